@@ -1,0 +1,139 @@
+"""The ``freespace`` command. Thin: parses options, calls the library, reports.
+
+Heavy modules are imported inside each subcommand so that ``freespace generate`` starts fast and
+never imports torch. Every :class:`~freespace.errors.FreespaceError` ends the command with a one-line
+message on stderr and exit code 2; a dataset run with failed frames exits with 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from collections.abc import Sequence
+
+from freespace import __version__
+from freespace.errors import FreespaceError, InvalidOptionError
+
+log = logging.getLogger("freespace")
+
+DATASETS = ("kitti",)
+
+
+def _add_fit_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("road fit")
+    g.add_argument("--inlier-threshold", type=float, default=1.0, metavar="PX",
+                   help="disparity residual (pixels) above which a road pixel is an outlier (default 1.0)")
+    g.add_argument("--no-robust", dest="robust", action="store_false",
+                   help="plain least squares over all valid road pixels (no outlier rejection)")
+    g.add_argument("--max-disparity", type=int, default=128, metavar="PX",
+                   help="SGBM search range when no disparity is given (default 128)")
+
+
+def _fit_options(args: argparse.Namespace):  # -> FitOptions (import kept lazy)
+    from freespace.generate import FitOptions
+
+    return FitOptions(robust=args.robust, inlier_threshold=args.inlier_threshold, max_disparity=args.max_disparity)
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    """``freespace generate``: one pair or a whole dataset."""
+    pair = [args.reference, args.target, args.road_mask]
+    if args.dataset is None:
+        if not all(pair):
+            raise InvalidOptionError("give --reference, --target and --road-mask (one pair), or --dataset and "
+                                     "--root (a dataset)")
+        from freespace.generate import generate_pair
+
+        result = generate_pair(args.reference, args.target, args.road_mask, args.disparity, out=args.out,
+                               model_json=args.model_json, options=_fit_options(args))
+        m = result.model
+        print(f"roll {m.roll_deg:+.4f}°  ϰ {m.kappa_hat:.6f}  κ {m.kappa:.3f}  inliers {m.num_inliers}/{m.num_valid}"
+              f"  rms {m.rms:.3f} px  → {args.out}")
+        return 0
+    if any(pair) or args.disparity or args.model_json:
+        raise InvalidOptionError("--dataset generates a whole dataset; --reference/--target/--road-mask/"
+                                 "--disparity/--model-json are for one pair, leave them out")
+    if args.root is None:
+        raise InvalidOptionError("--dataset needs --root DIR, the dataset's folder")
+    from freespace.data.kitti_road import list_kitti_road_frames
+    from freespace.generate import generate_dataset
+
+    frames = list_kitti_road_frames(args.root, args.split, disparity_dir=args.disparity_dir)
+    summary = generate_dataset(frames, args.out, workers=args.workers, options=_fit_options(args))
+    failed = summary["failed"]
+    print(f"{summary['generated']} generated, {summary['skipped']} already done, {len(failed)} failed "
+          f"of {summary['frames']} frames → {args.out}")
+    for name, reason in failed.items():
+        print(f"  failed {name}: {reason}")
+    return 1 if failed else 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
+    from freespace.demo import run_demo
+
+    summary = run_demo(args.out, num_frames=args.num, seed=args.seed)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``freespace`` command."""
+    parser = argparse.ArgumentParser(prog="freespace", description=__doc__.splitlines()[0] if __doc__ else None)
+    parser.add_argument("--version", action="version", version=f"freespace {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log messages")
+    parser.add_argument("-q", "--quiet", action="store_true", help="warnings and errors only")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("generate", help="fit the road model and write the DS-Generator image(s)",
+                       description="Fit the road disparity model to the road pixels of a stereo pair and warp "
+                                   "the target (right) image into the reference (left) view with the road "
+                                   "homography; for one pair or every labelled frame of a dataset.")
+    one = p.add_argument_group("one pair")
+    one.add_argument("--reference", metavar="L.png", help="reference (left) image")
+    one.add_argument("--target", metavar="R.png", help="target (right) image")
+    one.add_argument("--road-mask", metavar="GT.png",
+                     help="road label of the reference image: KITTI colours or single-channel (non-zero = road)")
+    one.add_argument("--disparity", metavar="D", help="left disparity (KITTI uint16 .png, .npy, .pfm); "
+                                                      "default: computed with SGBM")
+    one.add_argument("--model-json", metavar="M.json", help="also write the fitted model as JSON")
+    many = p.add_argument_group("a dataset")
+    many.add_argument("--dataset", choices=DATASETS, help="dataset layout")
+    many.add_argument("--root", metavar="DIR", help="dataset folder")
+    many.add_argument("--split", default="training", help="split (default training)")
+    many.add_argument("--disparity-dir", metavar="DIR", help="folder of <frame>.png|.npy|.pfm disparities")
+    many.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    p.add_argument("--out", required=True, help="output image (one pair) or folder (dataset)")
+    _add_fit_options(p)
+    p.set_defaults(func=cmd_generate)
+
+    p = sub.add_parser("demo", help="run the built-in demo end to end",
+                       description="Render stereo road scenes, run the DS-Generator on them and write the results.")
+    p.add_argument("--out", default="demo_out", help="output folder (default demo_out)")
+    p.add_argument("--num", type=int, default=4, help="number of scenes (default 4)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.set_defaults(func=cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``freespace`` console script; returns the exit code."""
+    from freespace.log import setup_logging
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    setup_logging(-1 if args.quiet else args.verbose)
+    try:
+        return int(args.func(args))
+    except FreespaceError as exc:
+        print(f"freespace: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("freespace: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

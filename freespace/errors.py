@@ -1,0 +1,42 @@
+"""Typed errors.
+
+Every error raised for a user mistake derives from :class:`FreespaceError`. Its message is one line
+that says what was wrong and how to fix it; the command-line interface prints it and exits with
+``exit_code`` (2) instead of showing a traceback.
+"""
+
+from __future__ import annotations
+
+
+class FreespaceError(Exception):
+    """Base class of every error ``freespace`` raises for bad input or bad options."""
+
+    exit_code: int = 2
+
+
+class InputFileError(FreespaceError, FileNotFoundError):
+    """A file or folder the user named is missing or cannot be read."""
+
+
+class CorruptFileError(FreespaceError, ValueError):
+    """A file exists but its content cannot be decoded (truncated image, bad PFM header, ...)."""
+
+
+class ShapeMismatchError(FreespaceError, ValueError):
+    """Arrays that must share a size do not (reference vs target, image vs disparity, ...)."""
+
+
+class InvalidOptionError(FreespaceError, ValueError):
+    """An option or argument has a value outside what the function accepts."""
+
+
+class RoadFitError(FreespaceError, ValueError):
+    """The road disparity model cannot be fitted (too few valid road pixels, degenerate geometry)."""
+
+
+class DatasetError(FreespaceError, ValueError):
+    """A dataset tree does not have the expected layout."""
+
+
+class OutputError(FreespaceError, OSError):
+    """An output file or folder cannot be written (permissions, a file where a folder should be, ...)."""

@@ -1,0 +1,282 @@
+"""The DS-Generator over files: one stereo pair, or every labelled frame of a dataset.
+
+This is what ``freespace generate`` runs. It imports NumPy and OpenCV only (never torch), reads and
+checks every input before it writes anything, and writes every output atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import json
+import logging
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from freespace.errors import FreespaceError, InvalidOptionError, ShapeMismatchError
+from freespace.geometry import RoadModel, compute_disparity, fit_road_model, generate_view
+from freespace.io import (
+    PathLike,
+    atomic_write_text,
+    encode_image,
+    atomic_write_bytes,
+    read_disparity,
+    read_image,
+    read_road_label,
+    write_json,
+)
+
+log = logging.getLogger(__name__)
+
+__all__ = ["FitOptions", "GenerateResult", "generate_pair", "generate_dataset", "IMAGE_SUFFIXES"]
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Options of the road fit and of the stereo matcher used when no disparity is given."""
+
+    robust: bool = True
+    inlier_threshold: float = 1.0
+    max_disparity: int = 128
+
+    def check(self) -> None:
+        """Raise InvalidOptionError for out-of-range values."""
+        if not self.inlier_threshold > 0:
+            raise InvalidOptionError(f"--inlier-threshold must be > 0 pixels, got {self.inlier_threshold}")
+        if not 1 <= self.max_disparity <= 1024:
+            raise InvalidOptionError(f"--max-disparity must be in 1..1024 pixels, got {self.max_disparity}")
+
+
+@dataclass
+class GenerateResult:
+    """What generating one frame produced: the model, the image and timings (seconds)."""
+
+    model: RoadModel
+    image: np.ndarray
+    disparity_source: str
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def report(self) -> dict[str, Any]:
+        """JSON-ready model and statistics (``roll_deg``, ``kappa_hat``, ``kappa``, ``affine``,
+        ``homography``, ``num_inliers``, ``rms_px``, ...)."""
+        return {**self.model.to_dict(), "disparity_source": self.disparity_source,
+                "seconds": {k: round(v, 6) for k, v in self.timings.items()}}
+
+
+def check_output_image_path(path: PathLike) -> Path:
+    """Reject output names whose suffix is not an image format, before any work is done."""
+    path = Path(path)
+    if path.suffix.lower() not in IMAGE_SUFFIXES:
+        raise InvalidOptionError(f"--out {path} must end in one of {', '.join(IMAGE_SUFFIXES)} (PNG is lossless)")
+    if path.is_dir():
+        raise InvalidOptionError(f"--out {path} is a folder; give an image file name")
+    return path
+
+
+def _size(shape: tuple[int, ...]) -> str:
+    return f"{shape[1]}×{shape[0]}"
+
+
+def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray, disparity: np.ndarray | None,
+                    options: FitOptions = FitOptions()) -> GenerateResult:
+    """Fit the road model and generate the view from arrays.
+
+    Args:
+        reference, target: ``H×W×3`` RGB (or ``H×W``) uint8 left and right images.
+        road: ``bool H×W`` road pixels of the reference label (don't-care pixels excluded).
+        disparity: ``float32 H×W`` left disparity (NaN invalid), or None to compute it with SGBM.
+    """
+    timings: dict[str, float] = {}
+    if reference.shape != target.shape:
+        raise ShapeMismatchError(f"reference is {_size(reference.shape)} but target is {_size(target.shape)}; "
+                                 f"give the two images of one rectified stereo pair")
+    if road.shape != reference.shape[:2]:
+        raise ShapeMismatchError(f"road mask is {_size(road.shape)} but the images are {_size(reference.shape)}; "
+                                 f"give the label of the reference image")
+    if not road.any():
+        raise FreespaceError("the road mask marks no road pixel; give a label with road (magenta in KITTI "
+                             "colours, non-zero in a single-channel mask)")
+    source = "file"
+    if disparity is None:
+        t0 = time.perf_counter()
+        disparity = compute_disparity(reference, target, max_disparity=options.max_disparity)
+        timings["disparity"] = time.perf_counter() - t0
+        source = "sgbm"
+    elif disparity.shape != reference.shape[:2]:
+        raise ShapeMismatchError(f"disparity is {_size(disparity.shape)} but the images are "
+                                 f"{_size(reference.shape)}; give the disparity of the reference image")
+    if not np.isfinite(disparity).any():
+        raise FreespaceError("the disparity map has no valid value (all 0, NaN or inf); check the disparity file")
+    t0 = time.perf_counter()
+    model = fit_road_model(disparity, road, robust=options.robust, inlier_threshold=options.inlier_threshold)
+    timings["fit"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    image = generate_view(reference, target, model)
+    timings["warp"] = time.perf_counter() - t0
+    return GenerateResult(model=model, image=image, disparity_source=source, timings=timings)
+
+
+def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, disparity: PathLike | None = None,
+                  *, out: PathLike | None = None, model_json: PathLike | None = None,
+                  options: FitOptions = FitOptions()) -> GenerateResult:
+    """Generate the augmented image of one stereo pair from files.
+
+    Reads every input and computes the result before anything is written; then writes ``out`` (the
+    generated image) and ``model_json`` (the model, :meth:`GenerateResult.report`) atomically.
+    """
+    options.check()
+    if out is not None:
+        check_output_image_path(out)
+    t_start = time.perf_counter()
+    ref = read_image(reference, what="reference image")
+    tgt = read_image(target, what="target image")
+    label = read_road_label(road_mask)
+    disp = read_disparity(disparity) if disparity is not None else None
+    result = generate_arrays(ref, tgt, label.road & label.valid, disp, options)
+    if out is not None:
+        data = encode_image(result.image, Path(out).suffix.lower())
+        result.timings["total"] = time.perf_counter() - t_start
+        atomic_write_bytes(out, data)
+    if model_json is not None:
+        result.timings.setdefault("total", time.perf_counter() - t_start)
+        write_json(model_json, result.report())
+    return result
+
+
+# ---------------------------------------------------------------------------------------------------
+# whole datasets
+
+
+def _process_frame(job: dict[str, Any]) -> dict[str, Any]:
+    """Worker: generate one frame; never raises (the reason of a failure goes into the record)."""
+    t0 = time.perf_counter()
+    record: dict[str, Any] = {"frame": job["name"]}
+    try:
+        for key, what in (("right", "right image"), ("label", "road label")):
+            if job[key] is None:
+                raise FreespaceError(f"missing {what}")
+        result = generate_pair(job["left"], job["right"], job["label"], job["disparity"],
+                               out=job["out"], options=job["options"])
+        record.update(status="done", **result.report())
+        record["seconds"]["total"] = time.perf_counter() - t0
+        write_json(job["report"], record)
+    except FreespaceError as exc:
+        record.update(status="failed", reason=str(exc))
+    except Exception as exc:  # a bad frame must not stop the run; the reason is reported
+        log.debug("frame %s failed", job["name"], exc_info=True)
+        record.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
+    return record
+
+
+def _init_worker() -> None:
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+def generate_dataset(frames: list[Any], out_dir: PathLike, *, workers: int = 1,
+                     options: FitOptions = FitOptions(), progress: bool = True) -> dict[str, Any]:
+    """Generate the augmented image of every frame and write a report.
+
+    Args:
+        frames: objects with ``name``, ``left``, ``right``, ``label``, ``disparity`` (paths or None),
+            e.g. :class:`freespace.data.kitti_road.KittiRoadFrame`.
+        out_dir: output folder. Writes ``<frame>.png`` (the frame's own file name), ``reports/<frame>.json``
+            (model, inliers, residual, seconds), ``report.csv`` (one row per frame) and ``summary.json``.
+        workers: processes; 1 runs in this process.
+        options: fit options.
+
+    Frames whose image and report already exist are skipped (resumable). A failing frame is recorded
+    with its reason and does not stop the run.
+
+    Returns:
+        The summary (also written to ``summary.json``): counts, ``failed`` (frame → reason), means.
+    """
+    options.check()
+    if workers < 1:
+        raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the generated dataset")
+    report_dir = out_dir / "reports"
+    records: dict[str, dict[str, Any]] = {}
+    jobs = []
+    for frame in frames:
+        image_path = out_dir / f"{frame.name}.png"
+        report_path = report_dir / f"{frame.name}.json"
+        if image_path.is_file() and report_path.is_file():
+            try:
+                records[frame.name] = {**json.loads(report_path.read_text()), "status": "skipped"}
+                continue
+            except (OSError, ValueError):
+                pass  # unreadable report: do the frame again
+        jobs.append({"name": frame.name, "left": frame.left, "right": frame.right, "label": frame.label,
+                     "disparity": frame.disparity, "out": image_path, "report": report_path, "options": options})
+    log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(jobs), desc="generate", unit="frame", disable=not progress or not jobs)
+    t0 = time.perf_counter()
+    if workers == 1 or len(jobs) <= 1:
+        for job in jobs:
+            records[job["name"]] = _process_frame(job)
+            bar.update()
+    else:
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker) as pool:
+            futures = [pool.submit(_process_frame, job) for job in jobs]
+            for future in as_completed(futures):
+                record = future.result()
+                records[record["frame"]] = record
+                bar.update()
+    bar.close()
+    wall = time.perf_counter() - t0
+    ordered = [records[f.name] for f in frames]
+    for record in ordered:
+        if record["status"] == "failed":
+            log.warning("frame %s failed: %s", record["frame"], record["reason"])
+    _write_report_csv(out_dir / "report.csv", ordered)
+    ok = [r for r in ordered if r["status"] != "failed"]
+
+    def mean(key: str) -> float | None:
+        vals = [r[key] for r in ok if r.get(key) is not None]
+        return float(np.mean(vals)) if vals else None
+
+    summary = {
+        "frames": len(ordered),
+        "generated": sum(r["status"] == "done" for r in ordered),
+        "skipped": sum(r["status"] == "skipped" for r in ordered),
+        "failed": {r["frame"]: r["reason"] for r in ordered if r["status"] == "failed"},
+        "mean_roll_deg": mean("roll_deg"),
+        "mean_rms_px": mean("rms_px"),
+        "mean_inlier_fraction": float(np.mean([r["num_inliers"] / r["num_valid"] for r in ok])) if ok else None,
+        "wall_seconds": round(wall, 3),
+        "workers": workers,
+        "options": {"robust": options.robust, "inlier_threshold": options.inlier_threshold,
+                    "max_disparity": options.max_disparity},
+    }
+    write_json(out_dir / "summary.json", summary)
+    return summary
+
+
+_CSV_FIELDS = ["frame", "status", "roll_deg", "kappa_hat", "kappa", "num_valid", "num_inliers", "rms_px",
+               "disparity_source", "seconds", "reason"]
+
+
+def _write_report_csv(path: Path, records: list[dict[str, Any]]) -> None:
+    buf = _io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=_CSV_FIELDS, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    for record in records:
+        row = dict(record)
+        seconds = record.get("seconds") or {}
+        row["seconds"] = round(seconds.get("total", math.nan), 4) if seconds else ""
+        writer.writerow(row)
+    atomic_write_text(path, buf.getvalue())

@@ -1,0 +1,301 @@
+"""The road disparity model of Fan et al. and its robust fit.
+
+Conventions
+-----------
+Pixel coordinates are 0-based, ``u`` = column (to the right), ``v`` = row (down), pixel centres at
+integers. The reference view is the left camera, the target the right one: a reference pixel
+``(u, v)`` with disparity ``d`` sees the same point as the target pixel ``(u − d, v)``.
+
+On a planar road the disparity is ``d = ϰ (v cos Φ − u sin Φ + κ)`` (Φ: roll angle of the rig, ϰ, κ:
+road disparity projection coefficients). With ``a = −ϰ sin Φ``, ``b = ϰ cos Φ``, ``c = ϰ κ`` this is the
+plane ``d = a u + b v + c``; the map (Φ, ϰ, κ) ↔ (a, b, c) is one-to-one for ϰ > 0, so minimising the
+paper's energy ``E = Σ (dᵢ − ϰ (vᵢ cos Φ − uᵢ sin Φ + κ))²`` is a linear least-squares plane fit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from freespace.errors import InvalidOptionError, RoadFitError, ShapeMismatchError
+
+__all__ = ["RoadModel", "fit_road_model", "fit_road_model_closed_form", "road_energy", "road_pixels"]
+
+#: Smallest number of valid road pixels :func:`fit_road_model` accepts.
+MIN_ROAD_PIXELS = 50
+
+
+@dataclass(frozen=True)
+class RoadModel:
+    """A fitted (or calibrated) road disparity model.
+
+    Attributes:
+        roll: Φ, the stereo rig's roll angle in radians (``atan2(−a, b)``).
+        kappa_hat: ϰ = ``hypot(a, b)``, in disparity pixels per image pixel (> 0).
+        kappa: κ = ``c / ϰ``, in image pixels.
+        affine: ``(a, b, c)`` of the disparity plane ``d = a u + b v + c`` (pixels).
+        num_inliers: road pixels the final fit used (0 for a model made from calibration).
+        rms: root-mean-square disparity residual over those pixels, in pixels (NaN when not fitted).
+        num_valid: valid road pixels offered to the fit.
+        inlier_mask: ``bool H×W`` of the pixels used, or None.
+    """
+
+    roll: float
+    kappa_hat: float
+    kappa: float
+    affine: tuple[float, float, float]
+    num_inliers: int = 0
+    rms: float = float("nan")
+    num_valid: int = 0
+    inlier_mask: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @classmethod
+    def from_affine(cls, a: float, b: float, c: float, **stats: Any) -> RoadModel:
+        """Build the model of the disparity plane ``d = a u + b v + c``.
+
+        Raises:
+            RoadFitError: ``a = b = 0`` (the disparity does not vary over the image: no roll angle).
+        """
+        kappa_hat = math.hypot(a, b)
+        if not (np.isfinite([a, b, c]).all() and kappa_hat > 1e-9):
+            raise RoadFitError(f"degenerate road plane d = {a:.3g}·u + {b:.3g}·v + {c:.3g}: the disparity does not "
+                               f"change across the road, so it is not a road seen by a stereo rig; check the "
+                               f"road label and the disparity")
+        return cls(roll=math.atan2(-a, b), kappa_hat=kappa_hat, kappa=c / kappa_hat,
+                   affine=(float(a), float(b), float(c)), **stats)
+
+    @classmethod
+    def from_roll(cls, roll: float, kappa_hat: float, kappa: float) -> RoadModel:
+        """Build the model from the paper's parameters (Φ in radians, ϰ > 0, κ)."""
+        return cls.from_affine(-kappa_hat * math.sin(roll), kappa_hat * math.cos(roll), kappa_hat * kappa)
+
+    @property
+    def roll_deg(self) -> float:
+        """Φ in degrees."""
+        return math.degrees(self.roll)
+
+    @property
+    def homography(self) -> np.ndarray:
+        """``H_tr`` (3×3 float64): homogeneous reference pixel → target pixel, on the road plane.
+
+        ``H_tr = ϰ [[1/ϰ + sin Φ, −cos Φ, −κ], [0, 1/ϰ, 0], [0, 0, 1/ϰ]] = [[1 − a, −b, −c], [0, 1, 0],
+        [0, 0, 1]]``, i.e. ``(u, v) ↦ (u − d(u, v), v)``.
+        """
+        a, b, c = self.affine
+        return np.array([[1.0 - a, -b, -c], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+
+    def disparity(self, shape: tuple[int, int]) -> np.ndarray:
+        """The model's disparity ``a u + b v + c`` over an image of ``shape = (H, W)`` (float32 H×W)."""
+        a, b, c = self.affine
+        h, w = shape
+        return (a * np.arange(w, dtype=np.float32)[None, :] + b * np.arange(h, dtype=np.float32)[:, None]
+                + np.float32(c)).astype(np.float32)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary: ``roll_deg``, ``kappa_hat``, ``kappa``, ``affine``, ``homography``,
+        ``num_inliers``, ``num_valid``, ``rms_px`` (None when not fitted)."""
+        return {
+            "roll_deg": self.roll_deg,
+            "kappa_hat": self.kappa_hat,
+            "kappa": self.kappa,
+            "affine": list(self.affine),
+            "homography": self.homography.tolist(),
+            "num_inliers": self.num_inliers,
+            "num_valid": self.num_valid,
+            "rms_px": self.rms if math.isfinite(self.rms) else None,
+        }
+
+
+def road_pixels(disparity: np.ndarray, road_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The valid road pixels: ``(u, v, d)`` float64 vectors of the pixels where ``road_mask`` is true
+    and the disparity is finite and > 0.
+
+    Raises:
+        ShapeMismatchError: disparity and mask differ in size. InvalidOptionError: not 2-D.
+    """
+    disparity = np.asarray(disparity)
+    road_mask = np.asarray(road_mask)
+    if disparity.ndim != 2:
+        raise InvalidOptionError(f"disparity must be a 2-D H×W map, got shape {disparity.shape}")
+    if road_mask.shape != disparity.shape:
+        raise ShapeMismatchError(f"road mask is {_size(road_mask.shape)} but the disparity is "
+                                 f"{_size(disparity.shape)}; both must be of the reference image's size")
+    with np.errstate(invalid="ignore"):
+        valid = road_mask.astype(bool, copy=False) & (disparity > 0) & (disparity < np.inf)
+    v, u = np.nonzero(valid)
+    return u.astype(np.float64), v.astype(np.float64), disparity[v, u].astype(np.float64)
+
+
+def _size(shape: tuple[int, ...]) -> str:
+    return f"{shape[1]}×{shape[0]} (W×H)" if len(shape) >= 2 else str(shape)
+
+
+class _Normaliser:
+    """Centres and scales pixel coordinates so the normal equations are well conditioned."""
+
+    def __init__(self, u: np.ndarray, v: np.ndarray) -> None:
+        self.mu_u, self.mu_v = float(u.mean()), float(v.mean())
+        self.scale = max(float(np.abs(u - self.mu_u).max(initial=0.0)),
+                         float(np.abs(v - self.mu_v).max(initial=0.0)), 1.0)
+
+    def design(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (u - self.mu_u) / self.scale, (v - self.mu_v) / self.scale
+
+    def to_pixels(self, an: float, bn: float, cn: float) -> tuple[float, float, float]:
+        a, b = an / self.scale, bn / self.scale
+        return a, b, cn - a * self.mu_u - b * self.mu_v
+
+
+def _plane_lsq(x: np.ndarray, y: np.ndarray, d: np.ndarray) -> tuple[float, float, float]:
+    """Least-squares ``d ≈ a x + b y + c`` (normalised coordinates); RoadFitError when degenerate."""
+    n = d.size
+    mx, my, md = x.mean(), y.mean(), d.mean()
+    xc, yc = x - mx, y - my
+    sxx, syy, sxy = xc @ xc / n, yc @ yc / n, xc @ yc / n
+    sxd, syd = xc @ d / n, yc @ d / n
+    det = sxx * syy - sxy * sxy
+    # smallest eigenvalue of the 2×2 coordinate covariance, relative to the largest
+    tr = sxx + syy
+    if tr <= 0 or det <= 1e-10 * tr * tr:
+        raise RoadFitError(f"degenerate road region: its {n} valid pixels lie on (or very near) one line, so "
+                           f"no plane can be fitted; label a road area that spans several rows and columns")
+    a = (syy * sxd - sxy * syd) / det
+    b = (sxx * syd - sxy * sxd) / det
+    return float(a), float(b), float(md - a * mx - b * my)
+
+
+def _ransac(x: np.ndarray, y: np.ndarray, d: np.ndarray, threshold: float, rng: np.random.Generator,
+            num_hypotheses: int, sample_size: int) -> tuple[float, float, float] | None:
+    """MSAC over random triples drawn from a random subset; returns the best plane or None."""
+    n = d.size
+    idx = rng.choice(n, size=min(n, sample_size), replace=False) if n > sample_size else np.arange(n)
+    xs, ys, ds = x[idx], y[idx], d[idx]
+    tri = rng.integers(0, idx.size, size=(num_hypotheses, 3))
+    A = np.stack([xs[tri], ys[tri], np.ones(tri.shape)], axis=-1)  # K×3×3
+    det = np.linalg.det(A)
+    ok = np.abs(det) > 1e-9
+    if not ok.any():
+        return None
+    params = np.linalg.solve(A[ok], ds[tri[ok]][..., None])[..., 0]  # K'×3
+    res = ds[:, None] - (xs[:, None] * params[:, 0] + ys[:, None] * params[:, 1] + params[:, 2])
+    cost = np.minimum(res * res, threshold * threshold).sum(axis=0)
+    a, b, c = params[int(np.argmin(cost))]
+    return float(a), float(b), float(c)
+
+
+def fit_road_model(disparity: np.ndarray, road_mask: np.ndarray, *, robust: bool = True,
+                   inlier_threshold: float = 1.0, max_iterations: int = 10, num_hypotheses: int = 128,
+                   sample_size: int = 2048, seed: int = 0, min_pixels: int = MIN_ROAD_PIXELS) -> RoadModel:
+    """Fit the road disparity model ``d = ϰ (v cos Φ − u sin Φ + κ)`` to the road pixels of a stereo pair.
+
+    Args:
+        disparity: ``float H×W`` disparity of the reference (left) image in pixels; NaN, ±inf and values
+            ≤ 0 are invalid and ignored.
+        road_mask: ``bool H×W`` (non-zero = road), the reference image's road label.
+        robust: if True (default), MSAC on random triples finds the dominant plane, then the fit is
+            iterated as least squares with 0/1 weights: pixels whose residual exceeds
+            ``inlier_threshold`` get weight 0, until the inlier set stops changing. The result is the
+            exact minimiser of E over its inliers. If False, plain least squares over all valid pixels.
+        inlier_threshold: residual in disparity pixels above which a pixel is an outlier (robust mode).
+        max_iterations: cap on the reweighting iterations.
+        num_hypotheses, sample_size: MSAC triples and the random subset they are scored on.
+        seed: seed of the random sampling; the same inputs and seed give the same model.
+        min_pixels: fewest valid road pixels (and inliers) accepted.
+
+    Returns:
+        The :class:`RoadModel`, with ``num_valid``, ``num_inliers``, ``rms`` (over inliers, pixels) and
+        ``inlier_mask`` (``bool H×W``).
+
+    Raises:
+        ShapeMismatchError: mask and disparity sizes differ.
+        RoadFitError: fewer than ``min_pixels`` valid road pixels or inliers, collinear road pixels, or a
+            plane with no disparity gradient.
+    """
+    if inlier_threshold <= 0 or max_iterations < 1 or num_hypotheses < 1 or sample_size < 3:
+        raise InvalidOptionError("inlier_threshold must be > 0 and max_iterations, num_hypotheses ≥ 1, "
+                                 "sample_size ≥ 3")
+    u, v, d = road_pixels(disparity, road_mask)
+    n = d.size
+    if n < min_pixels:
+        road_count = int(np.count_nonzero(road_mask))
+        raise RoadFitError(f"only {n} road pixels have a valid disparity ({road_count} labelled road, "
+                           f"{min_pixels} needed); check that the road mask marks the road and that the "
+                           f"disparity map is valid there")
+    norm = _Normaliser(u, v)
+    x, y = norm.design(u, v)
+    keep = np.ones(n, dtype=bool)
+    plane = _plane_lsq(x, y, d)
+    if robust:
+        rng = np.random.default_rng(seed)
+        hypothesis = _ransac(x, y, d, inlier_threshold, rng, num_hypotheses, sample_size)
+        if hypothesis is not None:
+            plane = hypothesis
+        for _ in range(max_iterations):
+            a, b, c = plane
+            new_keep = np.abs(d - (a * x + b * y + c)) <= inlier_threshold
+            count = int(np.count_nonzero(new_keep))
+            if count < min_pixels:
+                raise RoadFitError(f"only {count} of {n} valid road pixels agree with one plane within "
+                                   f"{inlier_threshold} px ({min_pixels} needed); the disparity on the road is "
+                                   f"too noisy or the label does not mark a planar road")
+            if count == np.count_nonzero(keep) and np.array_equal(new_keep, keep):
+                break
+            keep = new_keep
+            plane = _plane_lsq(x[keep], y[keep], d[keep])
+        else:
+            a, b, c = plane
+            keep = np.abs(d - (a * x + b * y + c)) <= inlier_threshold
+    a, b, c = plane
+    residual = d[keep] - (a * x[keep] + b * y[keep] + c)
+    rms = float(np.sqrt(np.mean(residual * residual)))
+    mask = np.zeros(np.shape(disparity), dtype=bool)
+    mask[v[keep].astype(np.intp), u[keep].astype(np.intp)] = True
+    return RoadModel.from_affine(*norm.to_pixels(a, b, c), num_inliers=int(np.count_nonzero(keep)), rms=rms,
+                                 num_valid=n, inlier_mask=mask)
+
+
+def road_energy(params: tuple[float, float, float] | np.ndarray, u: np.ndarray, v: np.ndarray,
+                d: np.ndarray) -> float:
+    """The paper's energy ``E(Φ, ϰ, κ) = Σ (dᵢ − ϰ (vᵢ cos Φ − uᵢ sin Φ + κ))²`` (pixels²).
+
+    ``params = (Φ [rad], ϰ, κ)``; ``u, v, d`` are equal-length vectors of road pixels.
+    """
+    roll, kappa_hat, kappa = params
+    r = d - kappa_hat * (v * np.cos(roll) - u * np.sin(roll) + kappa)
+    return float(r @ r)
+
+
+def fit_road_model_closed_form(disparity: np.ndarray, road_mask: np.ndarray) -> RoadModel:
+    """The paper's closed-form minimiser of E over all valid road pixels (no outlier rejection).
+
+    For a fixed Φ, E is quadratic in ϰ and ϰκ; eliminating them leaves ``E(Φ) = n·(var d − cov(t, d)² /
+    var t)`` with ``t = v cos Φ − u sin Φ``. Setting ``dE/dΦ = 0`` gives ``tan Φ = x₂ / x₁`` with
+    ``x = S⁻¹ g`` (``S`` the covariance of (v, −u), ``g`` = (cov(v, d), −cov(u, d))), i.e.
+    ``Φ = arctan(x₂ / x₁) + qπ``; of the two roots (q = 0, 1 — the authors' ``q = ±1``) the one with
+    ϰ > 0 is kept. Then ϰ = cov(t, d) / var t and κ = mean(d) / ϰ − mean(t). This is the long way to
+    the same optimum as :func:`fit_road_model` with ``robust=False``; it serves as a cross-check.
+    """
+    u, v, d = road_pixels(disparity, road_mask)
+    if d.size < 3:
+        raise RoadFitError(f"only {d.size} valid road pixels; at least 3 are needed")
+    uc, vc, dc = u - u.mean(), v - v.mean(), d - d.mean()
+    S = np.array([[vc @ vc, -(vc @ uc)], [-(vc @ uc), uc @ uc]])
+    g = np.array([vc @ dc, -(uc @ dc)])
+    x = np.linalg.solve(S, g)  # ∝ (cos Φ, sin Φ)
+    best = None
+    for q in (0, 1):
+        roll = math.atan(x[1] / x[0]) + q * math.pi if x[0] != 0 else math.copysign(math.pi / 2, x[1])
+        roll = math.atan2(math.sin(roll), math.cos(roll))
+        t = v * math.cos(roll) - u * math.sin(roll)
+        tc = t - t.mean()
+        kappa_hat = float(tc @ dc / (tc @ tc))
+        if kappa_hat > 0:
+            best = (roll, kappa_hat, float(d.mean() / kappa_hat - t.mean()))
+    if best is None:
+        raise RoadFitError("degenerate road region: no roll angle gives ϰ > 0")
+    rm = RoadModel.from_roll(*best)
+    return RoadModel(rm.roll, rm.kappa_hat, rm.kappa, rm.affine, num_inliers=d.size,
+                     rms=math.sqrt(road_energy(best, u, v, d) / d.size), num_valid=d.size)

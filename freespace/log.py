@@ -1,0 +1,27 @@
+"""Logging set-up shared by the command-line interface and scripts.
+
+Library code logs through ``logging.getLogger(__name__)``; only :func:`setup_logging` (called once by
+the CLI) installs a handler, so applications embedding ``freespace`` keep control of their logging.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+
+
+def setup_logging(verbosity: int = 0) -> None:
+    """Install a stderr handler on the ``freespace`` logger.
+
+    Args:
+        verbosity: 0 = warnings and info, 1+ = debug, -1 = warnings only.
+    """
+    level = logging.DEBUG if verbosity > 0 else logging.WARNING if verbosity < 0 else logging.INFO
+    logger = logging.getLogger("freespace")
+    logger.setLevel(level)
+    if not any(getattr(h, "_freespace", False) for h in logger.handlers):
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+        handler._freespace = True  # type: ignore[attr-defined]
+        logger.addHandler(handler)
+    logger.propagate = False
