@@ -11,6 +11,7 @@ import io as _io
 import json
 import logging
 import math
+import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -118,6 +119,10 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
     t0 = time.perf_counter()
     model = fit_road_model(disparity, road, robust=options.robust, inlier_threshold=options.inlier_threshold)
     timings["fit"] = time.perf_counter() - t0
+    if model.num_inliers < 0.5 * model.num_valid:
+        log.warning("only %d of %d road pixels (%.0f%%) agree with the fitted plane: check that the images are "
+                    "one rectified pair and the label marks a planar road", model.num_inliers, model.num_valid,
+                    100.0 * model.num_inliers / model.num_valid)
     t0 = time.perf_counter()
     image = generate_view(reference, target, model)
     timings["warp"] = time.perf_counter() - t0
@@ -230,7 +235,9 @@ def generate_dataset(frames: list[Any], out_dir: PathLike, *, workers: int = 1,
             records[job["name"]] = _process_frame(job)
             bar.update()
     else:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker) as pool:
+        # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+                                 mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = [pool.submit(_process_frame, job) for job in jobs]
             for future in as_completed(futures):
                 record = future.result()

@@ -1,0 +1,187 @@
+"""`freespace generate`: one pair, a dataset (resumable, bad frames reported), user mistakes."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from freespace.cli import main
+from freespace.io import read_image, road_label_to_kitti, write_disparity, write_image
+
+from conftest import synthetic_pair
+
+
+@pytest.fixture
+def pair_files(tmp_path: Path) -> dict[str, Path]:
+    left, right, label, disp = synthetic_pair()
+    files = {"left": tmp_path / "L.png", "right": tmp_path / "R.png", "gt": tmp_path / "gt.png",
+             "disp": tmp_path / "D.png"}
+    write_image(files["left"], left)
+    write_image(files["right"], right)
+    write_image(files["gt"], road_label_to_kitti(label))
+    write_disparity(files["disp"], disp)
+    return files
+
+
+def _pair_args(f: dict[str, Path], out: Path, *extra: str) -> list[str]:
+    return ["generate", "--reference", str(f["left"]), "--target", str(f["right"]), "--road-mask", str(f["gt"]),
+            "--out", str(out), *extra]
+
+
+def test_one_pair_with_disparity(pair_files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out, js = tmp_path / "G.png", tmp_path / "M.json"
+    assert main(_pair_args(pair_files, out, "--disparity", str(pair_files["disp"]), "--model-json", str(js))) == 0
+    model = json.loads(js.read_text())
+    assert {"roll_deg", "kappa_hat", "kappa", "affine", "homography", "num_inliers", "rms_px"} <= set(model)
+    assert model["roll_deg"] == pytest.approx(1.0, abs=0.01)
+    assert model["disparity_source"] == "file"
+    generated, left = read_image(out).astype(float), read_image(pair_files["left"]).astype(float)
+    right = read_image(pair_files["right"]).astype(float)
+    road = read_image(pair_files["gt"])[:, :, 2] > 0
+    # the right image was itself made by a bilinear warp: two resamplings of a noise texture remain
+    assert np.abs(generated - left)[road].mean() < 0.15 * np.abs(right - left)[road].mean()
+    assert "roll" in capsys.readouterr().out
+
+
+def test_one_pair_with_sgbm(pair_files: dict[str, Path], tmp_path: Path) -> None:
+    js = tmp_path / "M.json"
+    assert main(_pair_args(pair_files, tmp_path / "G.png", "--model-json", str(js))) == 0
+    model = json.loads(js.read_text())
+    assert model["disparity_source"] == "sgbm"
+    assert model["roll_deg"] == pytest.approx(1.0, abs=0.1)
+
+
+def _run(args: list[str]) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "freespace.cli", *args], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONWARNINGS": "ignore"})
+
+
+@pytest.mark.parametrize("mistake", ["missing_target", "corrupt_target", "sizes", "disp_size", "empty_mask",
+                                     "tiny_mask", "invalid_disp", "bad_suffix", "no_pair", "both_modes"])
+def test_user_mistakes_exit_2_without_output(mistake: str, pair_files: dict[str, Path], tmp_path: Path,
+                                             capsys: pytest.CaptureFixture) -> None:
+    f = dict(pair_files)
+    out = tmp_path / "G.png"
+    extra: list[str] = ["--disparity", str(f["disp"])]
+    if mistake == "missing_target":
+        f["right"] = tmp_path / "missing.png"
+    elif mistake == "corrupt_target":
+        f["right"] = tmp_path / "corrupt.png"
+        f["right"].write_bytes(b"\x89PNG\r\n\x1a\nbroken")
+    elif mistake == "sizes":
+        f["right"] = tmp_path / "small.png"
+        write_image(f["right"], np.zeros((100, 320, 3), np.uint8))
+    elif mistake == "disp_size":
+        write_disparity(tmp_path / "d2.npy", np.ones((160, 300), np.float32))
+        extra = ["--disparity", str(tmp_path / "d2.npy")]
+    elif mistake == "empty_mask":
+        f["gt"] = tmp_path / "empty.png"
+        write_image(f["gt"], np.zeros((160, 320), np.uint8))
+    elif mistake == "tiny_mask":
+        f["gt"] = tmp_path / "tiny.png"
+        m = np.zeros((160, 320), np.uint8)
+        m[150, 100:110] = 255
+        write_image(f["gt"], m)
+    elif mistake == "invalid_disp":
+        write_disparity(tmp_path / "nan.npy", np.full((160, 320), np.nan, np.float32))
+        extra = ["--disparity", str(tmp_path / "nan.npy")]
+    elif mistake == "bad_suffix":
+        out = tmp_path / "G.txt"
+    args = _pair_args(f, out, *extra)
+    if mistake == "no_pair":
+        args = ["generate", "--reference", str(f["left"]), "--out", str(out)]
+    elif mistake == "both_modes":
+        args += ["--dataset", "kitti", "--root", str(tmp_path)]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("freespace: error: ") and "\n" not in err and "Traceback" not in err
+    assert not out.exists()
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_process_reports_one_line_and_never_imports_torch(pair_files: dict[str, Path], tmp_path: Path) -> None:
+    res = _run(_pair_args(pair_files, tmp_path / "G.png", "--disparity", str(tmp_path / "nope.png")))
+    assert res.returncode == 2
+    assert res.stderr.strip().count("\n") == 0 and "disparity not found" in res.stderr
+    code = ("import sys, freespace.cli, freespace.generate, freespace.geometry, freespace.data.kitti_road;"
+            "freespace.cli.main(sys.argv[1:]); print('torch' in sys.modules)")
+    res = subprocess.run([sys.executable, "-c", code, *_pair_args(pair_files, tmp_path / "G.png")],
+                         capture_output=True, text=True)
+    assert res.returncode == 0 and res.stdout.strip().endswith("False")
+
+
+# --- dataset mode ------------------------------------------------------------------------------------
+
+def _kitti_tree(root: Path, n: int = 4, with_disparity: bool = True) -> list[str]:
+    names = []
+    for i in range(n):
+        cat = ("um", "umm", "uu")[i % 3]
+        name = f"{cat}_{i:06d}"
+        left, right, label, disp = synthetic_pair(roll_deg=0.5 * i, seed=i)
+        write_image(root / "data_road/training/image_2" / f"{name}.png", left)
+        write_image(root / "data_road/training/gt_image_2" / f"{cat}_road_{i:06d}.png", road_label_to_kitti(label))
+        write_image(root / "data_road_right/training/image_3" / f"{name}.png", right)
+        if with_disparity:
+            write_disparity(root / "data_road/training/disparity" / f"{name}.png", disp)
+        names.append(name)
+    return names
+
+
+def test_dataset_resumable_with_bad_frames(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    root, out = tmp_path / "kitti", tmp_path / "out"
+    names = _kitti_tree(root, n=5)
+    gt_bad = root / "data_road/training/gt_image_2/umm_road_000001.png"
+    good_gt = gt_bad.read_bytes()
+    gt_bad.write_bytes(b"corrupt")
+    (root / "data_road_right/training/image_3/uu_000002.png").unlink()
+    args = ["generate", "--dataset", "kitti", "--root", str(root), "--out", str(out)]
+    assert main(args) == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["generated"] == 3 and set(summary["failed"]) == {"umm_000001", "uu_000002"}
+    assert "cannot decode road label" in summary["failed"]["umm_000001"]
+    assert "missing right image" in summary["failed"]["uu_000002"]
+    for name in ("um_000000", "um_000003", "umm_000004"):
+        assert (out / f"{name}.png").is_file()
+        report = json.loads((out / "reports" / f"{name}.json").read_text())
+        assert report["roll_deg"] == pytest.approx(0.5 * names.index(name), abs=0.01)
+        assert report["num_inliers"] > 0 and "total" in report["seconds"]
+    assert not (out / "umm_000001.png").exists()
+    rows = (out / "report.csv").read_text().splitlines()
+    assert len(rows) == 6 and rows[0].startswith("frame,status,roll_deg")
+    assert "failed" in capsys.readouterr().out
+    # fix the bad label: the rerun only does the missing frames
+    gt_bad.write_bytes(good_gt)
+    before = (out / "um_000000.png").stat().st_mtime_ns
+    assert main(args) == 1  # uu_000002 still has no right image
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["generated"] == 1 and summary["skipped"] == 3 and list(summary["failed"]) == ["uu_000002"]
+    assert (out / "um_000000.png").stat().st_mtime_ns == before
+
+
+def test_dataset_workers_and_sgbm(tmp_path: Path) -> None:
+    root = tmp_path / "kitti"
+    _kitti_tree(root, n=3, with_disparity=False)
+    for workers, out in ((1, tmp_path / "a"), (2, tmp_path / "b")):
+        assert main(["generate", "--dataset", "kitti", "--root", str(root), "--out", str(out),
+                     "--workers", str(workers)]) == 0
+    for name in ("um_000000", "umm_000001", "uu_000002"):
+        np.testing.assert_array_equal(read_image(tmp_path / "a" / f"{name}.png"),
+                                      read_image(tmp_path / "b" / f"{name}.png"))
+        report = json.loads((tmp_path / "b" / "reports" / f"{name}.json").read_text())
+        assert report["disparity_source"] == "sgbm"
+
+
+def test_dataset_user_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["generate", "--dataset", "kitti", "--root", str(tmp_path / "none"), "--out", str(tmp_path)]) == 2
+    assert "dataset root not found" in capsys.readouterr().err
+    (tmp_path / "data_road/training/image_2").mkdir(parents=True)
+    assert main(["generate", "--dataset", "kitti", "--root", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert "no KITTI road frames" in capsys.readouterr().err
+    assert main(["generate", "--dataset", "kitti", "--out", str(tmp_path / "o")]) == 2
+    assert "--root" in capsys.readouterr().err
