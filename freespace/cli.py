@@ -70,6 +70,20 @@ def cmd_generate(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def cmd_synth(args: argparse.Namespace) -> int:
+    """``freespace synth``: render the built-in stereo road dataset as a KITTI road tree."""
+    from freespace.data.synthetic import WEATHERS, SynthConfig, write_dataset
+
+    weathers = tuple(w.strip() for w in args.weather.split(",")) if args.weather else WEATHERS
+    config = SynthConfig(width=args.width, height=args.height, frames_per_scenario=args.frames_per_scenario,
+                         planar=not args.non_planar, baseline=args.baseline, max_roll_deg=args.max_roll,
+                         weathers=weathers)
+    rows = write_dataset(args.out, args.num, seed=args.seed, config=config, workers=args.workers)
+    scenarios = len({r["scenario"] for r in rows})
+    print(f"{len(rows)} stereo frames in {scenarios} scenarios ({args.width}×{args.height}) → {args.out}")
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
     from freespace.demo import run_demo
@@ -108,6 +122,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output image (one pair) or folder (dataset)")
     _add_fit_options(p)
     p.set_defaults(func=cmd_generate)
+
+    p = sub.add_parser("synth", help="render the built-in stereo road dataset (KITTI road layout)",
+                       description="Render stereo road scenes (left, right, exact disparity, road label, "
+                                   "calibration) as a KITTI road tree. Frame i depends only on the seed and i.")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--num", type=int, required=True, help="number of frames")
+    p.add_argument("--width", type=int, default=640, help="image width (default 640)")
+    p.add_argument("--height", type=int, default=480, help="image height (default 480)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--frames-per-scenario", type=int, default=10, help="frames per drive (default 10)")
+    p.add_argument("--non-planar", action="store_true", help="roads with slopes and camber")
+    p.add_argument("--baseline", type=float, help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
+    p.add_argument("--max-roll", type=float, default=3.0, help="rig roll range ± degrees (default 3)")
+    p.add_argument("--weather", help="comma-separated subset of clear,cloudy,rain,sunset,dusk,fog (default all)")
+    p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    p.set_defaults(func=cmd_synth)
 
     p = sub.add_parser("demo", help="run the built-in demo end to end",
                        description="Render stereo road scenes, run the DS-Generator on them and write the results.")

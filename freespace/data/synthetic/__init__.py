@@ -1,0 +1,12 @@
+"""The built-in procedural stereo road scene renderer (a SYN-Stereo-like dataset made on the spot).
+
+``render_sample(i, seed)`` returns one :class:`StereoSample` in memory; ``write_dataset`` writes a
+KITTI-road tree (``freespace synth``). NumPy + OpenCV only.
+"""
+
+from freespace.data.synthetic.dataset import format_kitti_calib, write_dataset, write_sample
+from freespace.data.synthetic.render import StereoSample, kitti_calibration, render_frame, render_sample
+from freespace.data.synthetic.scene import CATEGORIES, WEATHERS, SynthConfig, sample_frame, sample_scenario
+
+__all__ = ["CATEGORIES", "WEATHERS", "StereoSample", "SynthConfig", "kitti_calibration", "render_frame",
+           "render_sample", "sample_frame", "sample_scenario", "format_kitti_calib", "write_dataset", "write_sample"]

@@ -1,0 +1,552 @@
+"""Ray casting and shading of the built-in stereo road scenes (NumPy + OpenCV, no torch).
+
+Both cameras of the rig cast one ray per pixel into the same 3D scene (:mod:`.scene`): the road
+surface with lane markings, curbs and raised sidewalks, building facades with windows, hedges,
+vehicles, pedestrians, poles and trees. The ray parameter is the depth along the camera's optical
+axis, so the ground-truth disparity of the left image is exactly ``f·B / t``. Shading: Lambertian with
+a sun, ambient sky light, ground shadows cast by every object (rasterised in a top-down shadow map
+shared by both views), fog and rain; then each camera adds its own gain, bias, vignetting and noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from freespace.data.synthetic.scene import (
+    CURB, FACADE, FOLIAGE, GLASS, GRASS, HEDGE, MARKING, PERSON, POLE, ROAD, SIDEWALK, SKY, TRUNK, VEHICLE,
+    Box, Frame, Scenario, Sphere, SynthConfig, sample_frame,
+)
+from freespace.geometry.homography import StereoCalibration
+from freespace.io import RoadLabel
+
+__all__ = ["StereoSample", "render_frame", "render_sample", "kitti_calibration"]
+
+F32 = np.float32
+FAR = 400.0
+
+# texture amplitudes (fine 2.5 cm, medium 17 cm, coarse 1.3 m) per material
+_AMPS = np.zeros((14, 3), F32)
+_AMPS[ROAD] = (0.30, 0.16, 0.12)
+_AMPS[MARKING] = (0.08, 0.06, 0.05)
+_AMPS[CURB] = (0.15, 0.10, 0.05)
+_AMPS[SIDEWALK] = (0.22, 0.14, 0.10)
+_AMPS[GRASS] = (0.40, 0.30, 0.20)
+_AMPS[FACADE] = (0.14, 0.10, 0.15)
+_AMPS[VEHICLE] = (0.03, 0.03, 0.03)
+_AMPS[GLASS] = (0.05, 0.08, 0.10)
+_AMPS[PERSON] = (0.15, 0.10, 0.05)
+_AMPS[POLE] = (0.06, 0.05, 0.05)
+_AMPS[TRUNK] = (0.35, 0.25, 0.10)
+_AMPS[FOLIAGE] = (0.55, 0.45, 0.25)
+_AMPS[HEDGE] = (0.50, 0.40, 0.20)
+
+# weather: ambient RGB, sun RGB, shadow strength, fog visibility (m), fog RGB, horizon RGB, zenith RGB
+_WEATHER: dict[str, dict[str, Any]] = {
+    "clear": dict(ambient=(0.42, 0.45, 0.52), sun=(1.0, 0.97, 0.9), shadow=1.0, fog=900.0, fog_rgb=(0.75, 0.8, 0.88),
+                  horizon=(0.78, 0.85, 0.95), zenith=(0.3, 0.5, 0.85), exposure=1.05),
+    "cloudy": dict(ambient=(0.75, 0.76, 0.8), sun=(0.25, 0.25, 0.25), shadow=0.3, fog=500.0, fog_rgb=(0.75, 0.76, 0.78),
+                   horizon=(0.8, 0.8, 0.82), zenith=(0.6, 0.62, 0.66), exposure=1.0),
+    "rain": dict(ambient=(0.55, 0.57, 0.62), sun=(0.12, 0.12, 0.12), shadow=0.15, fog=160.0, fog_rgb=(0.55, 0.57, 0.6),
+                 horizon=(0.6, 0.61, 0.64), zenith=(0.42, 0.44, 0.48), exposure=0.9),
+    "sunset": dict(ambient=(0.38, 0.33, 0.36), sun=(1.0, 0.62, 0.35), shadow=0.9, fog=600.0, fog_rgb=(0.9, 0.65, 0.5),
+                   horizon=(1.0, 0.62, 0.38), zenith=(0.35, 0.35, 0.6), exposure=1.1),
+    "dusk": dict(ambient=(0.18, 0.19, 0.26), sun=(0.35, 0.25, 0.2), shadow=0.4, fog=400.0, fog_rgb=(0.25, 0.25, 0.33),
+                 horizon=(0.35, 0.3, 0.4), zenith=(0.08, 0.1, 0.22), exposure=1.6),
+    "fog": dict(ambient=(0.7, 0.7, 0.72), sun=(0.15, 0.15, 0.15), shadow=0.2, fog=60.0, fog_rgb=(0.78, 0.78, 0.8),
+                horizon=(0.8, 0.8, 0.82), zenith=(0.72, 0.72, 0.75), exposure=1.0),
+}
+
+
+@dataclass
+class StereoSample:
+    """One rendered stereo frame.
+
+    Attributes:
+        name: ``<cat>_<6 digits>``; category: ``um``/``umm``/``uu``; scenario: scenario id; index: frame i.
+        left, right: ``H×W×3 uint8`` RGB images of the left (reference) and right cameras.
+        disparity: ``float32 H×W`` exact left disparity in pixels, NaN where the ray hits nothing (sky).
+        label: road label of the left image (road = road surface incl. markings, everything else
+            non-road; every pixel valid).
+        noc: ``bool H×W``, left pixels visible in the right image too (not occluded).
+        calibration: the rig and its road plane (planar mode: the exact road plane).
+        kitti_calib: KITTI calibration matrices (P0–P3, R0_rect, Tr_velo_to_cam, Tr_cam_to_road).
+        meta: weather, rig and road parameters.
+    """
+
+    name: str
+    category: str
+    scenario: int
+    index: int
+    left: np.ndarray
+    right: np.ndarray
+    disparity: np.ndarray
+    label: RoadLabel
+    noc: np.ndarray
+    calibration: StereoCalibration
+    kitti_calib: dict[str, np.ndarray]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class _Hits:
+    """Nearest hit per pixel of one view, as flat arrays of length H·W."""
+
+    t: np.ndarray
+    mat: np.ndarray
+    albedo: np.ndarray
+    normal: np.ndarray
+    tu: np.ndarray
+    tv: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> _Hits:
+        return cls(t=np.full(n, np.inf, F32), mat=np.zeros(n, np.uint8), albedo=np.zeros((n, 3), F32),
+                   normal=np.zeros((n, 3), F32), tu=np.zeros(n, F32), tv=np.zeros(n, F32))
+
+    def write(self, idx: np.ndarray, t: np.ndarray, mat: int | np.ndarray, albedo: Any, normal: Any,
+              tu: np.ndarray, tv: np.ndarray) -> None:
+        """Keep the hits at flat pixel indices ``idx`` (values aligned with ``idx``) that are nearer."""
+        m = t < self.t[idx]
+        if not m.any():
+            return
+        sel = idx[m]
+        self.t[sel] = t[m]
+        self.mat[sel] = mat[m] if isinstance(mat, np.ndarray) else mat
+        self.albedo[sel] = albedo[m] if isinstance(albedo, np.ndarray) and albedo.ndim == 2 else albedo
+        self.normal[sel] = normal[m] if isinstance(normal, np.ndarray) and normal.ndim == 2 else normal
+        self.tu[sel] = tu[m]
+        self.tv[sel] = tv[m]
+
+
+def _directions(sc: Scenario, R: np.ndarray, h: int, w: int) -> np.ndarray:
+    """World directions of the pixel rays (``3×(H·W)``), scaled so the camera-z component is 1."""
+    x = (np.arange(w, dtype=F32) - F32(sc.cx)) / F32(sc.focal)
+    y = (np.arange(h, dtype=F32) - F32(sc.cy)) / F32(sc.focal)
+    R = R.astype(F32)
+    return np.stack([(R[i, 0] * x[None, :] + R[i, 1] * y[:, None] + R[i, 2]).ravel() for i in range(3)])
+
+
+_GROUND_ALBEDO = {MARKING: (0.85, 0.85, 0.82), CURB: (0.6, 0.6, 0.58), GRASS: (0.22, 0.38, 0.14)}
+
+
+def _ground(hits: _Hits, sc: Scenario, o: tuple[float, float, float], d: np.ndarray) -> np.ndarray:
+    """Road, lane markings, curbs, sidewalks and verges. Returns the lateral offset s of every pixel's
+    ground hit (inf where the ray does not hit the ground)."""
+    idx = np.flatnonzero(d[1] > 1e-6)
+    dx, dy, dz = d[0][idx], d[1][idx], d[2][idx]
+    inv = 1.0 / dy
+    planar = sc.vcurve == 0 and sc.grade == 0 and sc.camber == 0
+
+    def intersect(lift: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = (-lift - o[1]) * inv  # plane Y = −lift
+        for _ in range(0 if planar else 6):
+            z = o[2] + t * dz
+            s = o[0] + t * dx - sc.centre_x(z)
+            t = (-(sc.elevation(s, z) + lift) - o[1]) * inv
+        z = o[2] + t * dz
+        return t, o[0] + t * dx - sc.centre_x(z), z
+
+    with np.errstate(invalid="ignore", over="ignore"):  # rays grazing the ground diverge: dropped below
+        hw, hc = sc.half_width, sc.curb_height
+        t_r, s_r, z_r = intersect(0.0)
+        t_s, s_s, z_s = intersect(hc)
+        on_side = np.abs(s_s) > hw
+        on_road = ~on_side & (np.abs(s_r) <= hw)
+        on_curb = ~on_side & ~on_road
+        frac = np.clip((hw - np.abs(s_s)) / np.maximum(np.abs(s_r) - np.abs(s_s), F32(1e-6)), 0, 1)
+        t = np.where(on_side, t_s, np.where(on_road, t_r, t_s + frac * (t_r - t_s)))
+        s = np.where(on_side, s_s, s_r)
+        z = np.where(on_side, z_s, z_r)
+    ok = (t > 0) & (t < FAR)
+    idx, t, s, z = idx[ok], t[ok], s[ok], z[ok]
+    on_side, on_curb = on_side[ok], on_curb[ok]
+    mat = np.full(t.shape, ROAD, np.uint8)
+    mat[on_side] = SIDEWALK
+    mat[on_side & (np.abs(s) > sc.facade_offset)] = GRASS
+    mat[on_curb] = CURB
+    on_road = mat == ROAD
+    if sc.category != "uu":
+        zm = np.mod(z, F32(9.0))
+        marks = np.abs(np.abs(s) - (hw - 0.3)) < 0.07  # edge lines
+        for k in range(1, sc.lanes):
+            marks |= (np.abs(s - (-hw + k * sc.lane_width)) < 0.07) & (zm < 3.0)
+        mat[on_road & marks] = MARKING
+    table = np.array([_GROUND_ALBEDO.get(m, sc.road_colour if m == ROAD else sc.sidewalk_colour)
+                      for m in range(GRASS + 1)], F32)
+    albedo = table[mat]
+    side = np.flatnonzero(mat == SIDEWALK)
+    tiles = (np.mod(s[side], F32(0.6)) < 0.03) | (np.mod(z[side], F32(0.6)) < 0.03)
+    albedo[side[tiles]] *= 0.7
+    hits.write(idx, t, mat, albedo, np.array([0.0, -1.0, 0.0], F32), o[0] + t * dx[ok], z)
+    lateral = np.full(hits.t.shape, np.inf, F32)
+    lateral[idx] = s
+    return lateral
+
+
+def _solve_lateral(sc: Scenario, o: tuple[float, float, float], dx: np.ndarray, dz: np.ndarray,
+                   offset: float) -> np.ndarray:
+    """Smallest positive t with ``s(o + t d) = offset`` (the road's parallel curves), inf if none."""
+    c0, c1, c2 = sc.centre
+    B = dx - (c1 + 2 * c2 * o[2]) * dz
+    C = o[0] - c0 - c1 * o[2] - c2 * o[2] ** 2 - offset
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        if abs(c2) < 1e-12:
+            t = -C / B
+            return np.where(t > 0, t, np.inf).astype(F32)
+        A = -c2 * dz * dz
+        disc = B * B - 4 * A * C
+        q = -0.5 * (B + np.copysign(np.sqrt(np.maximum(disc, 0)), B))  # numerically stable roots
+        r1, r2 = q / A, C / q
+        t = np.minimum(np.where(r1 > 0, r1, np.inf), np.where(r2 > 0, r2, np.inf))
+        return np.where(disc >= 0, t, np.inf).astype(F32)
+
+
+def _facades(hits: _Hits, sc: Scenario, o: tuple[float, float, float], d: np.ndarray, z_cam: float,
+             lateral: np.ndarray) -> None:
+    """Building facades (with windows) and hedges along both sides of the road.
+
+    Only rays whose ground hit lies beyond the building line (or that miss the ground) can reach a
+    facade: the street is a corridor the rays leave only through its walls.
+    """
+    nseg = len(sc.building_heights)
+    heights = sc.building_heights.astype(F32)
+    for side in (-1.0, 1.0):
+        off = side * sc.facade_offset
+        cand = np.flatnonzero(np.isinf(lateral) | (side * lateral >= sc.facade_offset - 0.01))
+        if cand.size == 0:
+            continue
+        dx, dy, dz = d[0][cand], d[1][cand], d[2][cand]
+        t = _solve_lateral(sc, o, dx, dz, off)
+        with np.errstate(invalid="ignore"):
+            z = o[2] + t * dz
+            y = o[1] + t * dy
+            ok = np.isfinite(t) & (t < FAR) & (z > z_cam - 20) & (z < 260)
+        cand, t, z, y = cand[ok], t[ok], z[ok], y[ok]
+        seg = np.clip((z / F32(sc.segment_length)).astype(np.intp), 0, nseg - 1)
+        height = heights[seg]
+        above = -(sc.elevation(off, z) + sc.curb_height) - y  # height of the hit above the ground
+        ok = (above >= -0.05) & (above <= height)
+        cand, t, z, y, seg, height, above = cand[ok], t[ok], z[ok], y[ok], seg[ok], height[ok], above[ok]
+        if cand.size == 0:
+            continue
+        hedge = height <= 2.5
+        mat = np.where(hedge, HEDGE, FACADE).astype(np.uint8)
+        albedo = sc.facade_colours.astype(F32)[seg]
+        albedo[hedge] = (0.18, 0.33, 0.12)
+        zm, am = np.mod(z, F32(3.2)), np.mod(above, F32(3.0))
+        window = ~hedge & (zm > 0.9) & (zm < 2.3) & (am > 0.9) & (am < 2.3) & (above > 3.0) & (above < height - 0.6)
+        albedo[window] = (0.12, 0.14, 0.17)
+        mat[window] = GLASS
+        slope = sc.centre[1] + 2 * sc.centre[2] * z
+        norm = np.sqrt(1 + slope * slope)
+        normal = np.stack([-side / norm, np.zeros_like(norm), side * slope / norm], axis=-1)
+        hits.write(cand, t, mat, albedo, normal, z, y)
+
+
+def _bbox(corners: np.ndarray, o: tuple[float, float, float], R: np.ndarray, sc: Scenario, h: int, w: int
+          ) -> np.ndarray | None:
+    """Flat indices of the image box covering world points ``corners`` (N×3), None when not visible."""
+    cam = (corners - np.asarray(o)) @ R  # Rᵀ (p − o), row-wise
+    if (cam[:, 2] < 0.05).all():
+        return None
+    if (cam[:, 2] < 0.05).any():
+        u0, u1, v0, v1 = 0, w, 0, h
+    else:
+        u = sc.focal * cam[:, 0] / cam[:, 2] + sc.cx
+        v = sc.focal * cam[:, 1] / cam[:, 2] + sc.cy
+        u0, u1 = int(max(math.floor(u.min()) - 1, 0)), int(min(math.ceil(u.max()) + 2, w))
+        v0, v1 = int(max(math.floor(v.min()) - 1, 0)), int(min(math.ceil(v.max()) + 2, h))
+        if u0 >= u1 or v0 >= v1:
+            return None
+    return (np.arange(v0, v1)[:, None] * w + np.arange(u0, u1)[None, :]).ravel()
+
+
+def _box_corners(b: Box) -> np.ndarray:
+    c, s = math.cos(b.yaw), math.sin(b.yaw)
+    pts = []
+    for lx in (-0.5 * b.width, 0.5 * b.width):
+        for lz in (-0.5 * b.length, 0.5 * b.length):
+            for ly in (0.0, -b.height):
+                pts.append((b.x + c * lx + s * lz, b.y + ly, b.z - s * lx + c * lz))
+    return np.array(pts)
+
+
+def _sphere_corners(sp: Sphere) -> np.ndarray:
+    r = sp.radius
+    return np.array([(sp.x + a * r, sp.y + b * r, sp.z + c * r) for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)])
+
+
+def _objects(hits: _Hits, objects: list[Box | Sphere], sc: Scenario, o: tuple[float, float, float],
+             d: np.ndarray, R: np.ndarray, w: int) -> None:
+    """Boxes (vehicles, pedestrians, poles, trunks) and spheres (tree canopies), each in its image box."""
+    h = hits.t.size // w
+    for ob in objects:
+        corners = _box_corners(ob) if isinstance(ob, Box) else _sphere_corners(ob)
+        idx = _bbox(corners, o, R, sc, h, w)
+        if idx is None:
+            continue
+        dx, dy, dz = d[0][idx], d[1][idx], d[2][idx]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if isinstance(ob, Box):
+                c, s = math.cos(ob.yaw), math.sin(ob.yaw)
+                ox, oy, oz = o[0] - ob.x, o[1] - (ob.y - 0.5 * ob.height), o[2] - ob.z
+                # world → box frame: rotate by −yaw about Y
+                lox, loz = c * ox - s * oz, s * ox + c * oz
+                ldx, ldz = c * dx - s * dz, s * dx + c * dz
+                half = (0.5 * ob.width, 0.5 * ob.height, 0.5 * ob.length)
+                tmin, tmax = [], []
+                for oo, dd, hh in ((lox, ldx, half[0]), (oy, dy, half[1]), (loz, ldz, half[2])):
+                    t1, t2 = (-hh - oo) / dd, (hh - oo) / dd
+                    tmin.append(np.minimum(t1, t2))
+                    tmax.append(np.maximum(t1, t2))
+                tmin_a = np.nan_to_num(np.stack(tmin), nan=-np.inf)
+                axis = np.argmax(tmin_a, axis=0)
+                t = np.take_along_axis(tmin_a, axis[None], 0)[0]
+                tfar = np.nanmin(np.stack(tmax), axis=0)
+                ok = (t <= tfar) & (t > 0)
+                if not ok.any():
+                    continue
+                idx, t, axis = idx[ok], t[ok], axis[ok]
+                ldx, dy, ldz = ldx[ok], dy[ok], ldz[ok]
+                sign = -np.sign(np.choose(axis, (ldx, dy, ldz))).astype(F32)
+                nl = np.zeros((t.size, 3), F32)
+                nl[np.arange(t.size), axis] = sign
+                normal = np.stack([c * nl[:, 0] + s * nl[:, 2], nl[:, 1], -s * nl[:, 0] + c * nl[:, 2]], -1)
+                px, py, pz = lox + t * ldx, oy + t * dy, loz + t * ldz
+                tu = np.choose(axis, (pz, px, px))
+                tv = np.choose(axis, (py, pz, py))
+                albedo = np.tile(np.array(ob.colour, F32), (t.size, 1))
+                if ob.material == VEHICLE:  # dark lower band: wheels and the shade under the body
+                    albedo[py > half[1] - 0.35] *= 0.35
+            else:
+                ox, oy, oz = o[0] - ob.x, o[1] - ob.y, o[2] - ob.z
+                b = ox * dx + oy * dy + oz * dz
+                a = dx * dx + dy * dy + dz * dz
+                disc = b * b - a * (ox * ox + oy * oy + oz * oz - ob.radius ** 2)
+                ok = disc >= 0
+                if not ok.any():
+                    continue
+                idx, a, b, disc, dx, dy, dz = idx[ok], a[ok], b[ok], disc[ok], dx[ok], dy[ok], dz[ok]
+                t = (-b - np.sqrt(disc)) / a
+                normal = np.stack([ox + t * dx, oy + t * dy, oz + t * dz], -1) / F32(ob.radius)
+                tu = o[0] + t * dx + 0.3 * (o[2] + t * dz)
+                tv = o[1] + t * dy + 0.3 * (o[2] + t * dz)
+                albedo = np.array(ob.colour, F32)
+                keep = t > 0
+                idx, t, normal, tu, tv = idx[keep], t[keep], normal[keep], tu[keep], tv[keep]
+        hits.write(idx, t.astype(F32), ob.material, albedo, normal.astype(F32), tu.astype(F32), tv.astype(F32))
+
+
+def _sun(sc: Scenario) -> np.ndarray:
+    el, az = sc.sun_elevation, sc.sun_azimuth
+    return np.array([math.cos(el) * math.sin(az), -math.sin(el), math.cos(el) * math.cos(az)])
+
+
+class _ShadowMap:
+    """Top-down map of the ground (0.1 m cells) with 1 where an object's shadow falls."""
+
+    cell = 0.1
+
+    def __init__(self, frame: Frame, origin: np.ndarray) -> None:
+        sc = frame.scenario
+        self.x0, self.z0 = origin[0] - 45.0, frame.z_cam - 5.0
+        grid = np.zeros((int(165 / self.cell), int(90 / self.cell)), np.uint8)  # rows = z, cols = x
+        self.grid = grid.astype(F32)
+        sun = _sun(sc)
+        if sun[1] > -0.02:
+            return
+        polys = []
+        for ob in sc.static_objects + frame.objects:
+            pts = _box_corners(ob) if isinstance(ob, Box) else self._sphere_points(ob)
+            polys.append(self._project(pts, sun))
+        nseg = len(sc.building_heights)
+        for side in (-1.0, 1.0):
+            off = side * sc.facade_offset
+            for k in range(nseg):
+                za, zb = k * sc.segment_length, (k + 1) * sc.segment_length
+                if zb < self.z0 - 50 or za > self.z0 + 200:
+                    continue
+                hgt = sc.building_heights[k]
+                base = [(sc.centre_x(z) + off, -sc.curb_height, z) for z in (za, zb)]
+                top = [(x, y - hgt, z) for x, y, z in base]
+                polys.append(self._project(np.array(base + top), sun))
+        for poly in polys:
+            pts = np.round(poly * 16).astype(np.int32)
+            cv2.fillConvexPoly(grid, cv2.convexHull(pts), 1, lineType=cv2.LINE_8, shift=4)
+        self.grid = grid.astype(F32)
+
+    @staticmethod
+    def _sphere_points(sp: Sphere) -> np.ndarray:
+        a = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+        r = sp.radius
+        ring = [np.stack([sp.x + r * np.cos(a), sp.y + r * np.sin(a), np.full_like(a, sp.z)], 1),
+                np.stack([np.full_like(a, sp.x), sp.y + r * np.sin(a), sp.z + r * np.cos(a)], 1),
+                np.stack([sp.x + r * np.cos(a), np.full_like(a, sp.y), sp.z + r * np.sin(a)], 1)]
+        return np.concatenate(ring)
+
+    def _project(self, pts: np.ndarray, sun: np.ndarray) -> np.ndarray:
+        mu = pts[:, 1] / sun[1]  # to the ground Y = 0 along −sun
+        g = pts - mu[:, None] * sun[None, :]
+        return np.stack([(g[:, 0] - self.x0) / self.cell, (g[:, 2] - self.z0) / self.cell], 1)
+
+    def lookup(self, x: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Shadow (0..1, bilinear) at ground points (x, z), flat arrays."""
+        return _remap_flat(self.grid, (x - self.x0) / self.cell, (z - self.z0) / self.cell, cv2.BORDER_CONSTANT)
+
+
+def _remap_flat(src: np.ndarray, mx: np.ndarray, my: np.ndarray, border: int) -> np.ndarray:
+    """cv2.remap at flat coordinate arrays (OpenCV wants maps under 32767 columns: fold them)."""
+    n = mx.size
+    cols = 1024
+    pad = (-n) % cols
+    mx = np.pad(mx.astype(F32, copy=False), (0, pad)).reshape(-1, cols)
+    my = np.pad(my.astype(F32, copy=False), (0, pad)).reshape(-1, cols)
+    return cv2.remap(src, mx, my, cv2.INTER_LINEAR, borderMode=border, borderValue=0).ravel()[:n]
+
+
+def _noise_tile(seed: tuple[int, ...]) -> np.ndarray:
+    rng = np.random.default_rng([*seed, 7])
+    padded = np.pad(rng.standard_normal((256, 256)).astype(F32), 8, mode="wrap")  # blur that tiles seamlessly
+    tile = cv2.GaussianBlur(padded, (0, 0), 0.8)[8:-8, 8:-8]
+    return (tile / tile.std()).astype(F32)
+
+
+def _texture(tile: np.ndarray, tu: np.ndarray, tv: np.ndarray, scale: float, shift: float) -> np.ndarray:
+    return cv2.remap(tile, (tu * scale + shift).astype(F32), (tv * scale + 0.37 * shift).astype(F32),
+                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+
+
+def _shade(hits: _Hits, frame: Frame, o: tuple[float, float, float], d: np.ndarray, tile: np.ndarray,
+           shadows: _ShadowMap, shape: tuple[int, int]) -> np.ndarray:
+    """Linear RGB radiance (float32 H×W×3) of one view."""
+    sc = frame.scenario
+    wx = _WEATHER[sc.weather]
+    h, w = shape
+    hit = np.isfinite(hits.t)
+    tt = np.where(hit, hits.t, F32(FAR))
+    footprint = tt / F32(sc.focal)
+    amps = _AMPS[hits.mat]
+    tu, tv = hits.tu.reshape(h, w), hits.tv.reshape(h, w)
+    n = (amps[:, 0] * np.minimum(F32(0.03) / footprint, 1) * _texture(tile, tu, tv, 40.0, 0.0).ravel()
+         + amps[:, 1] * np.minimum(F32(0.2) / footprint, 1) * _texture(tile, tu, tv, 6.0, 91.0).ravel()
+         + amps[:, 2] * _texture(tile, tu, tv, 0.8, 17.0).ravel())
+    colour = hits.albedo * np.clip(1.0 + n, 0.2, 2.0)[:, None]
+    ground = np.flatnonzero((hits.mat >= ROAD) & (hits.mat <= GRASS))
+    if sc.weather == "rain":  # wet, darker ground
+        colour[ground] *= 0.7
+    sun = _sun(sc).astype(F32)
+    lambert = np.clip(hits.normal @ sun, 0, 1)
+    if ground.size and wx["shadow"] > 0:
+        shadow = shadows.lookup(o[0] + tt[ground] * d[0][ground], o[2] + tt[ground] * d[2][ground])
+        lambert[ground] *= 1 - F32(wx["shadow"]) * shadow
+    rad = colour * (np.array(wx["ambient"], F32) + lambert[:, None] * np.array(wx["sun"], F32))
+    fog = (1.0 - np.exp(-tt / F32(wx["fog"])))[:, None]  # aerial perspective
+    rad += fog * (np.array(wx["fog_rgb"], F32) - rad)
+    sky = np.flatnonzero(~hit)
+    if sky.size:
+        dx, dy, dz = d[0][sky], d[1][sky], d[2][sky]
+        up = np.clip(-dy / np.sqrt(dx * dx + dy * dy + dz * dz), 0, 1)
+        k = np.clip(up * 2.5, 0, 1)[:, None]
+        colour = np.array(wx["horizon"], F32) * (1 - k) + np.array(wx["zenith"], F32) * k
+        lift = np.maximum(-dy + F32(0.05), F32(0.05))
+        clouds = _remap_flat(tile, dx / lift * 3.0 + 5.0, dz / lift * 3.0, cv2.BORDER_WRAP)
+        rad[sky] = colour + F32(0.06) * clouds[:, None]
+    return (rad * F32(wx["exposure"])).reshape(h, w, 3)
+
+
+def _camera(rad: np.ndarray, rng: np.random.Generator, weather: str) -> np.ndarray:
+    """This camera's response: gain and white balance, bias, vignetting, gamma, noise (uint8 RGB)."""
+    h, w = rad.shape[:2]
+    gain = rng.uniform(0.85, 1.15) * rng.uniform(0.96, 1.04, 3)
+    bias = rng.uniform(-8, 8)
+    yy, xx = np.ogrid[:h, :w]
+    r2 = ((xx - w / 2) / (w / 2)) ** 2 + ((yy - h / 2) / (h / 2)) ** 2
+    vignette = (1 - rng.uniform(0.05, 0.35) * r2 / 2).astype(F32)
+    img = np.power(np.clip(rad * gain.astype(F32) * vignette[..., None], 0, 1), F32(1 / 2.2)) * 255 + F32(bias)
+    img += rng.standard_normal(img.shape, dtype=F32) * F32(rng.uniform(1.0, 3.5))
+    if weather == "rain":  # streaks differ between the cameras
+        streaks = np.zeros((h, w), np.uint8)
+        for _ in range(int(rng.integers(60, 160))):
+            x, y = int(rng.integers(0, w)), int(rng.integers(0, h))
+            ln = int(rng.integers(8, 25))
+            cv2.line(streaks, (x, y), (x + ln // 6, y + ln), 1, 1)
+        img += (streaks[..., None] * 25).astype(F32)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def kitti_calibration(frame: Frame) -> dict[str, np.ndarray]:
+    """KITTI calibration matrices of the frame's rig (camera 0 = 2 = left, 1 = 3 = right, rectified).
+
+    ``Tr_cam_to_road`` maps left-camera coordinates to the road frame (origin on the road under the
+    camera, Y down, Z along the rig's heading): ``[Rx(pitch)·Rz(roll) | (0, −h, 0)]``.
+    """
+    sc = frame.scenario
+    K = np.array([[sc.focal, 0, sc.cx], [0, sc.focal, sc.cy], [0, 0, 1.0]])
+    P_left = np.hstack([K, np.zeros((3, 1))])
+    P_right = P_left.copy()
+    P_right[0, 3] = -sc.focal * sc.baseline
+    R_wc = frame.rotation()
+    cy_, sy_ = math.cos(frame.yaw), math.sin(frame.yaw)
+    Ry = np.array([[cy_, 0, sy_], [0, 1, 0], [-sy_, 0, cy_]])
+    road = np.hstack([Ry.T @ R_wc, np.array([[0.0], [-sc.cam_height], [0.0]])])
+    velo = np.array([[0, -1, 0, 0], [0, 0, -1, -0.08], [1, 0, 0, -0.27]], float)
+    return {"P0": P_left, "P1": P_right, "P2": P_left, "P3": P_right, "R0_rect": np.eye(3),
+            "Tr_velo_to_cam": velo, "Tr_cam_to_road": road}
+
+
+def render_frame(frame: Frame, config: SynthConfig) -> StereoSample:
+    """Render a sampled :class:`~freespace.data.synthetic.scene.Frame` from both cameras."""
+    sc = frame.scenario
+    h, w = config.height, config.width
+    R = frame.rotation()
+    d = _directions(sc, R, h, w)
+    o_left = tuple(float(x) for x in frame.camera_centre())  # Python floats keep float32 arithmetic
+    o_right = tuple(float(x) for x in np.asarray(o_left) + R @ np.array([sc.baseline, 0.0, 0.0]))
+    tile = _noise_tile((frame.seed[0], sc.index))
+    shadows = _ShadowMap(frame, np.asarray(o_left))
+    objects = sc.static_objects + frame.objects
+    rng = np.random.default_rng([*frame.seed, 3])
+    views, images = [], []
+    for o in (o_left, o_right):
+        hits = _Hits.empty(h * w)
+        lateral = _ground(hits, sc, o, d)
+        _facades(hits, sc, o, d, frame.z_cam, lateral)
+        _objects(hits, objects, sc, o, d, R, w)
+        views.append(hits)
+        images.append(_camera(_shade(hits, frame, o, d, tile, shadows, (h, w)), rng, sc.weather))
+    t_left, t_right = views[0].t.reshape(h, w), views[1].t.reshape(h, w)
+    seen = np.isfinite(t_left)
+    disparity = np.full((h, w), np.nan, F32)
+    disparity[seen] = F32(sc.focal * sc.baseline) / t_left[seen]
+    # visible in the right view: the right ray at u − d sees the same depth
+    ur = np.rint(np.arange(w, dtype=F32)[None, :] - np.where(seen, disparity, F32(1e9)))
+    t_at = np.take_along_axis(t_right, np.clip(ur, 0, w - 1).astype(np.intp), axis=1)
+    with np.errstate(invalid="ignore"):
+        noc = seen & (ur >= 0) & (np.abs(t_at - t_left) <= 0.02 * t_left + 0.05)
+    mat = views[0].mat.reshape(h, w)
+    road = (mat == ROAD) | (mat == MARKING)
+    kitti = kitti_calibration(frame)
+    meta = {"weather": sc.weather, "planar": config.planar, "roll_deg": math.degrees(sc.roll),
+            "pitch_deg": math.degrees(sc.pitch), "baseline_m": sc.baseline, "focal_px": sc.focal,
+            "camera_height_m": sc.cam_height, "lanes": sc.lanes, "seed": frame.seed[0]}
+    return StereoSample(name=frame.name, category=sc.category, scenario=sc.index, index=frame.index,
+                        left=images[0], right=images[1], disparity=disparity,
+                        label=RoadLabel(road=road, valid=np.ones_like(road)), noc=noc,
+                        calibration=StereoCalibration.from_kitti(kitti), kitti_calib=kitti, meta=meta)
+
+
+def render_sample(index: int, seed: int = 0, config: SynthConfig = SynthConfig()) -> StereoSample:
+    """Render frame ``index`` of the built-in dataset (a function of ``(seed, index, config)`` only).
+
+    Example:
+        >>> s = render_sample(0, seed=1, config=SynthConfig(width=160, height=120))
+        >>> s.left.shape, s.disparity.dtype, s.name[:3] in ("um_", "umm", "uu_")
+        ((120, 160, 3), dtype('float32'), True)
+    """
+    config.check()
+    return render_frame(sample_frame(config, seed, index), config)
