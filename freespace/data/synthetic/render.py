@@ -92,33 +92,60 @@ class StereoSample:
     meta: dict[str, Any] = field(default_factory=dict)
 
 
+class _Palette:
+    """The frame's surface colours; every hit stores an index into it (shared by both views)."""
+
+    def __init__(self, sc: Scenario) -> None:
+        self.colours: list[tuple[float, float, float]] = []
+        self._ids: dict[tuple[float, float, float], int] = {}
+        self.ground = np.zeros(GRASS + 1, np.uint16)
+        for m, rgb in ((ROAD, sc.road_colour), (MARKING, (0.85, 0.85, 0.82)), (CURB, (0.6, 0.6, 0.58)),
+                       (SIDEWALK, sc.sidewalk_colour), (GRASS, (0.22, 0.38, 0.14))):
+            self.ground[m] = self.add(rgb)
+        self.tile = self.add(tuple(0.7 * c for c in sc.sidewalk_colour))  # type: ignore[arg-type]
+        self.hedge = self.add((0.18, 0.33, 0.12))
+        self.window = self.add((0.12, 0.14, 0.17))
+        self.facades = np.array([self.add(tuple(float(c) for c in rgb)) for rgb in sc.facade_colours], np.uint16)
+
+    def add(self, rgb: tuple[float, float, float]) -> int:
+        """Index of colour ``rgb`` (added once)."""
+        key = tuple(round(float(c), 6) for c in rgb)
+        if key not in self._ids:
+            self._ids[key] = len(self.colours)
+            self.colours.append(key)  # type: ignore[arg-type]
+        return self._ids[key]
+
+    def array(self) -> np.ndarray:
+        return np.array(self.colours, F32)
+
+
 @dataclass
 class _Hits:
-    """Nearest hit per pixel of one view, as flat arrays of length H·W."""
+    """Nearest hit per pixel of one view, as flat arrays of length H·W: depth, material, colour index
+    in the palette, sun-facing factor ``max(0, n·L)`` and texture coordinates (metres)."""
 
     t: np.ndarray
     mat: np.ndarray
-    albedo: np.ndarray
-    normal: np.ndarray
+    sid: np.ndarray
+    lam: np.ndarray
     tu: np.ndarray
     tv: np.ndarray
 
     @classmethod
     def empty(cls, n: int) -> _Hits:
-        return cls(t=np.full(n, np.inf, F32), mat=np.zeros(n, np.uint8), albedo=np.zeros((n, 3), F32),
-                   normal=np.zeros((n, 3), F32), tu=np.zeros(n, F32), tv=np.zeros(n, F32))
+        return cls(t=np.full(n, np.inf, F32), mat=np.zeros(n, np.uint8), sid=np.zeros(n, np.uint16),
+                   lam=np.zeros(n, F32), tu=np.zeros(n, F32), tv=np.zeros(n, F32))
 
-    def write(self, idx: np.ndarray, t: np.ndarray, mat: int | np.ndarray, albedo: Any, normal: Any,
-              tu: np.ndarray, tv: np.ndarray) -> None:
+    def write(self, idx: np.ndarray, t: np.ndarray, mat: int | np.ndarray, sid: int | np.ndarray,
+              lam: float | np.ndarray, tu: np.ndarray, tv: np.ndarray) -> None:
         """Keep the hits at flat pixel indices ``idx`` (values aligned with ``idx``) that are nearer."""
         m = t < self.t[idx]
         if not m.any():
             return
         sel = idx[m]
         self.t[sel] = t[m]
-        self.mat[sel] = mat[m] if isinstance(mat, np.ndarray) else mat
-        self.albedo[sel] = albedo[m] if isinstance(albedo, np.ndarray) and albedo.ndim == 2 else albedo
-        self.normal[sel] = normal[m] if isinstance(normal, np.ndarray) and normal.ndim == 2 else normal
+        for name, value in (("mat", mat), ("sid", sid), ("lam", lam)):
+            getattr(self, name)[sel] = value[m] if isinstance(value, np.ndarray) else value
         self.tu[sel] = tu[m]
         self.tv[sel] = tv[m]
 
@@ -131,10 +158,8 @@ def _directions(sc: Scenario, R: np.ndarray, h: int, w: int) -> np.ndarray:
     return np.stack([(R[i, 0] * x[None, :] + R[i, 1] * y[:, None] + R[i, 2]).ravel() for i in range(3)])
 
 
-_GROUND_ALBEDO = {MARKING: (0.85, 0.85, 0.82), CURB: (0.6, 0.6, 0.58), GRASS: (0.22, 0.38, 0.14)}
-
-
-def _ground(hits: _Hits, sc: Scenario, o: tuple[float, float, float], d: np.ndarray) -> np.ndarray:
+def _ground(hits: _Hits, sc: Scenario, o: tuple[float, float, float], d: np.ndarray, pal: _Palette,
+            sun: np.ndarray) -> np.ndarray:
     """Road, lane markings, curbs, sidewalks and verges. Returns the lateral offset s of every pixel's
     ground hit (inf where the ray does not hit the ground)."""
     idx = np.flatnonzero(d[1] > 1e-6)
@@ -176,13 +201,11 @@ def _ground(hits: _Hits, sc: Scenario, o: tuple[float, float, float], d: np.ndar
         for k in range(1, sc.lanes):
             marks |= (np.abs(s - (-hw + k * sc.lane_width)) < 0.07) & (zm < 3.0)
         mat[on_road & marks] = MARKING
-    table = np.array([_GROUND_ALBEDO.get(m, sc.road_colour if m == ROAD else sc.sidewalk_colour)
-                      for m in range(GRASS + 1)], F32)
-    albedo = table[mat]
+    sid = pal.ground[mat]
     side = np.flatnonzero(mat == SIDEWALK)
     tiles = (np.mod(s[side], F32(0.6)) < 0.03) | (np.mod(z[side], F32(0.6)) < 0.03)
-    albedo[side[tiles]] *= 0.7
-    hits.write(idx, t, mat, albedo, np.array([0.0, -1.0, 0.0], F32), o[0] + t * dx[ok], z)
+    sid[side[tiles]] = pal.tile
+    hits.write(idx, t, mat, sid, max(0.0, float(-sun[1])), o[0] + t * dx[ok], z)
     lateral = np.full(hits.t.shape, np.inf, F32)
     lateral[idx] = s
     return lateral
@@ -207,7 +230,7 @@ def _solve_lateral(sc: Scenario, o: tuple[float, float, float], dx: np.ndarray, 
 
 
 def _facades(hits: _Hits, sc: Scenario, o: tuple[float, float, float], d: np.ndarray, z_cam: float,
-             lateral: np.ndarray) -> None:
+             lateral: np.ndarray, pal: _Palette, sun: np.ndarray) -> None:
     """Building facades (with windows) and hedges along both sides of the road.
 
     Only rays whose ground hit lies beyond the building line (or that miss the ground) can reach a
@@ -236,16 +259,15 @@ def _facades(hits: _Hits, sc: Scenario, o: tuple[float, float, float], d: np.nda
             continue
         hedge = height <= 2.5
         mat = np.where(hedge, HEDGE, FACADE).astype(np.uint8)
-        albedo = sc.facade_colours.astype(F32)[seg]
-        albedo[hedge] = (0.18, 0.33, 0.12)
+        sid = pal.facades[seg]
+        sid[hedge] = pal.hedge
         zm, am = np.mod(z, F32(3.2)), np.mod(above, F32(3.0))
         window = ~hedge & (zm > 0.9) & (zm < 2.3) & (am > 0.9) & (am < 2.3) & (above > 3.0) & (above < height - 0.6)
-        albedo[window] = (0.12, 0.14, 0.17)
+        sid[window] = pal.window
         mat[window] = GLASS
-        slope = sc.centre[1] + 2 * sc.centre[2] * z
-        norm = np.sqrt(1 + slope * slope)
-        normal = np.stack([-side / norm, np.zeros_like(norm), side * slope / norm], axis=-1)
-        hits.write(cand, t, mat, albedo, normal, z, y)
+        slope = sc.centre[1] + 2 * sc.centre[2] * z  # normal (−side, 0, side·slope)/‖·‖, towards the road
+        lam = np.maximum(side * (slope * float(sun[2]) - float(sun[0])) / np.sqrt(1 + slope * slope), 0)
+        hits.write(cand, t, mat, sid, lam, z, y)
 
 
 def _bbox(corners: np.ndarray, o: tuple[float, float, float], R: np.ndarray, sc: Scenario, h: int, w: int
@@ -282,7 +304,7 @@ def _sphere_corners(sp: Sphere) -> np.ndarray:
 
 
 def _objects(hits: _Hits, objects: list[Box | Sphere], sc: Scenario, o: tuple[float, float, float],
-             d: np.ndarray, R: np.ndarray, w: int) -> None:
+             d: np.ndarray, R: np.ndarray, w: int, pal: _Palette, sun: np.ndarray) -> None:
     """Boxes (vehicles, pedestrians, poles, trunks) and spheres (tree canopies), each in its image box."""
     h = hits.t.size // w
     for ob in objects:
@@ -314,15 +336,15 @@ def _objects(hits: _Hits, objects: list[Box | Sphere], sc: Scenario, o: tuple[fl
                 idx, t, axis = idx[ok], t[ok], axis[ok]
                 ldx, dy, ldz = ldx[ok], dy[ok], ldz[ok]
                 sign = -np.sign(np.choose(axis, (ldx, dy, ldz))).astype(F32)
-                nl = np.zeros((t.size, 3), F32)
-                nl[np.arange(t.size), axis] = sign
-                normal = np.stack([c * nl[:, 0] + s * nl[:, 2], nl[:, 1], -s * nl[:, 0] + c * nl[:, 2]], -1)
+                # n·L of the six faces: the sun in the box frame, one component per axis
+                sun_local = (c * sun[0] - s * sun[2], sun[1], s * sun[0] + c * sun[2])
+                lam = np.maximum(sign * np.choose(axis, sun_local).astype(F32), 0)
                 px, py, pz = lox + t * ldx, oy + t * dy, loz + t * ldz
                 tu = np.choose(axis, (pz, px, px))
                 tv = np.choose(axis, (py, pz, py))
-                albedo = np.tile(np.array(ob.colour, F32), (t.size, 1))
+                sid = np.full(t.size, pal.add(ob.colour), np.uint16)
                 if ob.material == VEHICLE:  # dark lower band: wheels and the shade under the body
-                    albedo[py > half[1] - 0.35] *= 0.35
+                    sid[py > half[1] - 0.35] = pal.add(tuple(0.35 * x for x in ob.colour))
             else:
                 ox, oy, oz = o[0] - ob.x, o[1] - ob.y, o[2] - ob.z
                 b = ox * dx + oy * dy + oz * dz
@@ -333,13 +355,14 @@ def _objects(hits: _Hits, objects: list[Box | Sphere], sc: Scenario, o: tuple[fl
                     continue
                 idx, a, b, disc, dx, dy, dz = idx[ok], a[ok], b[ok], disc[ok], dx[ok], dy[ok], dz[ok]
                 t = (-b - np.sqrt(disc)) / a
-                normal = np.stack([ox + t * dx, oy + t * dy, oz + t * dz], -1) / F32(ob.radius)
+                n_dot_l = ((ox + t * dx) * sun[0] + (oy + t * dy) * sun[1] + (oz + t * dz) * sun[2]) / ob.radius
+                lam = np.maximum(n_dot_l, 0)
                 tu = o[0] + t * dx + 0.3 * (o[2] + t * dz)
                 tv = o[1] + t * dy + 0.3 * (o[2] + t * dz)
-                albedo = np.array(ob.colour, F32)
+                sid = pal.add(ob.colour)
                 keep = t > 0
-                idx, t, normal, tu, tv = idx[keep], t[keep], normal[keep], tu[keep], tv[keep]
-        hits.write(idx, t.astype(F32), ob.material, albedo, normal.astype(F32), tu.astype(F32), tv.astype(F32))
+                idx, t, lam, tu, tv = idx[keep], t[keep], lam[keep], tu[keep], tv[keep]
+        hits.write(idx, t.astype(F32), ob.material, sid, lam.astype(F32), tu.astype(F32), tv.astype(F32))
 
 
 def _sun(sc: Scenario) -> np.ndarray:
@@ -417,12 +440,13 @@ def _noise_tile(seed: tuple[int, ...]) -> np.ndarray:
 
 
 def _texture(tile: np.ndarray, tu: np.ndarray, tv: np.ndarray, scale: float, shift: float) -> np.ndarray:
-    return cv2.remap(tile, (tu * scale + shift).astype(F32), (tv * scale + 0.37 * shift).astype(F32),
-                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+    with np.errstate(over="ignore", invalid="ignore"):  # far hits: huge coordinates, wrapped anyway
+        return cv2.remap(tile, (tu * scale + shift).astype(F32), (tv * scale + 0.37 * shift).astype(F32),
+                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
 
 
 def _shade(hits: _Hits, frame: Frame, o: tuple[float, float, float], d: np.ndarray, tile: np.ndarray,
-           shadows: _ShadowMap, shape: tuple[int, int]) -> np.ndarray:
+           shadows: _ShadowMap, palette: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Linear RGB radiance (float32 H×W×3) of one view."""
     sc = frame.scenario
     wx = _WEATHER[sc.weather]
@@ -430,17 +454,15 @@ def _shade(hits: _Hits, frame: Frame, o: tuple[float, float, float], d: np.ndarr
     hit = np.isfinite(hits.t)
     tt = np.where(hit, hits.t, F32(FAR))
     footprint = tt / F32(sc.focal)
-    amps = _AMPS[hits.mat]
     tu, tv = hits.tu.reshape(h, w), hits.tv.reshape(h, w)
-    n = (amps[:, 0] * np.minimum(F32(0.03) / footprint, 1) * _texture(tile, tu, tv, 40.0, 0.0).ravel()
-         + amps[:, 1] * np.minimum(F32(0.2) / footprint, 1) * _texture(tile, tu, tv, 6.0, 91.0).ravel()
-         + amps[:, 2] * _texture(tile, tu, tv, 0.8, 17.0).ravel())
-    colour = hits.albedo * np.clip(1.0 + n, 0.2, 2.0)[:, None]
+    n = (_AMPS[:, 0][hits.mat] * np.minimum(F32(0.03) / footprint, 1) * _texture(tile, tu, tv, 40.0, 0.0).ravel()
+         + _AMPS[:, 1][hits.mat] * np.minimum(F32(0.2) / footprint, 1) * _texture(tile, tu, tv, 6.0, 91.0).ravel()
+         + _AMPS[:, 2][hits.mat] * _texture(tile, tu, tv, 0.8, 17.0).ravel())
     ground = np.flatnonzero((hits.mat >= ROAD) & (hits.mat <= GRASS))
     if sc.weather == "rain":  # wet, darker ground
-        colour[ground] *= 0.7
-    sun = _sun(sc).astype(F32)
-    lambert = np.clip(hits.normal @ sun, 0, 1)
+        n[ground] = (1.0 + n[ground]) * 0.7 - 1.0
+    colour = palette[hits.sid] * np.clip(1.0 + n, 0.2, 2.0)[:, None]
+    lambert = hits.lam
     if ground.size and wx["shadow"] > 0:
         shadow = shadows.lookup(o[0] + tt[ground] * d[0][ground], o[2] + tt[ground] * d[2][ground])
         lambert[ground] *= 1 - F32(wx["shadow"]) * shadow
@@ -463,12 +485,16 @@ def _camera(rad: np.ndarray, rng: np.random.Generator, weather: str) -> np.ndarr
     """This camera's response: gain and white balance, bias, vignetting, gamma, noise (uint8 RGB)."""
     h, w = rad.shape[:2]
     gain = rng.uniform(0.85, 1.15) * rng.uniform(0.96, 1.04, 3)
+    sigma = rng.uniform(1.0, 3.5)
     bias = rng.uniform(-8, 8)
     yy, xx = np.ogrid[:h, :w]
     r2 = ((xx - w / 2) / (w / 2)) ** 2 + ((yy - h / 2) / (h / 2)) ** 2
     vignette = (1 - rng.uniform(0.05, 0.35) * r2 / 2).astype(F32)
-    img = np.power(np.clip(rad * gain.astype(F32) * vignette[..., None], 0, 1), F32(1 / 2.2)) * 255 + F32(bias)
-    img += rng.standard_normal(img.shape, dtype=F32) * F32(rng.uniform(1.0, 3.5))
+    img = cv2.pow(np.clip(rad * gain.astype(F32) * vignette[..., None], 0, 1), 1 / 2.2) * 255 + F32(bias)
+    # sensor noise: triangular (sum of two uniforms), standard deviation sigma grey levels
+    n = rad.size
+    noise = np.frombuffer(rng.bytes(n), np.uint8).astype(F32) + np.frombuffer(rng.bytes(n), np.uint8) - F32(255)
+    img += (noise * F32(sigma / (255 * math.sqrt(1 / 6)))).reshape(img.shape)
     if weather == "rain":  # streaks differ between the cameras
         streaks = np.zeros((h, w), np.uint8)
         for _ in range(int(rng.integers(60, 160))):
@@ -511,14 +537,16 @@ def render_frame(frame: Frame, config: SynthConfig) -> StereoSample:
     shadows = _ShadowMap(frame, np.asarray(o_left))
     objects = sc.static_objects + frame.objects
     rng = np.random.default_rng([*frame.seed, 3])
+    pal = _Palette(sc)
+    sun = _sun(sc)
     views, images = [], []
     for o in (o_left, o_right):
         hits = _Hits.empty(h * w)
-        lateral = _ground(hits, sc, o, d)
-        _facades(hits, sc, o, d, frame.z_cam, lateral)
-        _objects(hits, objects, sc, o, d, R, w)
+        lateral = _ground(hits, sc, o, d, pal, sun)
+        _facades(hits, sc, o, d, frame.z_cam, lateral, pal, sun)
+        _objects(hits, objects, sc, o, d, R, w, pal, sun)
         views.append(hits)
-        images.append(_camera(_shade(hits, frame, o, d, tile, shadows, (h, w)), rng, sc.weather))
+        images.append(_camera(_shade(hits, frame, o, d, tile, shadows, pal.array(), (h, w)), rng, sc.weather))
     t_left, t_right = views[0].t.reshape(h, w), views[1].t.reshape(h, w)
     seen = np.isfinite(t_left)
     disparity = np.full((h, w), np.nan, F32)
