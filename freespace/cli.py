@@ -8,7 +8,6 @@ message on stderr and exit code 2; a dataset run with failed frames exits with 1
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 from collections.abc import Sequence
@@ -88,9 +87,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
     from freespace.demo import run_demo
 
-    summary = run_demo(args.out, num_frames=args.num, seed=args.seed)
-    print(json.dumps(summary, indent=2))
-    return 0
+    result = run_demo(args.out, num_frames=args.num, seed=args.seed)
+    print(f"{'frame':<12} {'weather':<8} {'roll':>7} {'fit':>7} {'SGBM fit':>8}   road |L−R|  road |L−G|")
+    for f in result["frames"]:
+        print(f"{f['frame']:<12} {f['weather']:<8} {f['true_roll_deg']:+7.3f} {f['fitted_roll_deg']:+7.3f} "
+              f"{f['sgbm_roll_deg']:+8.3f}   {f['road_mae_right']:10.1f}  {f['road_mae_generated']:10.1f}")
+    print(f"on the road the generated view differs from the left image by {result['mean_road_mae_generated']:.1f} "
+          f"grey levels on average, the raw right image by {result['mean_road_mae_right']:.1f}")
+    print(f"figures: {result['figures']}   ({result['seconds']:.0f} s)")
+    return 1 if result["generate_failed"] else 0
 
 
 def build_parser() -> argparse.ArgumentParser:

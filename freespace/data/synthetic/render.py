@@ -484,7 +484,7 @@ def _shade(hits: _Hits, frame: Frame, o: tuple[float, float, float], d: np.ndarr
 def _camera(rad: np.ndarray, rng: np.random.Generator, weather: str) -> np.ndarray:
     """This camera's response: gain and white balance, bias, vignetting, gamma, noise (uint8 RGB)."""
     h, w = rad.shape[:2]
-    gain = rng.uniform(0.85, 1.15) * rng.uniform(0.96, 1.04, 3)
+    gain = rng.uniform(0.9, 1.1) * rng.uniform(0.96, 1.04, 3)
     sigma = rng.uniform(1.0, 3.5)
     bias = rng.uniform(-8, 8)
     yy, xx = np.ogrid[:h, :w]

@@ -1,0 +1,54 @@
+"""Pictures: disparity colour maps, road overlays, captioned image grids (NumPy + OpenCV).
+
+All functions take and return ``H×W×3 uint8`` RGB images.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+__all__ = ["colorize_disparity", "overlay_road", "caption", "grid"]
+
+
+def colorize_disparity(disparity: np.ndarray, max_disparity: float | None = None) -> np.ndarray:
+    """Colour-map a ``float H×W`` disparity (NaN = invalid, drawn black); ``max_disparity`` defaults to the
+    99th percentile of the valid values."""
+    valid = np.isfinite(disparity) & (disparity > 0)
+    top = max_disparity or (float(np.percentile(disparity[valid], 99)) if valid.any() else 1.0)
+    scaled = np.zeros(disparity.shape, np.uint8)
+    scaled[valid] = np.clip(disparity[valid] / max(top, 1e-6) * 255, 0, 255).astype(np.uint8)
+    rgb = cv2.cvtColor(cv2.applyColorMap(scaled, cv2.COLORMAP_TURBO), cv2.COLOR_BGR2RGB)
+    rgb[~valid] = 0
+    return rgb
+
+
+def overlay_road(image: np.ndarray, road: np.ndarray, colour: tuple[int, int, int] = (255, 0, 255),
+                 alpha: float = 0.45) -> np.ndarray:
+    """Tint the ``bool H×W`` road pixels of ``image`` with ``colour`` (KITTI magenta by default)."""
+    out = image.copy() if image.ndim == 3 else np.repeat(image[..., None], 3, axis=2)
+    tint = np.array(colour, np.float32)
+    out[road] = (out[road].astype(np.float32) * (1 - alpha) + tint * alpha).astype(np.uint8)
+    return out
+
+
+def caption(image: np.ndarray, text: str) -> np.ndarray:
+    """A copy of ``image`` with ``text`` written in its top-left corner on a dark band."""
+    out = image.copy()
+    scale = max(0.4, image.shape[1] / 900)
+    (w, h), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
+    cv2.rectangle(out, (0, 0), (w + 8, h + base + 8), (0, 0, 0), -1)
+    cv2.putText(out, text, (4, h + 4), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1, cv2.LINE_AA)
+    return out
+
+
+def grid(rows: Sequence[Sequence[np.ndarray]], width: int | None = None) -> np.ndarray:
+    """Stack equally sized RGB images into a grid (rows of columns), each resized to ``width`` if given."""
+    def fit(img: np.ndarray) -> np.ndarray:
+        if width is None or img.shape[1] == width:
+            return img
+        return cv2.resize(img, (width, round(img.shape[0] * width / img.shape[1])), interpolation=cv2.INTER_AREA)
+
+    return np.vstack([np.hstack([fit(img) for img in row]) for row in rows])

@@ -1,0 +1,44 @@
+"""The built-in demo and the pictures it draws."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from freespace.cli import main
+from freespace.data.synthetic import SynthConfig
+from freespace.demo import run_demo
+from freespace.viz import caption, colorize_disparity, grid, overlay_road
+
+
+def test_demo_end_to_end(tmp_path: Path) -> None:
+    result = run_demo(tmp_path, num_frames=3, seed=4, config=SynthConfig(width=320, height=240, frames_per_scenario=1))
+    assert len(result["frames"]) == 3 and not result["generate_failed"]
+    assert result["max_roll_error_deg"] < 0.01
+    assert result["max_sgbm_roll_error_deg"] < 0.5
+    assert result["mean_road_mae_generated"] < result["mean_road_mae_right"]
+    assert len(list((tmp_path / "figures").glob("*.jpg"))) == 3
+    assert json.loads((tmp_path / "demo_summary.json").read_text())["frames"][0]["frame"]
+
+
+def test_demo_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["demo", "--out", str(tmp_path), "--num", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "generated view differs" in out and "figures:" in out
+    assert main(["demo", "--out", str(tmp_path), "--num", "0"]) == 2
+
+
+def test_viz() -> None:
+    d = np.array([[np.nan, 1.0], [2.0, 4.0]], np.float32)
+    rgb = colorize_disparity(d)
+    assert rgb.shape == (2, 2, 3) and rgb[0, 0].tolist() == [0, 0, 0] and rgb[1, 1].any()
+    img = np.full((40, 60, 3), 100, np.uint8)
+    road = np.zeros((40, 60), bool)
+    road[20:] = True
+    over = overlay_road(img, road)
+    assert (over[30, 5] != img[30, 5]).any() and (over[5, 5] == img[5, 5]).all()
+    assert caption(img, "x").shape == img.shape
+    assert grid([[img, img], [img, img]], width=30).shape == (40, 60, 3)
