@@ -17,7 +17,32 @@ from freespace.errors import FreespaceError, InvalidOptionError
 
 log = logging.getLogger("freespace")
 
-DATASETS = ("kitti",)
+DATASETS = ("kitti", "synth", "synthia", "carla", "syn-stereo", "generic")
+
+
+def _open_dataset(args: argparse.Namespace):  # -> StereoRoadDataset (import kept lazy)
+    from freespace.data.base import get_dataset
+
+    options = {"disparity": args.disparity_source, "cache_dir": args.cache_dir,
+               "max_disparity": getattr(args, "max_disparity", 128)}
+    if args.disparity_dir is not None:
+        if args.dataset not in ("kitti", "synth"):
+            raise InvalidOptionError("--disparity-dir is for KITTI road trees; other layouts name their "
+                                     "disparity folder in freespace.yaml")
+        options["disparity_dir"] = args.disparity_dir
+    return get_dataset(args.dataset, args.root, args.split, **options)
+
+
+def _add_dataset_options(p: argparse.ArgumentParser, required: bool) -> None:
+    g = p.add_argument_group("dataset")
+    g.add_argument("--dataset", choices=DATASETS, required=required,
+                   help="layout: kitti (KITTI road; synth = the renderer's output), synthia, carla/syn-stereo, generic")
+    g.add_argument("--root", metavar="DIR", required=required, help="dataset folder")
+    g.add_argument("--split", help="on-disk split (KITTI: training or testing; default: the first)")
+    g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
+    g.add_argument("--disparity-source", choices=("auto", "file", "sgbm", "none"), default="auto",
+                   help="auto: file, else depth + camera, else cached SGBM (default)")
+    g.add_argument("--cache-dir", metavar="DIR", help="SGBM disparity cache (default ~/.cache/freespace/sgbm)")
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -56,11 +81,10 @@ def cmd_generate(args: argparse.Namespace) -> int:
                                  "--disparity/--model-json are for one pair, leave them out")
     if args.root is None:
         raise InvalidOptionError("--dataset needs --root DIR, the dataset's folder")
-    from freespace.data.kitti_road import list_kitti_road_frames
     from freespace.generate import generate_dataset
 
-    frames = list_kitti_road_frames(args.root, args.split, disparity_dir=args.disparity_dir)
-    summary = generate_dataset(frames, args.out, workers=args.workers, options=_fit_options(args))
+    dataset = _open_dataset(args)
+    summary = generate_dataset(dataset, args.out, workers=args.workers, options=_fit_options(args))
     failed = summary["failed"]
     print(f"{summary['generated']} generated, {summary['skipped']} already done, {len(failed)} failed "
           f"of {summary['frames']} frames → {args.out}")
@@ -81,6 +105,16 @@ def cmd_synth(args: argparse.Namespace) -> int:
     scenarios = len({r["scenario"] for r in rows})
     print(f"{len(rows)} stereo frames in {scenarios} scenarios ({args.width}×{args.height}) → {args.out}")
     return 0
+
+
+def cmd_datasets_info(args: argparse.Namespace) -> int:
+    """``freespace datasets info``: counts, what is there, and every problem by frame."""
+    from freespace.data.info import dataset_info, format_info
+
+    info = dataset_info(args.dataset, args.root, progress=not args.no_progress, seed=args.seed,
+                        disparity_dir=args.disparity_dir)
+    print(format_info(info))
+    return 1 if info["problems"] else 0
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -118,12 +152,8 @@ def build_parser() -> argparse.ArgumentParser:
     one.add_argument("--disparity", metavar="D", help="left disparity (KITTI uint16 .png, .npy, .pfm); "
                                                       "default: computed with SGBM")
     one.add_argument("--model-json", metavar="M.json", help="also write the fitted model as JSON")
-    many = p.add_argument_group("a dataset")
-    many.add_argument("--dataset", choices=DATASETS, help="dataset layout")
-    many.add_argument("--root", metavar="DIR", help="dataset folder")
-    many.add_argument("--split", default="training", help="split (default training)")
-    many.add_argument("--disparity-dir", metavar="DIR", help="folder of <frame>.png|.npy|.pfm disparities")
-    many.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    _add_dataset_options(p, required=False)
+    p.add_argument("--workers", type=int, default=1, help="processes, for --dataset (default 1)")
     p.add_argument("--out", required=True, help="output image (one pair) or folder (dataset)")
     _add_fit_options(p)
     p.set_defaults(func=cmd_generate)
@@ -143,6 +173,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--weather", help="comma-separated subset of clear,cloudy,rain,sunset,dusk,fog (default all)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.set_defaults(func=cmd_synth)
+
+    p = sub.add_parser("datasets", help="inspect datasets", description="Inspect and check datasets.")
+    dsub = p.add_subparsers(dest="datasets_command", required=True, metavar="SUBCOMMAND")
+    q = dsub.add_parser("info", help="counts per split and category, what is there, every problem",
+                        description="Count frames per split and category, report resolution and which files "
+                                    "are there, open every file and list every problem by frame. Exit 0 only "
+                                    "when there is none.")
+    q.add_argument("--dataset", choices=DATASETS, required=True, help="layout")
+    q.add_argument("--root", metavar="DIR", required=True, help="dataset folder")
+    q.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of user-supplied disparities")
+    q.add_argument("--seed", type=int, default=0, help="seed of the train/val/test split shown (default 0)")
+    q.add_argument("--no-progress", action="store_true", help="no progress bar")
+    q.set_defaults(func=cmd_datasets_info)
 
     p = sub.add_parser("demo", help="run the built-in demo end to end",
                        description="Render stereo road scenes, run the DS-Generator on them and write the results.")

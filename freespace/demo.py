@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from freespace.data.kitti_road import list_kitti_road_frames
+from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.errors import InvalidOptionError
 from freespace.generate import generate_dataset
@@ -46,9 +46,10 @@ def run_demo(out: PathLike, num_frames: int = 4, seed: int = 0, config: SynthCon
     t0 = time.perf_counter()
     log.info("rendering %d stereo frames into %s", num_frames, out / "dataset")
     rows = write_dataset(out / "dataset", num_frames, seed=seed, config=config)
-    frames = list_kitti_road_frames(out / "dataset")
+    dataset = KittiRoad(out / "dataset")
+    frames = dataset.frames
     log.info("running the DS-Generator")
-    summary = generate_dataset(frames, out / "generated")
+    summary = generate_dataset(dataset, out / "generated")
     per_frame = []
     for frame, row in zip(frames, sorted(rows, key=lambda r: r["frame"])):
         left, right = read_image(frame.left), read_image(frame.right)

@@ -160,51 +160,63 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
 # whole datasets
 
 
-def _process_frame(job: dict[str, Any]) -> dict[str, Any]:
-    """Worker: generate one frame; never raises (the reason of a failure goes into the record)."""
+_DATASET: Any = None  # the dataset of this worker process (set by _init_worker)
+
+
+def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> dict[str, Any]:
+    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record)."""
     t0 = time.perf_counter()
-    record: dict[str, Any] = {"frame": job["name"]}
+    frame = _DATASET.frames[index]
+    record: dict[str, Any] = {"frame": frame.name}
     try:
-        for key, what in (("right", "right image"), ("label", "road label")):
-            if job[key] is None:
-                raise FreespaceError(f"missing {what}")
-        result = generate_pair(job["left"], job["right"], job["label"], job["disparity"],
-                               out=job["out"], options=job["options"])
+        if frame.right is None:
+            raise FreespaceError("missing right image")
+        if frame.label is None:
+            raise FreespaceError("missing road label")
+        sample = _DATASET.load(index)
+        result = generate_arrays(sample.left, sample.right, sample.label.road & sample.label.valid,
+                                 sample.disparity, options)
+        if sample.disparity is not None:
+            result.disparity_source = sample.disparity_source
+        atomic_write_bytes(out, encode_image(result.image, ".png"))
         record.update(status="done", **result.report())
         record["seconds"]["total"] = time.perf_counter() - t0
-        write_json(job["report"], record)
+        write_json(report, record)
     except FreespaceError as exc:
         record.update(status="failed", reason=str(exc))
     except Exception as exc:  # a bad frame must not stop the run; the reason is reported
-        log.debug("frame %s failed", job["name"], exc_info=True)
+        log.debug("frame %s failed", frame.name, exc_info=True)
         record.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
     return record
 
 
-def _init_worker() -> None:
+def _init_worker(dataset: Any) -> None:
     import cv2
 
+    global _DATASET
+    _DATASET = dataset
     cv2.setNumThreads(1)
 
 
-def generate_dataset(frames: list[Any], out_dir: PathLike, *, workers: int = 1,
+def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
                      options: FitOptions = FitOptions(), progress: bool = True) -> dict[str, Any]:
-    """Generate the augmented image of every frame and write a report.
+    """Generate the augmented image of every frame of a dataset and write a report.
 
     Args:
-        frames: objects with ``name``, ``left``, ``right``, ``label``, ``disparity`` (paths or None),
-            e.g. :class:`freespace.data.kitti_road.KittiRoadFrame`.
+        dataset: a :class:`freespace.data.base.StereoRoadDataset` (any layout); its disparity setting
+            decides where disparities come from (file, depth, cached SGBM).
         out_dir: output folder. Writes ``<frame>.png`` (the frame's own file name), ``reports/<frame>.json``
             (model, inliers, residual, seconds), ``report.csv`` (one row per frame) and ``summary.json``.
         workers: processes; 1 runs in this process.
         options: fit options.
 
-    Frames whose image and report already exist are skipped (resumable). A failing frame is recorded
-    with its reason and does not stop the run.
+    Frames whose image and report already exist are skipped (resumable). A failing frame (missing
+    partner, unreadable file, too little road, ...) is recorded with its reason and does not stop the run.
 
     Returns:
         The summary (also written to ``summary.json``): counts, ``failed`` (frame → reason), means.
     """
+    global _DATASET
     options.check()
     if workers < 1:
         raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
@@ -212,9 +224,10 @@ def generate_dataset(frames: list[Any], out_dir: PathLike, *, workers: int = 1,
     if out_dir.exists() and not out_dir.is_dir():
         raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the generated dataset")
     report_dir = out_dir / "reports"
+    frames = dataset.frames
     records: dict[str, dict[str, Any]] = {}
     jobs = []
-    for frame in frames:
+    for i, frame in enumerate(frames):
         image_path = out_dir / f"{frame.name}.png"
         report_path = report_dir / f"{frame.name}.json"
         if image_path.is_file() and report_path.is_file():
@@ -223,22 +236,26 @@ def generate_dataset(frames: list[Any], out_dir: PathLike, *, workers: int = 1,
                 continue
             except (OSError, ValueError):
                 pass  # unreadable report: do the frame again
-        jobs.append({"name": frame.name, "left": frame.left, "right": frame.right, "label": frame.label,
-                     "disparity": frame.disparity, "out": image_path, "report": report_path, "options": options})
+        jobs.append((i, image_path, report_path, options))
     log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
     from tqdm import tqdm
 
     bar = tqdm(total=len(jobs), desc="generate", unit="frame", disable=not progress or not jobs)
     t0 = time.perf_counter()
     if workers == 1 or len(jobs) <= 1:
-        for job in jobs:
-            records[job["name"]] = _process_frame(job)
-            bar.update()
+        previous, _DATASET = _DATASET, dataset
+        try:
+            for job in jobs:
+                record = _process_frame(*job)
+                records[record["frame"]] = record
+                bar.update()
+        finally:
+            _DATASET = previous
     else:
         # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset,),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(_process_frame, job) for job in jobs]
+            futures = [pool.submit(_process_frame, *job) for job in jobs]
             for future in as_completed(futures):
                 record = future.result()
                 records[record["frame"]] = record
@@ -257,6 +274,8 @@ def generate_dataset(frames: list[Any], out_dir: PathLike, *, workers: int = 1,
         return float(np.mean(vals)) if vals else None
 
     summary = {
+        "dataset": dataset.name,
+        "root": str(dataset.root),
         "frames": len(ordered),
         "generated": sum(r["status"] == "done" for r in ordered),
         "skipped": sum(r["status"] == "skipped" for r in ordered),
@@ -267,7 +286,7 @@ def generate_dataset(frames: list[Any], out_dir: PathLike, *, workers: int = 1,
         "wall_seconds": round(wall, 3),
         "workers": workers,
         "options": {"robust": options.robust, "inlier_threshold": options.inlier_threshold,
-                    "max_disparity": options.max_disparity},
+                    "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode},
     }
     write_json(out_dir / "summary.json", summary)
     return summary

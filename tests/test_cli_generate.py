@@ -182,6 +182,6 @@ def test_dataset_user_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture) ->
     assert "dataset root not found" in capsys.readouterr().err
     (tmp_path / "data_road/training/image_2").mkdir(parents=True)
     assert main(["generate", "--dataset", "kitti", "--root", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
-    assert "no KITTI road frames" in capsys.readouterr().err
+    assert "no frames found for kitti" in capsys.readouterr().err
     assert main(["generate", "--dataset", "kitti", "--out", str(tmp_path / "o")]) == 2
     assert "--root" in capsys.readouterr().err

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from freespace.cli import main
-from freespace.data.kitti_road import list_kitti_road_frames
+from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, render_sample, sample_frame, write_dataset
 from freespace.geometry import StereoCalibration, fit_road_model
 from freespace.io import read_disparity, read_kitti_calib, read_road_label
@@ -101,12 +101,13 @@ def test_synth_writes_a_kitti_road_tree(tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["synth", "--out", str(out), "--num", "4", "--width", "160", "--height", "120",
                  "--frames-per-scenario", "2", "--seed", "9", "--workers", "2"]) == 0
     assert "4 stereo frames in 2 scenarios" in capsys.readouterr().out
-    frames = list_kitti_road_frames(out)
+    frames = KittiRoad(out).frames
     assert len(frames) == 4 and all(f.right and f.label and f.calib and f.disparity for f in frames)
     rows = list(csv.DictReader((out / "index.csv").open()))
     assert [r["frame"] for r in rows] == [f.name for f in sorted(frames, key=lambda f: f.name[-6:])]
     assert [int(r["scenario"]) for r in rows] == [0, 0, 1, 1]
     assert json.loads((out / "synth.json").read_text())["seed"] == 9
+    assert [f.scenario for f in frames] == [f"scenario_{r['scenario']}" for r in sorted(rows, key=lambda r: r["frame"])]
     for f in frames:
         label = read_road_label(f.label)
         disp = read_disparity(f.disparity)

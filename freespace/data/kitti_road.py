@@ -1,99 +1,128 @@
-"""KITTI road: frame listing and pairing (torch-free).
+"""KITTI road (and the built-in renderer's output, which uses the same tree).
 
-Expected tree (``ROOT`` is the folder that holds ``data_road``)::
+Expected tree (``ROOT`` holds ``data_road``)::
 
     ROOT/data_road/{training,testing}/image_2/<cat>_<id>.png          left images (cat: um, umm, uu)
     ROOT/data_road/training/gt_image_2/<cat>_road_<id>.png           road ground truth (KITTI colours)
-    ROOT/data_road/{training,testing}/calib/<cat>_<id>.txt           calibration (optional here)
+    ROOT/data_road/{training,testing}/calib/<cat>_<id>.txt           calibration (P0–P3, R0_rect,
+                                                                     Tr_velo_to_cam, Tr_cam_to_road)
     ROOT/data_road/{training,testing}/disparity/<cat>_<id>.png       left disparity, KITTI uint16 (optional)
-    ROOT/data_road_right/{training,testing}/image_3/<cat>_<id>.png   right images
+    ROOT/data_road_right/{training,testing}/image_3/<cat>_<id>.png   right images (optional)
 
 Files are paired by frame name from a sorted listing of ``image_2``; ``*_lane_*`` ground truth is
-ignored. A user-supplied disparity folder (``<frame>.png|.npy|.pfm``) replaces ``disparity/``.
+ignored. Without right images the frames load without them (no augmentation then). A user-supplied
+disparity folder (``<frame>.png|.npy|.pfm``, e.g. a learned matcher's KITTI uint16 output) replaces the
+tree's own ``disparity/``. KITTI road has no drive ids, so every frame is its own scenario — unless
+``ROOT/index.csv`` (written by ``freespace synth``) gives a ``scenario`` per ``frame``.
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError
-from freespace.io import DISPARITY_SUFFIXES, PathLike
+from freespace.data.base import FrameRef, Problem, StereoRoadDataset, register_dataset
+from freespace.errors import DatasetError, InputFileError
+from freespace.geometry import StereoCalibration
+from freespace.io import DISPARITY_SUFFIXES, PathLike, RoadLabel, read_kitti_calib, read_road_label
 
-__all__ = ["KittiRoadFrame", "list_kitti_road_frames", "SPLITS"]
+__all__ = ["KittiRoad", "CATEGORIES"]
 
-SPLITS = ("training", "testing")
+CATEGORIES = ("um", "umm", "uu")
 _FRAME = re.compile(r"^(um|umm|uu)_(\d{6})$")
+_LABEL = re.compile(r"^(um|umm|uu)_road_(\d{6})$")
 
 
-@dataclass(frozen=True)
-class KittiRoadFrame:
-    """Paths of one KITTI road frame; ``None`` where the file does not exist."""
-
-    name: str
-    category: str
-    left: Path
-    right: Path | None
-    label: Path | None
-    calib: Path | None
-    disparity: Path | None
-
-
-def _find_disparity(folder: Path | None, name: str) -> Path | None:
+def _find(folder: Path | None, name: str, suffixes: tuple[str, ...]) -> Path | None:
     if folder is None:
         return None
-    for suffix in DISPARITY_SUFFIXES:
+    for suffix in suffixes:
         path = folder / f"{name}{suffix}"
         if path.is_file():
             return path
     return None
 
 
-def list_kitti_road_frames(root: PathLike, split: str = "training",
-                           disparity_dir: PathLike | None = None) -> list[KittiRoadFrame]:
-    """List the frames of a KITTI road split, sorted by name, with their partner files.
+@register_dataset("kitti", "kitti_road", "synth")
+class KittiRoad(StereoRoadDataset):
+    """KITTI road (``training``/``testing``); see the module docstring for the tree.
 
     Args:
-        root: folder holding ``data_road`` (and ``data_road_right``).
-        split: ``training`` or ``testing``.
-        disparity_dir: folder of ``<frame>.png|.npy|.pfm`` disparities to use instead of the tree's own
-            ``disparity/`` folder.
-
-    Raises:
-        InputFileError: ``root`` or its ``image_2`` folder is missing. DatasetError: no frames.
+        disparity_dir: folder of ``<frame>.png|.npy|.pfm`` disparities to use instead of ``disparity/``.
+        Other arguments: :class:`~freespace.data.base.StereoRoadDataset`.
     """
-    if split not in SPLITS:
-        raise InvalidOptionError(f"unknown KITTI road split {split!r}; choose one of {', '.join(SPLITS)}")
-    root = Path(root)
-    if not root.is_dir():
-        raise InputFileError(f"dataset root not found: {root} (give the folder that holds data_road/)")
-    base = root / "data_road" / split
-    image_dir = base / "image_2"
-    if not image_dir.is_dir():
-        raise InputFileError(f"{image_dir} not found; a KITTI road root holds data_road/{split}/image_2")
-    right_dir = root / "data_road_right" / split / "image_3"
-    if disparity_dir is not None:
-        disp_dir: Path | None = Path(disparity_dir)
-        if not disp_dir.is_dir():
-            raise InputFileError(f"disparity folder not found: {disp_dir}")
-    else:
-        disp_dir = base / "disparity" if (base / "disparity").is_dir() else None
-    frames = []
-    for left in sorted(image_dir.glob("*.png")):
-        match = _FRAME.match(left.stem)
-        if not match:
-            continue
-        cat, idx = match.groups()
-        right = right_dir / left.name
-        label = base / "gt_image_2" / f"{cat}_road_{idx}.png"
-        calib = base / "calib" / f"{left.stem}.txt"
-        frames.append(KittiRoadFrame(
-            name=left.stem, category=cat, left=left,
-            right=right if right.is_file() else None,
-            label=label if label.is_file() else None,
-            calib=calib if calib.is_file() else None,
-            disparity=_find_disparity(disp_dir, left.stem)))
-    if not frames:
-        raise DatasetError(f"no KITTI road frames (<um|umm|uu>_<6 digits>.png) in {image_dir}")
-    return frames
+
+    splits = ("training", "testing")
+
+    def __init__(self, root: PathLike, split: str | None = None, *, disparity_dir: PathLike | None = None,
+                 **options) -> None:
+        self.disparity_dir = Path(disparity_dir) if disparity_dir is not None else None
+        if self.disparity_dir is not None and not self.disparity_dir.is_dir():
+            raise InputFileError(f"disparity folder not found: {self.disparity_dir}")
+        super().__init__(root, split, **options)
+
+    @property
+    def base(self) -> Path:
+        return self.root / "data_road" / self.split
+
+    def _list(self) -> list[FrameRef]:
+        image_dir = self.base / "image_2"
+        if not image_dir.is_dir():
+            raise InputFileError(f"{image_dir} not found; a KITTI road root holds data_road/{self.split}/image_2")
+        right_dir = self.root / "data_road_right" / self.split / "image_3"
+        disp_dir = self.disparity_dir or (self.base / "disparity" if (self.base / "disparity").is_dir() else None)
+        scenarios = self._scenarios()
+        frames = []
+        for left in sorted(image_dir.glob("*.png")):
+            match = _FRAME.match(left.stem)
+            if not match:
+                continue
+            cat, idx = match.groups()
+            right = right_dir / left.name
+            label = self.base / "gt_image_2" / f"{cat}_road_{idx}.png"
+            calib = self.base / "calib" / f"{left.stem}.txt"
+            frames.append(FrameRef(
+                name=left.stem, category=cat, scenario=scenarios.get(left.stem, left.stem), left=left,
+                right=right if right.is_file() else None,
+                label=label if label.is_file() else None,
+                calib=calib if calib.is_file() else None,
+                disparity=_find(disp_dir, left.stem, DISPARITY_SUFFIXES)))
+        return frames
+
+    def _scenarios(self) -> dict[str, str]:
+        """Frame → scenario from ``ROOT/index.csv`` when there is one (the renderer's output)."""
+        path = self.root / "index.csv"
+        if not path.is_file():
+            return {}
+        import csv
+
+        with path.open(newline="") as f:
+            rows = list(csv.DictReader(f))
+        if not rows or not {"frame", "scenario"} <= set(rows[0]):
+            raise DatasetError(f"{path} must have 'frame' and 'scenario' columns")
+        return {r["frame"]: f"scenario_{r['scenario']}" for r in rows}
+
+    def read_label(self, frame: FrameRef) -> RoadLabel:
+        return read_road_label(frame.label)  # type: ignore[arg-type]
+
+    def calibration(self, frame: FrameRef) -> StereoCalibration | None:
+        """Focal length, principal point and baseline from P2/P3; the road plane from Tr_cam_to_road."""
+        return StereoCalibration.from_kitti(read_kitti_calib(frame.calib)) if frame.calib else None
+
+    def orphans(self) -> list[Problem]:
+        names = {f.name for f in self.frames}
+        problems = []
+        for path in sorted((self.root / "data_road_right" / self.split / "image_3").glob("*.png")):
+            if path.stem not in names:
+                problems.append(Problem(path.stem, f"right image {path} has no left image"))
+        for path in sorted((self.base / "gt_image_2").glob("*_road_*.png")):
+            m = _LABEL.match(path.stem)
+            if m and f"{m.group(1)}_{m.group(2)}" not in names:
+                problems.append(Problem(f"{m.group(1)}_{m.group(2)}", f"label {path} has no left image"))
+        return problems
+
+    def expected_partners(self) -> set[str]:
+        kinds = super().expected_partners()
+        if self.split == "training" and (self.base / "gt_image_2").is_dir():
+            kinds.add("label")
+        return kinds

@@ -1,0 +1,352 @@
+"""Folder layouts: SYNTHIA stereo sequences, SYN-Stereo/CARLA exports and a generic stereo layout.
+
+All three pair files by frame stem across folders and decode labels and depth as a
+:class:`FolderSpec` says. Each reads an optional ``freespace.yaml`` at the dataset root (loaded with
+``yaml.safe_load``) whose keys override the layout's documented defaults, e.g.::
+
+    road_ids: [1, 24]          # class ids that are road (CARLA ≥ 0.9.14: Roads, RoadLines)
+    ignore_ids: [0]            # class ids that are don't-care
+    label_encoding: class_id   # class_id | kitti (KITTI colours) | mask (non-zero = road)
+    label_channel: 0           # channel holding the class id in a colour label, RGB order
+    depth_encoding: png16      # png16 (integer × depth_scale) | carla_rgb | float (.npy/.pfm × depth_scale)
+    depth_channel: 0
+    depth_scale: 0.01          # metres per stored unit
+    camera: {fx: 320, fy: 320, cx: 320, cy: 240, baseline: 1.5}   # pixels, metres
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from freespace.data.base import FrameRef, Problem, StereoRoadDataset, register_dataset
+from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
+from freespace.geometry import StereoCalibration
+from freespace.io import DISPARITY_SUFFIXES, PathLike, RoadLabel, _decode, read_disparity, read_road_label
+
+__all__ = ["FolderSpec", "GenericStereo", "SynthiaStereo", "CarlaStereo", "CONFIG_NAME"]
+
+CONFIG_NAME = "freespace.yaml"
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+LABEL_ENCODINGS = ("class_id", "kitti", "mask")
+DEPTH_ENCODINGS = ("png16", "carla_rgb", "float")
+
+
+@dataclass(frozen=True)
+class FolderSpec:
+    """How a folder layout encodes labels, depth and the camera (see the module docstring)."""
+
+    label_encoding: str = "class_id"
+    label_channel: int = 0
+    road_ids: tuple[int, ...] = (1,)
+    ignore_ids: tuple[int, ...] = ()
+    depth_encoding: str = "png16"
+    depth_channel: int = 0
+    depth_scale: float = 1.0
+    camera: dict[str, float] | None = None
+    folders: dict[str, str] = field(default_factory=dict)
+    scenario_pattern: str | None = None
+
+    def updated(self, path: Path) -> FolderSpec:
+        """This spec with the keys of the YAML file at ``path`` (if it exists) applied."""
+        if not path.is_file():
+            return self
+        import yaml
+
+        try:
+            data = yaml.safe_load(path.read_text()) or {}
+        except (yaml.YAMLError, UnicodeDecodeError) as exc:
+            raise CorruptFileError(f"cannot parse {path}: {str(exc).splitlines()[0]}") from None
+        if not isinstance(data, dict):
+            raise CorruptFileError(f"{path} must hold a mapping of options")
+        known = {f.name for f in fields(self)}
+        folder_keys = {"left", "right", "label", "disparity", "depth"}
+        unknown = set(data) - known - folder_keys
+        if unknown:
+            raise InvalidOptionError(f"{path}: unknown keys {sorted(unknown)}; allowed: {sorted(known | folder_keys)}")
+        folders = dict(self.folders)
+        folders.update({k: str(data.pop(k)) for k in list(data) if k in folder_keys})
+        for key in ("road_ids", "ignore_ids"):
+            if key in data:
+                data[key] = tuple(int(x) for x in (data[key] if isinstance(data[key], list) else [data[key]]))
+        spec = replace(self, folders=folders, **data)
+        spec.check(path)
+        return spec
+
+    def check(self, where: Path | str = "options") -> None:
+        if self.label_encoding not in LABEL_ENCODINGS:
+            raise InvalidOptionError(f"{where}: label_encoding must be one of {LABEL_ENCODINGS}")
+        if self.depth_encoding not in DEPTH_ENCODINGS:
+            raise InvalidOptionError(f"{where}: depth_encoding must be one of {DEPTH_ENCODINGS}")
+        if self.camera is not None:
+            missing = {"fx", "cx", "cy", "baseline"} - set(self.camera)
+            if missing:
+                raise InvalidOptionError(f"{where}: camera needs fx, cx, cy, baseline (missing {sorted(missing)})")
+
+
+def _raw(path: Path, what: str) -> np.ndarray:
+    """Decode without conversion (16-bit kept); colour images in RGB channel order."""
+    img = _decode(path, what, cv2.IMREAD_UNCHANGED)
+    if img.ndim == 3 and img.shape[2] >= 3:
+        img = img[:, :, [2, 1, 0]]
+    return img
+
+
+def _channel(img: np.ndarray, channel: int) -> np.ndarray:
+    return img if img.ndim == 2 else img[:, :, channel]
+
+
+class FolderDataset(StereoRoadDataset):
+    """Shared behaviour of the folder layouts: decode labels and depth by :class:`FolderSpec`."""
+
+    default_spec: FolderSpec = FolderSpec()
+
+    def __init__(self, root: PathLike, split: str | None = None, *, spec: FolderSpec | None = None, **options) -> None:
+        self.spec = spec or self.default_spec.updated(Path(root) / CONFIG_NAME)
+        super().__init__(root, split, **options)
+
+    def read_label(self, frame: FrameRef) -> RoadLabel:
+        spec = self.spec
+        if spec.label_encoding == "kitti":
+            return read_road_label(frame.label)  # type: ignore[arg-type]
+        ids = _channel(_raw(frame.label, "label"), spec.label_channel)  # type: ignore[arg-type]
+        if spec.label_encoding == "mask":
+            return RoadLabel(road=ids > 0, valid=np.ones(ids.shape, bool))
+        valid = ~np.isin(ids, spec.ignore_ids) if spec.ignore_ids else np.ones(ids.shape, bool)
+        return RoadLabel(road=np.isin(ids, spec.road_ids) & valid, valid=valid)
+
+    def read_depth(self, frame: FrameRef) -> np.ndarray:
+        spec = self.spec
+        path = frame.depth
+        if spec.depth_encoding == "float":
+            return read_disparity(path) * np.float32(spec.depth_scale)  # type: ignore[arg-type]
+        img = _raw(path, "depth")  # type: ignore[arg-type]
+        if spec.depth_encoding == "carla_rgb":
+            if img.ndim != 3:
+                raise CorruptFileError(f"depth {path} is not a CARLA RGB-encoded depth image (3 channels)")
+            rgb = img[:, :, :3].astype(np.float64)
+            metres = (rgb[..., 0] + rgb[..., 1] * 256 + rgb[..., 2] * 65536) / (256 ** 3 - 1) * 1000.0
+            depth = metres.astype(np.float32)
+        else:
+            depth = _channel(img, spec.depth_channel).astype(np.float32) * np.float32(spec.depth_scale)
+        depth[depth <= 0] = np.nan
+        return depth
+
+    def calibration(self, frame: FrameRef) -> StereoCalibration | None:
+        cam = self._camera(frame)
+        if cam is None:
+            return None
+        return StereoCalibration(fx=float(cam["fx"]), fy=float(cam.get("fy", cam["fx"])), cx=float(cam["cx"]),
+                                 cy=float(cam["cy"]), baseline=float(cam["baseline"]))
+
+    def _camera(self, frame: FrameRef) -> dict[str, float] | None:
+        return self.spec.camera
+
+    def _pair(self, name: str, category: str, scenario: str, left: Path, folders: dict[str, Path | None],
+              stem: str) -> FrameRef:
+        def find(kind: str, suffixes: tuple[str, ...]) -> Path | None:
+            folder = folders.get(kind)
+            if folder is None:
+                return None
+            for s in suffixes:
+                if (folder / f"{stem}{s}").is_file():
+                    return folder / f"{stem}{s}"
+            return None
+
+        return FrameRef(name=name, category=category, scenario=scenario, left=left,
+                        right=find("right", IMAGE_SUFFIXES), label=find("label", IMAGE_SUFFIXES),
+                        disparity=find("disparity", DISPARITY_SUFFIXES), depth=find("depth", (".png", ".npy", ".pfm")))
+
+    def _orphans_in(self, folders: dict[str, Path | None], stems: set[str], prefix: str) -> list[Problem]:
+        problems = []
+        for kind, folder in folders.items():
+            if kind == "left" or folder is None or not folder.is_dir():
+                continue
+            for path in sorted(folder.iterdir()):
+                if path.is_file() and path.stem not in stems and not path.name.startswith("."):
+                    problems.append(Problem(f"{prefix}{path.stem}", f"{kind} file {path} has no left image"))
+        return problems
+
+
+def _left_files(folder: Path) -> list[Path]:
+    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith("."))
+
+
+@register_dataset("generic")
+class GenericStereo(FolderDataset):
+    """A generic stereo layout described by ``ROOT/freespace.yaml``.
+
+    Expected tree (folder names are set in the YAML; ``left`` is required)::
+
+        ROOT/freespace.yaml
+        ROOT/<left>/<frame>.png          left images
+        ROOT/<right>/<frame>.png         right images (optional)
+        ROOT/<label>/<frame>.png         labels (optional): class ids, KITTI colours or a road mask
+        ROOT/<disparity>/<frame>.png     left disparity (optional): KITTI uint16 .png, .npy or .pfm
+        ROOT/<depth>/<frame>.png         left depth (optional, used without disparity; needs ``camera``)
+
+    Besides the spec keys (module docstring): ``left``, ``right``, ``label``, ``disparity``, ``depth``
+    (folder names) and ``scenario_pattern``, a regex on the frame name whose group ``scenario`` names the
+    frame's scenario (default: each frame is its own scenario).
+    """
+
+    def __init__(self, root: PathLike, split: str | None = None, **options) -> None:
+        config = Path(root) / CONFIG_NAME
+        if Path(root).is_dir() and not config.is_file():
+            raise InputFileError(f"{config} not found; the generic layout is described by a YAML file there "
+                                 f"(see `freespace datasets --help`)")
+        super().__init__(root, split, **options)
+
+    def _folders(self) -> dict[str, Path | None]:
+        folders: dict[str, Path | None] = {k: None for k in ("left", "right", "label", "disparity", "depth")}
+        for kind, name in self.spec.folders.items():
+            folders[kind] = self.root / name
+        if folders["left"] is None or not folders["left"].is_dir():  # type: ignore[union-attr]
+            raise InputFileError(f"left image folder {folders['left']} not found; set `left:` in {self.root / CONFIG_NAME}")
+        return folders
+
+    def _list(self) -> list[FrameRef]:
+        folders = self._folders()
+        pattern = re.compile(self.spec.scenario_pattern) if self.spec.scenario_pattern else None
+        frames = []
+        for left in _left_files(folders["left"]):  # type: ignore[arg-type]
+            scenario = left.stem
+            if pattern is not None:
+                m = pattern.search(left.stem)
+                if m is None or "scenario" not in m.groupdict():
+                    raise DatasetError(f"scenario_pattern does not match frame {left.stem!r} (it needs a "
+                                       f"(?P<scenario>...) group)")
+                scenario = m.group("scenario")
+            frames.append(self._pair(left.stem, "all", scenario, left, folders, left.stem))
+        return frames
+
+    def orphans(self) -> list[Problem]:
+        return self._orphans_in(self._folders(), {f.name for f in self.frames}, "")
+
+
+@register_dataset("synthia")
+class SynthiaStereo(FolderDataset):
+    """SYNTHIA stereo video sequences (SYNTHIA-SEQS).
+
+    Expected tree (``ROOT`` holds one or more sequence folders, or is one)::
+
+        ROOT/<SEQUENCE>/RGB/Stereo_Left/Omni_F/<id>.png         left images
+        ROOT/<SEQUENCE>/RGB/Stereo_Right/Omni_F/<id>.png        right images
+        ROOT/<SEQUENCE>/GT/LABELS/Stereo_Left/Omni_F/<id>.png   class ids (16-bit, first channel)
+        ROOT/<SEQUENCE>/Depth/Stereo_Left/Omni_F/<id>.png       depth (16-bit, first channel, centimetres)
+
+    Defaults (override in ``ROOT/freespace.yaml``): road = class 3 (road) and 12 (lane marking), class 0
+    (void) is don't-care; depth in centimetres; camera fx = fy = 532.74 px, principal point (640, 380),
+    baseline 0.8 m (SYNTHIA's 1280×760 stereo rig). Frame names are ``<SEQUENCE>_<id>``; the scenario is
+    the sequence and the category its last dash-separated word (SPRING, NIGHT, ...).
+    """
+
+    default_spec = FolderSpec(label_encoding="class_id", label_channel=0, road_ids=(3, 12), ignore_ids=(0,),
+                              depth_encoding="png16", depth_channel=0, depth_scale=0.01,
+                              camera={"fx": 532.740352, "fy": 532.740352, "cx": 640.0, "cy": 380.0, "baseline": 0.8})
+    view = "Omni_F"
+
+    def _sequences(self) -> list[Path]:
+        if (self.root / "RGB" / "Stereo_Left").is_dir():
+            return [self.root]
+        seqs = sorted(p for p in self.root.iterdir() if (p / "RGB" / "Stereo_Left").is_dir())
+        if not seqs:
+            raise InputFileError(f"no SYNTHIA sequence under {self.root}: expected <SEQUENCE>/RGB/Stereo_Left/{self.view}")
+        return seqs
+
+    def _folders(self, seq: Path) -> dict[str, Path | None]:
+        v = self.view
+        return {"left": seq / "RGB" / "Stereo_Left" / v, "right": seq / "RGB" / "Stereo_Right" / v,
+                "label": seq / "GT" / "LABELS" / "Stereo_Left" / v, "depth": seq / "Depth" / "Stereo_Left" / v,
+                "disparity": None}
+
+    def _list(self) -> list[FrameRef]:
+        frames = []
+        for seq in self._sequences():
+            folders = self._folders(seq)
+            if not folders["left"].is_dir():  # type: ignore[union-attr]
+                continue
+            category = seq.name.rsplit("-", 1)[-1]
+            for left in _left_files(folders["left"]):  # type: ignore[arg-type]
+                frames.append(self._pair(f"{seq.name}_{left.stem}", category, seq.name, left, folders, left.stem))
+        return frames
+
+    def orphans(self) -> list[Problem]:
+        problems = []
+        for seq in self._sequences():
+            stems = {f.name[len(seq.name) + 1:] for f in self.frames if f.scenario == seq.name}
+            problems += self._orphans_in(self._folders(seq), stems, f"{seq.name}_")
+        return problems
+
+
+@register_dataset("carla", "syn-stereo")
+class CarlaStereo(FolderDataset):
+    """SYN-Stereo-style CARLA exports (the paper's SYN-Stereo: 640×480, baseline 1.5 m).
+
+    Expected tree (``ROOT`` holds sequence folders, or is one)::
+
+        ROOT/<sequence>/left/<id>.png        left images
+        ROOT/<sequence>/right/<id>.png       right images
+        ROOT/<sequence>/semantic/<id>.png    CARLA semantic segmentation (class id in the red channel)
+        ROOT/<sequence>/depth/<id>.png       CARLA depth ((R + 256 G + 65536 B) / (256³ − 1) · 1000 m)
+        ROOT/<sequence>/disparity/<id>.png   left disparity, KITTI uint16 (optional; preferred to depth)
+        ROOT/<sequence>/camera.yaml          fx, fy, cx, cy (px), baseline (m) (optional, else the default)
+
+    Defaults (override in ``ROOT/freespace.yaml``): road = CARLA classes 7 (road) and 6 (road line) as
+    in CARLA ≤ 0.9.13 (use ``road_ids: [1, 24]`` for CARLA ≥ 0.9.14); camera for 640×480 with a 90° field
+    of view (fx = fy = 320, principal point (320, 240)) and a 1.5 m baseline. Frame names are
+    ``<sequence>_<id>``; the scenario and the category are the sequence.
+    """
+
+    default_spec = FolderSpec(label_encoding="class_id", label_channel=0, road_ids=(7, 6), ignore_ids=(),
+                              depth_encoding="carla_rgb",
+                              camera={"fx": 320.0, "fy": 320.0, "cx": 320.0, "cy": 240.0, "baseline": 1.5})
+
+    def _sequences(self) -> list[Path]:
+        if (self.root / "left").is_dir():
+            return [self.root]
+        seqs = sorted(p for p in self.root.iterdir() if (p / "left").is_dir())
+        if not seqs:
+            raise InputFileError(f"no CARLA sequence under {self.root}: expected <sequence>/left/<id>.png")
+        return seqs
+
+    @staticmethod
+    def _folders(seq: Path) -> dict[str, Path | None]:
+        return {k: seq / d for k, d in (("left", "left"), ("right", "right"), ("label", "semantic"),
+                                         ("depth", "depth"), ("disparity", "disparity"))}
+
+    def _list(self) -> list[FrameRef]:
+        frames = []
+        for seq in self._sequences():
+            folders = self._folders(seq)
+            for left in _left_files(folders["left"]):  # type: ignore[arg-type]
+                frames.append(self._pair(f"{seq.name}_{left.stem}", seq.name, seq.name, left, folders, left.stem))
+        return frames
+
+    def _camera(self, frame: FrameRef) -> dict[str, Any] | None:
+        own = frame.left.parent.parent / "camera.yaml"
+        return self._camera_file(own) if own.is_file() else self.spec.camera
+
+    @staticmethod
+    def _camera_file(path: Path) -> dict[str, Any]:
+        import yaml
+
+        try:
+            cam = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            raise CorruptFileError(f"cannot parse {path}: {str(exc).splitlines()[0]}") from None
+        if not isinstance(cam, dict) or not {"fx", "cx", "cy", "baseline"} <= set(cam):
+            raise CorruptFileError(f"{path} must give fx, cx, cy (pixels) and baseline (metres)")
+        return cam
+
+    def orphans(self) -> list[Problem]:
+        problems = []
+        for seq in self._sequences():
+            stems = {f.name[len(seq.name) + 1:] for f in self.frames if f.scenario == seq.name}
+            problems += self._orphans_in(self._folders(seq), stems, f"{seq.name}_")
+        return problems
