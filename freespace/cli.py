@@ -117,6 +117,21 @@ def cmd_datasets_info(args: argparse.Namespace) -> int:
     return 1 if info["problems"] else 0
 
 
+def cmd_datasets_split(args: argparse.Namespace) -> int:
+    """``freespace datasets split``: the paper's train/val/test split by scenario, as list files."""
+    from freespace.data.base import get_dataset
+    from freespace.data.splits import make_splits, write_splits
+
+    dataset = get_dataset(args.dataset, args.root, args.split, disparity="none")
+    labelled = [(f.name, f.scenario) for f in dataset.frames if f.label is not None]
+    if not labelled:
+        raise InvalidOptionError(f"split {dataset.split!r} of {args.root} has no labelled frames to split")
+    splits = make_splits(labelled, seed=args.seed)
+    write_splits(args.out, splits)
+    print(" ".join(f"{k} {len(v)}" for k, v in splits.items()) + f" → {args.out}/{{train,val,test}}.txt")
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
     from freespace.demo import run_demo
@@ -186,6 +201,17 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--seed", type=int, default=0, help="seed of the train/val/test split shown (default 0)")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.set_defaults(func=cmd_datasets_info)
+
+    q = dsub.add_parser("split", help="write the paper's train/val/test split by scenario as list files",
+                        description="Split the labelled frames by scenario with the paper's sizes (289 → "
+                                    "173/58/58, 300 → 180/60/60, else 60/20/20 %%) and write train.txt, val.txt, "
+                                    "test.txt (frame names).")
+    q.add_argument("--dataset", choices=DATASETS, required=True, help="layout")
+    q.add_argument("--root", metavar="DIR", required=True, help="dataset folder")
+    q.add_argument("--split", help="on-disk split (default: the first, e.g. KITTI training)")
+    q.add_argument("--seed", type=int, default=0, help="shuffling seed (default 0)")
+    q.add_argument("--out", required=True, help="folder for the list files")
+    q.set_defaults(func=cmd_datasets_split)
 
     p = sub.add_parser("demo", help="run the built-in demo end to end",
                        description="Render stereo road scenes, run the DS-Generator on them and write the results.")

@@ -2,8 +2,10 @@
 
 The paper splits KITTI road's 289 labelled frames 173/58/58 and SYNTHIA's and SYN-Stereo's 300
 frames 180/60/60; other sizes get 60/20/20 %. Frames of one scenario (drive, sequence) always land in
-the same split. The assignment is a deterministic function of the scenario list and the seed. Sizes
-are met exactly when every scenario is one frame, and as nearly as whole scenarios allow otherwise.
+the same split. The assignment is a deterministic function of the scenario list and the seed: scenarios in a
+seeded random order each go to the split furthest below its target size. Sizes are met exactly when
+every scenario is one frame (or all scenarios divide the targets), and as nearly as whole scenarios
+allow otherwise.
 """
 
 from __future__ import annotations
@@ -54,15 +56,11 @@ def make_splits(frames: Sequence[tuple[str, str]], seed: int = 0,
     keys = sorted(groups)
     order = np.random.default_rng(seed).permutation(len(keys))
     out: dict[str, list[str]] = {k: [] for k in SPLIT_NAMES}
-    targets = {"test": sizes[2], "val": sizes[1]}
-    for i in order:
+    targets = dict(zip(SPLIT_NAMES, sizes))
+    for i in order:  # each scenario goes to the split that is furthest below its target
         members = groups[keys[i]]
-        for split in ("test", "val"):
-            if len(out[split]) + len(members) <= targets[split]:
-                out[split] += members
-                break
-        else:
-            out["train"] += members
+        split = max(("test", "val", "train"), key=lambda k: targets[k] - len(out[k]))
+        out[split] += members
     return {k: sorted(v) for k, v in out.items()}
 
 
