@@ -229,8 +229,49 @@ class GenericStereo(FolderDataset):
         return self._orphans_in(self._folders(), {f.name for f in self.frames}, "")
 
 
+class SequenceDataset(FolderDataset):
+    """Layouts made of sequence folders (``ROOT/<sequence>/...``, or ``ROOT`` is one sequence).
+
+    Frame names are ``<sequence>_<stem>``; the scenario is the sequence.
+    """
+
+    marker: str = ""  # a folder, relative to a sequence, whose presence makes a sequence
+
+    def _sequences(self) -> list[Path]:
+        if (self.root / self.marker).is_dir():
+            return [self.root]
+        seqs = sorted(p for p in self.root.iterdir() if (p / self.marker).is_dir())
+        if not seqs:
+            raise InputFileError(f"no {self.name} sequence under {self.root}: expected <sequence>/{self.marker}")
+        return seqs
+
+    def _folders(self, seq: Path) -> dict[str, Path | None]:
+        raise NotImplementedError
+
+    def _category(self, seq: Path) -> str:
+        return seq.name
+
+    def _list(self) -> list[FrameRef]:
+        frames = []
+        for seq in self._sequences():
+            folders = self._folders(seq)
+            if not folders["left"].is_dir():  # type: ignore[union-attr]
+                continue
+            for left in _left_files(folders["left"]):  # type: ignore[arg-type]
+                frames.append(self._pair(f"{seq.name}_{left.stem}", self._category(seq), seq.name, left, folders,
+                                         left.stem))
+        return frames
+
+    def orphans(self) -> list[Problem]:
+        problems = []
+        for seq in self._sequences():
+            stems = {f.name[len(seq.name) + 1:] for f in self.frames if f.scenario == seq.name}
+            problems += self._orphans_in(self._folders(seq), stems, f"{seq.name}_")
+        return problems
+
+
 @register_dataset("synthia")
-class SynthiaStereo(FolderDataset):
+class SynthiaStereo(SequenceDataset):
     """SYNTHIA stereo video sequences (SYNTHIA-SEQS).
 
     Expected tree (``ROOT`` holds one or more sequence folders, or is one)::
@@ -250,14 +291,7 @@ class SynthiaStereo(FolderDataset):
                               depth_encoding="png16", depth_channel=0, depth_scale=0.01,
                               camera={"fx": 532.740352, "fy": 532.740352, "cx": 640.0, "cy": 380.0, "baseline": 0.8})
     view = "Omni_F"
-
-    def _sequences(self) -> list[Path]:
-        if (self.root / "RGB" / "Stereo_Left").is_dir():
-            return [self.root]
-        seqs = sorted(p for p in self.root.iterdir() if (p / "RGB" / "Stereo_Left").is_dir())
-        if not seqs:
-            raise InputFileError(f"no SYNTHIA sequence under {self.root}: expected <SEQUENCE>/RGB/Stereo_Left/{self.view}")
-        return seqs
+    marker = "RGB/Stereo_Left"
 
     def _folders(self, seq: Path) -> dict[str, Path | None]:
         v = self.view
@@ -265,27 +299,12 @@ class SynthiaStereo(FolderDataset):
                 "label": seq / "GT" / "LABELS" / "Stereo_Left" / v, "depth": seq / "Depth" / "Stereo_Left" / v,
                 "disparity": None}
 
-    def _list(self) -> list[FrameRef]:
-        frames = []
-        for seq in self._sequences():
-            folders = self._folders(seq)
-            if not folders["left"].is_dir():  # type: ignore[union-attr]
-                continue
-            category = seq.name.rsplit("-", 1)[-1]
-            for left in _left_files(folders["left"]):  # type: ignore[arg-type]
-                frames.append(self._pair(f"{seq.name}_{left.stem}", category, seq.name, left, folders, left.stem))
-        return frames
-
-    def orphans(self) -> list[Problem]:
-        problems = []
-        for seq in self._sequences():
-            stems = {f.name[len(seq.name) + 1:] for f in self.frames if f.scenario == seq.name}
-            problems += self._orphans_in(self._folders(seq), stems, f"{seq.name}_")
-        return problems
+    def _category(self, seq: Path) -> str:
+        return seq.name.rsplit("-", 1)[-1]
 
 
 @register_dataset("carla", "syn-stereo")
-class CarlaStereo(FolderDataset):
+class CarlaStereo(SequenceDataset):
     """SYN-Stereo-style CARLA exports (the paper's SYN-Stereo: 640×480, baseline 1.5 m).
 
     Expected tree (``ROOT`` holds sequence folders, or is one)::
@@ -307,26 +326,11 @@ class CarlaStereo(FolderDataset):
                               depth_encoding="carla_rgb",
                               camera={"fx": 320.0, "fy": 320.0, "cx": 320.0, "cy": 240.0, "baseline": 1.5})
 
-    def _sequences(self) -> list[Path]:
-        if (self.root / "left").is_dir():
-            return [self.root]
-        seqs = sorted(p for p in self.root.iterdir() if (p / "left").is_dir())
-        if not seqs:
-            raise InputFileError(f"no CARLA sequence under {self.root}: expected <sequence>/left/<id>.png")
-        return seqs
+    marker = "left"
 
-    @staticmethod
-    def _folders(seq: Path) -> dict[str, Path | None]:
+    def _folders(self, seq: Path) -> dict[str, Path | None]:
         return {k: seq / d for k, d in (("left", "left"), ("right", "right"), ("label", "semantic"),
                                          ("depth", "depth"), ("disparity", "disparity"))}
-
-    def _list(self) -> list[FrameRef]:
-        frames = []
-        for seq in self._sequences():
-            folders = self._folders(seq)
-            for left in _left_files(folders["left"]):  # type: ignore[arg-type]
-                frames.append(self._pair(f"{seq.name}_{left.stem}", seq.name, seq.name, left, folders, left.stem))
-        return frames
 
     def _camera(self, frame: FrameRef) -> dict[str, Any] | None:
         own = frame.left.parent.parent / "camera.yaml"
@@ -343,10 +347,3 @@ class CarlaStereo(FolderDataset):
         if not isinstance(cam, dict) or not {"fx", "cx", "cy", "baseline"} <= set(cam):
             raise CorruptFileError(f"{path} must give fx, cx, cy (pixels) and baseline (metres)")
         return cam
-
-    def orphans(self) -> list[Problem]:
-        problems = []
-        for seq in self._sequences():
-            stems = {f.name[len(seq.name) + 1:] for f in self.frames if f.scenario == seq.name}
-            problems += self._orphans_in(self._folders(seq), stems, f"{seq.name}_")
-        return problems

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from freespace.data.synthetic.scene import (
-    CURB, FACADE, FOLIAGE, GLASS, GRASS, HEDGE, MARKING, PERSON, POLE, ROAD, SIDEWALK, SKY, TRUNK, VEHICLE,
+    CURB, FACADE, FOLIAGE, GLASS, GRASS, HEDGE, MARKING, PERSON, POLE, ROAD, SIDEWALK, TRUNK, VEHICLE,
     Box, Frame, Scenario, Sphere, SynthConfig, sample_frame,
 )
 from freespace.geometry.homography import StereoCalibration
