@@ -1,0 +1,143 @@
+"""The base class and registry of the segmentation networks.
+
+Every network takes ``N×3×H×W`` float images in [0, 1] (RGB) and normalises them itself (ImageNet
+mean and std live in buffers, so a checkpoint is self-contained). Any H and W work: the input is padded
+(replicate) to a multiple of ``divisor`` (32) inside the model and the logits are cropped back, so
+``model(x)`` in eval mode returns ``N×C×H×W`` logits at the input size. In train mode a network with
+auxiliary outputs returns a dict whose first entry, ``"logits"``, is those logits; :meth:`loss` turns
+outputs and a target into the training losses (cross-entropy plus the network's own auxiliary terms).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from freespace.errors import FreespaceError, InvalidOptionError
+
+__all__ = ["SegmentationModel", "register_model", "create_model", "list_models", "main_logits", "IGNORE_INDEX",
+           "load_smp_encoder"]
+
+IGNORE_INDEX = 255
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+
+Outputs = torch.Tensor | dict[str, torch.Tensor]
+
+
+def main_logits(outputs: Outputs) -> torch.Tensor:
+    """The ``N×C×H×W`` logits of a model's outputs (a tensor, or the ``"logits"`` entry of a dict)."""
+    return outputs["logits"] if isinstance(outputs, dict) else outputs
+
+
+class SegmentationModel(nn.Module):
+    """Base of the six networks: normalisation, padding to ``divisor``, output cropping, losses.
+
+    Subclasses implement :meth:`forward_features` on normalised, padded input and return logits at the
+    padded size (or a dict with ``"logits"`` first and extra outputs in train mode).
+    """
+
+    divisor: int = 32
+
+    def __init__(self, num_classes: int) -> None:
+        super().__init__()
+        if num_classes < 2:
+            raise InvalidOptionError(f"num_classes must be ≥ 2 (road and non-road), got {num_classes}")
+        self.num_classes = num_classes
+        self.register_buffer("mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1))
+        self.register_buffer("std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1))
+        self.config: dict[str, Any] = {}
+
+    def forward_features(self, x: torch.Tensor) -> Outputs:
+        raise NotImplementedError
+
+    def forward(self, x: torch.Tensor) -> Outputs:
+        """``x``: ``N×3×H×W`` RGB in [0, 1]. Returns logits ``N×C×H×W`` (eval) or the train-mode outputs."""
+        if x.dim() != 4 or x.shape[1] != 3:
+            raise InvalidOptionError(f"expected an N×3×H×W image batch, got shape {tuple(x.shape)}")
+        h, w = x.shape[-2:]
+        d = self.divisor
+        ph, pw = (d - h % d) % d, (d - w % d) % d
+        x = (x - self.mean) / self.std
+        if ph or pw:
+            x = F.pad(x, (0, pw, 0, ph), mode="replicate")
+        out = self.forward_features(x)
+        if isinstance(out, dict):
+            return {k: (v[..., :h, :w] if k in self.full_size_outputs else v) for k, v in out.items()}
+        return out[..., :h, :w]
+
+    #: dict outputs at the padded input size (cropped like the logits)
+    full_size_outputs: tuple[str, ...] = ("logits",)
+
+    def loss(self, outputs: Outputs, target: torch.Tensor, ignore_index: int = IGNORE_INDEX) -> dict[str, torch.Tensor]:
+        """Training losses. ``target``: ``N×H×W`` int64 class map (``ignore_index`` = don't care).
+
+        Returns ``{"total": ..., "seg": ...}`` plus the network's auxiliary terms.
+        """
+        seg = F.cross_entropy(main_logits(outputs), target, ignore_index=ignore_index)
+        return {"total": seg, "seg": seg}
+
+
+_REGISTRY: dict[str, Callable[..., SegmentationModel]] = {}
+
+
+def register_model(name: str) -> Callable[[Callable[..., SegmentationModel]], Callable[..., SegmentationModel]]:
+    """Decorator: make a model factory available to :func:`create_model` under ``name``."""
+    def wrap(fn: Callable[..., SegmentationModel]) -> Callable[..., SegmentationModel]:
+        _REGISTRY[name] = fn
+        return fn
+    return wrap
+
+
+def list_models() -> list[str]:
+    """Names accepted by :func:`create_model`."""
+    _load()
+    return sorted(_REGISTRY)
+
+
+def create_model(name: str, num_classes: int = 2, **options: Any) -> SegmentationModel:
+    """Build the network called ``name``.
+
+    Args:
+        name: ``segnet``, ``unet``, ``deeplabv3plus``, ``denseaspp``, ``dupsampling`` or ``gscnn``.
+        num_classes: output classes (2: non-road, road).
+        options: the network's options; every network takes ``preset`` (``light``, the default, trains
+            on a CPU; ``paper``, the original papers' configuration) and, where an ImageNet encoder
+            exists, ``encoder_weights`` (None by default; ``"imagenet"`` needs the network).
+
+    Raises:
+        InvalidOptionError: unknown name (the message lists the choices) or option.
+    """
+    _load()
+    if name not in _REGISTRY:
+        raise InvalidOptionError(f"unknown model {name!r}; choose one of {', '.join(sorted(_REGISTRY))}")
+    try:
+        model = _REGISTRY[name](num_classes=num_classes, **options)
+    except TypeError as exc:
+        raise InvalidOptionError(f"bad option for model {name!r}: {exc}") from None
+    model.config = {"name": name, "num_classes": num_classes, **options}
+    return model
+
+
+def load_smp_encoder(encoder_name: str, weights: str | None, **kwargs: Any) -> nn.Module:
+    """An encoder from segmentation-models-pytorch; a failed weight download is a one-line error."""
+    import segmentation_models_pytorch as smp
+
+    try:
+        return smp.encoders.get_encoder(encoder_name, weights=weights, **kwargs)
+    except KeyError as exc:
+        raise InvalidOptionError(f"unknown encoder {encoder_name!r}: {exc}") from None
+    except Exception as exc:  # network errors from the weight download
+        if weights is None:
+            raise
+        raise FreespaceError(f"cannot load {weights!r} weights for encoder {encoder_name!r} "
+                             f"({type(exc).__name__}: {str(exc).splitlines()[0][:120]}); this needs the network "
+                             f"— train from scratch with encoder_weights=None") from None
+
+
+def _load() -> None:
+    from freespace.models import denseaspp, dupsampling, gscnn, segnet, smp_models  # noqa: F401
