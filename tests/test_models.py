@@ -118,6 +118,31 @@ def test_segnet_unpools_with_the_pooling_indices() -> None:
     assert sum(len(b) for b in paper.encoder) == 13  # VGG16's 13 convolutions
 
 
+def test_segnet_takes_vgg16_bn_weights(monkeypatch: pytest.MonkeyPatch) -> None:
+    import segmentation_models_pytorch as smp
+
+    real = smp.encoders.get_encoder
+    torch.manual_seed(3)
+    vgg = real("vgg16_bn", weights=None)
+    monkeypatch.setattr(smp.encoders, "get_encoder", lambda name, weights=None, **kw: vgg)  # stands in for a download
+    model = create_model("segnet", preset="paper", encoder_weights="imagenet")
+    src = [m for m in vgg.modules() if isinstance(m, torch.nn.Conv2d)]
+    dst = [m for b in model.encoder for m in b.modules() if isinstance(m, torch.nn.Conv2d)]
+    assert len(src) == len(dst) == 13
+    assert all(torch.equal(a.weight, b.weight) for a, b in zip(src, dst))
+    # the first block computes what VGG's first block computes (conv biases folded into batch norm)
+    vgg.eval(), model.eval()
+    for m in vgg.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.1, 0.1)
+    model = create_model("segnet", preset="paper", encoder_weights="imagenet").eval()
+    x = torch.rand(1, 3, 32, 32)
+    with torch.no_grad():
+        torch.testing.assert_close(model.encoder[0](x), vgg.features[:6](x), atol=1e-5, rtol=1e-4)
+    with pytest.raises(InvalidOptionError, match="full-width"):
+        create_model("segnet", encoder_weights="imagenet")
+
+
 def test_segnet_unpool_is_max_unpool() -> None:
     from freespace.models.segnet import _unpool
 
