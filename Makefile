@@ -19,6 +19,8 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(VENV)/bin/python bench/generate.py
+	$(VENV)/bin/python bench/synth.py
+	$(VENV)/bin/python bench/models.py
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache

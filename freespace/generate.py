@@ -146,13 +146,17 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
     label = read_road_label(road_mask)
     disp = read_disparity(disparity) if disparity is not None else None
     result = generate_arrays(ref, tgt, label.road & label.valid, disp, options)
+    data = encode_image(result.image, Path(out).suffix.lower()) if out is not None else None
+    result.timings["total"] = time.perf_counter() - t_start
     if out is not None:
-        data = encode_image(result.image, Path(out).suffix.lower())
-        result.timings["total"] = time.perf_counter() - t_start
-        atomic_write_bytes(out, data)
+        atomic_write_bytes(out, data)  # type: ignore[arg-type]
     if model_json is not None:
-        result.timings.setdefault("total", time.perf_counter() - t_start)
-        write_json(model_json, result.report())
+        try:
+            write_json(model_json, result.report())
+        except FreespaceError:
+            if out is not None:
+                Path(out).unlink(missing_ok=True)  # all or nothing
+            raise
     return result
 
 

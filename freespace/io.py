@@ -35,6 +35,7 @@ __all__ = [
     "atomic_write_text",
     "write_json",
     "read_image",
+    "read_raw",
     "write_image",
     "encode_image",
     "read_disparity",
@@ -107,6 +108,17 @@ def _decode(path: PathLike, what: str, flags: int) -> np.ndarray:
     if img is None:
         raise CorruptFileError(f"cannot decode {what} {path}: not a readable image file (empty, truncated or "
                                f"another format)")
+    return img
+
+
+def read_raw(path: PathLike, *, what: str = "image") -> np.ndarray:
+    """Decode an image file as stored: 8 or 16 bits, 1–4 channels (colour channels in RGB order).
+
+    For label ids and depth maps, whose values must not be converted.
+    """
+    img = _decode(path, what, cv2.IMREAD_UNCHANGED)
+    if img.ndim == 3 and img.shape[2] >= 3:
+        img = img[:, :, [2, 1, 0] + list(range(3, img.shape[2]))]
     return img
 
 

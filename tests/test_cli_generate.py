@@ -185,3 +185,12 @@ def test_dataset_user_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture) ->
     assert "no frames found for kitti" in capsys.readouterr().err
     assert main(["generate", "--dataset", "kitti", "--out", str(tmp_path / "o")]) == 2
     assert "--root" in capsys.readouterr().err
+
+
+def test_unwritable_model_json_leaves_no_image(pair_files: dict[str, Path], tmp_path: Path) -> None:
+    (tmp_path / "blocker").write_text("a file, not a folder")
+    out = tmp_path / "G.png"
+    args = _pair_args(pair_files, out, "--disparity", str(pair_files["disp"]), "--model-json",
+                      str(tmp_path / "blocker" / "M.json"))
+    assert main(args) == 2
+    assert not out.exists()

@@ -22,7 +22,7 @@ import numpy as np
 
 from freespace.errors import DatasetError, FreespaceError, InputFileError, InvalidOptionError, ShapeMismatchError
 from freespace.geometry import StereoCalibration, compute_disparity
-from freespace.io import PathLike, RoadLabel, atomic_write_bytes, read_disparity, read_image
+from freespace.io import PathLike, RoadLabel, atomic_write_bytes, read_disparity, read_image, read_raw
 
 log = logging.getLogger(__name__)
 
@@ -92,11 +92,7 @@ def image_size(path: Path) -> tuple[int, int]:
     Raises:
         InputFileError, CorruptFileError.
     """
-    import cv2
-
-    from freespace.io import _decode  # the same decoding (and errors) as every reader
-
-    img = _decode(path, "image", cv2.IMREAD_UNCHANGED)
+    img = read_raw(path)
     return int(img.shape[0]), int(img.shape[1])
 
 

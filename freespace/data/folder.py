@@ -21,13 +21,12 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from freespace.data.base import FrameRef, Problem, StereoRoadDataset, register_dataset
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
 from freespace.geometry import StereoCalibration
-from freespace.io import DISPARITY_SUFFIXES, PathLike, RoadLabel, _decode, read_disparity, read_road_label
+from freespace.io import DISPARITY_SUFFIXES, PathLike, RoadLabel, read_disparity, read_raw, read_road_label
 
 __all__ = ["FolderSpec", "GenericStereo", "SynthiaStereo", "CarlaStereo", "CONFIG_NAME"]
 
@@ -89,14 +88,6 @@ class FolderSpec:
                 raise InvalidOptionError(f"{where}: camera needs fx, cx, cy, baseline (missing {sorted(missing)})")
 
 
-def _raw(path: Path, what: str) -> np.ndarray:
-    """Decode without conversion (16-bit kept); colour images in RGB channel order."""
-    img = _decode(path, what, cv2.IMREAD_UNCHANGED)
-    if img.ndim == 3 and img.shape[2] >= 3:
-        img = img[:, :, [2, 1, 0]]
-    return img
-
-
 def _channel(img: np.ndarray, channel: int) -> np.ndarray:
     return img if img.ndim == 2 else img[:, :, channel]
 
@@ -114,7 +105,7 @@ class FolderDataset(StereoRoadDataset):
         spec = self.spec
         if spec.label_encoding == "kitti":
             return read_road_label(frame.label)  # type: ignore[arg-type]
-        ids = _channel(_raw(frame.label, "label"), spec.label_channel)  # type: ignore[arg-type]
+        ids = _channel(read_raw(frame.label, what="label"), spec.label_channel)  # type: ignore[arg-type]
         if spec.label_encoding == "mask":
             return RoadLabel(road=ids > 0, valid=np.ones(ids.shape, bool))
         valid = ~np.isin(ids, spec.ignore_ids) if spec.ignore_ids else np.ones(ids.shape, bool)
@@ -125,7 +116,7 @@ class FolderDataset(StereoRoadDataset):
         path = frame.depth
         if spec.depth_encoding == "float":
             return read_disparity(path) * np.float32(spec.depth_scale)  # type: ignore[arg-type]
-        img = _raw(path, "depth")  # type: ignore[arg-type]
+        img = read_raw(path, what="depth")  # type: ignore[arg-type]
         if spec.depth_encoding == "carla_rgb":
             if img.ndim != 3:
                 raise CorruptFileError(f"depth {path} is not a CARLA RGB-encoded depth image (3 channels)")
