@@ -132,6 +132,19 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
+    """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
+    from freespace.io import write_json
+    from freespace.kitti_eval import evaluate_kitti_dirs
+
+    results = evaluate_kitti_dirs(args.gt, args.pred)
+    write_json(args.out, results)
+    print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
+    for cat, r in results.items():
+        print(f"{cat:<10} {r['images']:>6} " + " ".join(f"{100 * r[k]:7.2f}" for k in ("max_f", "ap", "pre", "rec", "fpr", "fnr")))
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
     from freespace.demo import run_demo
@@ -212,6 +225,15 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--seed", type=int, default=0, help="shuffling seed (default 0)")
     q.add_argument("--out", required=True, help="folder for the list files")
     q.set_defaults(func=cmd_datasets_split)
+
+    p = sub.add_parser("evaluate-kitti", help="evaluate KITTI-format confidence maps like the KITTI road devkit",
+                       description="Evaluate 8-bit road confidence PNGs against KITTI road ground truth as the "
+                                   "official devkit does (256 thresholds, don't-care excluded, counts summed per "
+                                   "category, MaxF, 11-point AP, PRE/REC/FPR/FNR at MaxF). Perspective view.")
+    p.add_argument("--gt", required=True, help="ground-truth folder (gt_image_2: <cat>_road_<id>.png)")
+    p.add_argument("--pred", required=True, help="prediction folder (<cat>_road_<id>.png or <cat>_<id>.png)")
+    p.add_argument("--out", required=True, help="output JSON")
+    p.set_defaults(func=cmd_evaluate_kitti)
 
     p = sub.add_parser("demo", help="run the built-in demo end to end",
                        description="Render stereo road scenes, run the DS-Generator on them and write the results.")

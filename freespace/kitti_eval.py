@@ -1,0 +1,75 @@
+"""`freespace evaluate-kitti`: KITTI road confidence maps against KITTI ground truth, as the devkit does.
+
+Ground truth: ``GT_DIR/<cat>_road_<id>.png`` (KITTI colours, read as the devkit reads them: road = blue
+> 0, evaluated = red > 0). Predictions: ``PRED_DIR/<cat>_road_<id>.png`` (the benchmark's naming) or
+``PRED_DIR/<cat>_<id>.png``, 8-bit grey (255 = sure road; colour files are converted to grey).
+Counts are summed per category (``um_road``, ``umm_road``, ``uu_road``) and over all images (``all``).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from freespace.errors import DatasetError, InputFileError, ShapeMismatchError
+from freespace.io import PathLike, read_image, read_road_label
+from freespace.metrics import KITTI_CATEGORIES, KittiCounts, kitti_counts, kitti_scores
+
+__all__ = ["evaluate_kitti_dirs", "read_confidence"]
+
+_GT = re.compile(r"^(um|umm|uu)_road_(\d{6})$")
+
+
+def read_confidence(path: PathLike) -> np.ndarray:
+    """An 8-bit road confidence map (``uint8 H×W``; colour files converted to grey)."""
+    img = read_image(path, what="prediction")
+    return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
+
+
+def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike) -> dict[str, Any]:
+    """Evaluate every ground-truth file of ``gt_dir`` against its prediction in ``pred_dir``.
+
+    Returns:
+        ``{category: {"max_f", "ap", "pre", "rec", "fpr", "fnr", "threshold", "images"}}`` for the
+        categories present and ``"all"``.
+
+    Raises:
+        InputFileError: a folder or a prediction is missing. ShapeMismatchError: sizes differ.
+    """
+    gt_dir, pred_dir = Path(gt_dir), Path(pred_dir)
+    for d, what in ((gt_dir, "ground-truth"), (pred_dir, "prediction")):
+        if not d.is_dir():
+            raise InputFileError(f"{what} folder not found: {d}")
+    gts = [p for p in sorted(gt_dir.glob("*.png")) if _GT.match(p.stem)]
+    if not gts:
+        raise DatasetError(f"no KITTI road ground truth (<cat>_road_<id>.png) in {gt_dir}")
+    missing, pairs = [], []
+    for gt in gts:
+        cat, idx = _GT.match(gt.stem).groups()  # type: ignore[union-attr]
+        candidates = [pred_dir / gt.name, pred_dir / f"{cat}_{idx}.png"]
+        pred = next((c for c in candidates if c.is_file()), None)
+        if pred is None:
+            missing.append(gt.name)
+        else:
+            pairs.append((f"{cat}_road", gt, pred))
+    if missing:
+        raise InputFileError(f"no prediction in {pred_dir} for {len(missing)} of {len(gts)} ground-truth files "
+                             f"(first: {missing[0]}); name them like the ground truth")
+    sums: dict[str, KittiCounts] = {}
+    images: dict[str, int] = {}
+    for cat, gt, pred in pairs:
+        label = read_road_label(gt)
+        conf = read_confidence(pred)
+        if conf.shape != label.shape:
+            raise ShapeMismatchError(f"{pred.name} is {conf.shape[1]}×{conf.shape[0]} but its ground truth is "
+                                     f"{label.shape[1]}×{label.shape[0]}")
+        counts = kitti_counts(conf, label.road, label.valid)
+        for key in (cat, "all"):
+            sums[key] = sums[key] + counts if key in sums else counts
+            images[key] = images.get(key, 0) + 1
+    order = [c for c in KITTI_CATEGORIES if c in sums] + ["all"]
+    return {k: {**kitti_scores(sums[k]), "images": images[k]} for k in order}
