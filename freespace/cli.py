@@ -145,6 +145,24 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    """``freespace train``: train a network, with or without the homography augmentation."""
+    from freespace.engine.config import TrainConfig, parse_size
+    from freespace.engine.train import run_training
+
+    config = TrainConfig(dataset=args.dataset, root=args.root, out=args.out, model=args.model, preset=args.preset,
+                         split=args.split, augment=args.augment, epochs=args.epochs, batch_size=args.batch_size,
+                         lr=args.lr, momentum=args.momentum, weight_decay=args.weight_decay, patience=args.patience,
+                         image_size=parse_size(args.image_size), seed=args.seed, devices=args.devices,
+                         strategy=args.strategy, workers=args.workers, splits=args.splits, max_frames=args.max_frames,
+                         disparity=args.disparity_source, cache_dir=args.cache_dir)
+    config.check()
+    metrics = run_training(config, resume=args.resume, progress=not args.no_progress)
+    print(" ".join(f"{k} {metrics[k]:.4f}" for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
+          + f"  → {args.out}/metrics.json")
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
     from freespace.demo import run_demo
@@ -225,6 +243,36 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--seed", type=int, default=0, help="shuffling seed (default 0)")
     q.add_argument("--out", required=True, help="folder for the list files")
     q.set_defaults(func=cmd_datasets_split)
+
+    p = sub.add_parser("train", help="train a network (optionally with the homography augmentation)",
+                       description="Train a segmentation network on a dataset's train split, validate each epoch, "
+                                   "stop early on the validation F-score and test the best checkpoint. The run "
+                                   "folder holds config.yaml, splits/, metrics.csv, checkpoints/ and metrics.json.")
+    p.add_argument("--dataset", choices=DATASETS, required=True, help="layout")
+    p.add_argument("--root", metavar="DIR", required=True, help="dataset folder")
+    p.add_argument("--split", help="on-disk split (default: the first, e.g. KITTI training)")
+    p.add_argument("--model", default="unet", help="segnet, unet, deeplabv3plus, denseaspp, dupsampling, gscnn")
+    p.add_argument("--preset", default="light", help="light (CPU) or paper")
+    p.add_argument("--augment", default="none", help="none or homography (adds the DS-Generator views)")
+    p.add_argument("--epochs", type=int, default=50)
+    p.add_argument("--batch-size", type=int, default=4)
+    p.add_argument("--lr", type=float, default=0.001)
+    p.add_argument("--momentum", type=float, default=0.9)
+    p.add_argument("--weight-decay", type=float, default=0.0)
+    p.add_argument("--patience", type=int, default=10, help="early-stopping patience in epochs (default 10)")
+    p.add_argument("--image-size", help="HxW all frames are resized to (default: the first frame's size)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--devices", type=int, default=1)
+    p.add_argument("--strategy", default="auto", help="auto or ddp")
+    p.add_argument("--workers", type=int, default=0, help="data-loading processes")
+    p.add_argument("--splits", metavar="DIR", help="train.txt/val.txt/test.txt to use (default: the paper's split)")
+    p.add_argument("--max-frames", type=int, help="use only the first N labelled frames (quick runs)")
+    p.add_argument("--disparity-source", choices=("auto", "file", "sgbm", "none"), default="auto")
+    p.add_argument("--cache-dir", metavar="DIR", help="SGBM disparity cache")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder")
+    p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("evaluate-kitti", help="evaluate KITTI-format confidence maps like the KITTI road devkit",
                        description="Evaluate 8-bit road confidence PNGs against KITTI road ground truth as the "

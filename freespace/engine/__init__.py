@@ -1,0 +1,1 @@
+"""Training and evaluation (PyTorch Lightning): configuration, data, the Lightning module, runs."""

@@ -1,0 +1,115 @@
+"""The Lightning module: a network, its losses, SGD with momentum, metrics from summed counts."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import lightning.pytorch as pl
+import numpy as np
+import torch
+
+from freespace.errors import FreespaceError
+from freespace.metrics import Counts, KittiCounts, kitti_scores
+from freespace.models import IGNORE_INDEX, create_model, main_logits
+
+__all__ = ["RoadModule", "TrainingError"]
+
+
+class TrainingError(FreespaceError):
+    """Training cannot go on (e.g. the loss became NaN)."""
+
+    exit_code = 1
+
+
+class RoadModule(pl.LightningModule):
+    """Trains ``create_model(model, **model_options)``; validation and test metrics are computed from
+    confusion counts summed over the whole split (and over DDP ranks), never averaged per batch."""
+
+    def __init__(self, model: str, model_options: dict[str, Any], lr: float, momentum: float,
+                 weight_decay: float) -> None:
+        super().__init__()
+        self.save_hyperparameters()
+        self.net = create_model(model, **model_options)
+        self._reset()
+
+    def _reset(self) -> None:
+        self._counts = torch.zeros(4, dtype=torch.float64)  # tp, fp, fn, tn
+        self._kitti = torch.zeros(2, 256, dtype=torch.float64)  # fn, fp per threshold
+        self._totals = torch.zeros(2, dtype=torch.float64)  # pos, neg
+        self._seconds = 0.0
+        self._frames = 0
+
+    def configure_optimizers(self):
+        return torch.optim.SGD(self.parameters(), lr=self.hparams.lr, momentum=self.hparams.momentum,
+                               weight_decay=self.hparams.weight_decay)
+
+    def on_train_epoch_start(self) -> None:
+        # dropout and the like draw from a generator seeded by the epoch: a resumed run is exact
+        torch.manual_seed(int(np.random.default_rng([self.trainer.current_epoch, 17]).integers(2**31)))
+
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        outputs = self.net(batch["image"])
+        losses = self.net.loss(outputs, batch["label"], IGNORE_INDEX)
+        loss = losses["total"]
+        if not torch.isfinite(loss):
+            raise TrainingError(f"the loss became {float(loss)} at epoch {self.current_epoch}, step {batch_idx}; "
+                                f"lower --lr or check the labels")
+        for k, v in losses.items():
+            self.log(f"train_{'loss' if k == 'total' else k}", v.detach(), on_step=False, on_epoch=True,
+                     batch_size=batch["image"].shape[0], sync_dist=True)
+        return loss
+
+    def _accumulate(self, batch: dict[str, Any]) -> None:
+        t0 = time.perf_counter()
+        logits = main_logits(self.net(batch["image"]))
+        self._seconds += time.perf_counter() - t0
+        self._frames += batch["image"].shape[0]
+        label = batch["label"]
+        valid = label != IGNORE_INDEX
+        road = label == 1
+        prob = torch.softmax(logits.float(), 1)[:, 1]
+        pred = prob >= 0.5
+        c = torch.stack([(pred & road & valid).sum(), (pred & ~road & valid).sum(),
+                         (~pred & road & valid).sum(), (~pred & ~road & valid).sum()]).double()
+        self._counts += c.cpu()
+        conf = torch.clamp(torch.round(prob * 255), 0, 255).long()
+        hr = torch.bincount(conf[road & valid], minlength=256).double().cpu()
+        hn = torch.bincount(conf[~road & valid], minlength=256).double().cpu()
+        self._kitti[0] += torch.cat([torch.zeros(1, dtype=torch.float64), torch.cumsum(hr, 0)[:-1]])
+        self._kitti[1] += torch.flip(torch.cumsum(torch.flip(hn, [0]), 0), [0])
+        self._totals += torch.stack([hr.sum(), hn.sum()])
+
+    def validation_step(self, batch: dict[str, Any], batch_idx: int) -> None:
+        self._accumulate(batch)
+
+    def test_step(self, batch: dict[str, Any], batch_idx: int) -> None:
+        self._accumulate(batch)
+
+    def on_validation_epoch_start(self) -> None:
+        self._reset()
+
+    def on_test_epoch_start(self) -> None:
+        self._reset()
+
+    def _reduce(self) -> dict[str, float]:
+        packed = torch.cat([self._counts, self._kitti.flatten(), self._totals,
+                            torch.tensor([self._seconds, self._frames], dtype=torch.float64)]).to(self.device)
+        packed = self.trainer.strategy.reduce(packed, reduce_op="sum").cpu()
+        tp, fp, fn, tn = (int(x) for x in packed[:4])
+        metrics = Counts(tp, fp, fn, tn).metrics()
+        kitti = KittiCounts(packed[4:260].long().numpy(), packed[260:516].long().numpy(), int(packed[516]),
+                            int(packed[517]))
+        scores = kitti_scores(kitti)
+        metrics.update(max_f=scores["max_f"], ap=scores["ap"])
+        metrics["seconds_per_frame"] = float(packed[518] / max(packed[519], 1))
+        return metrics
+
+    def on_validation_epoch_end(self) -> None:
+        for k, v in self._reduce().items():
+            self.log(f"val_{k}", v, sync_dist=False)
+
+    def on_test_epoch_end(self) -> None:
+        self.test_metrics = self._reduce()
+        for k, v in self.test_metrics.items():
+            self.log(f"test_{k}", v, sync_dist=False)
