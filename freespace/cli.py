@@ -158,6 +158,10 @@ def cmd_train(args: argparse.Namespace) -> int:
                          disparity=args.disparity_source, cache_dir=args.cache_dir)
     config.check()
     metrics = run_training(config, resume=args.resume, progress=not args.no_progress)
+    from freespace.engine.data import is_rank_zero
+
+    if not is_rank_zero():
+        return 0
     print(" ".join(f"{k} {metrics[k]:.4f}" for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
           + f"  → {args.out}/metrics.json")
     return 0

@@ -53,7 +53,7 @@ class RoadModule(pl.LightningModule):
         losses = self.net.loss(outputs, batch["label"], IGNORE_INDEX)
         loss = losses["total"]
         if not torch.isfinite(loss):
-            raise TrainingError(f"the loss became {float(loss)} at epoch {self.current_epoch}, step {batch_idx}; "
+            raise TrainingError(f"the loss became {loss.item()} at epoch {self.current_epoch}, step {batch_idx}; "
                                 f"lower --lr or check the labels")
         for k, v in losses.items():
             self.log(f"train_{'loss' if k == 'total' else k}", v.detach(), on_step=False, on_epoch=True,
@@ -107,9 +107,9 @@ class RoadModule(pl.LightningModule):
 
     def on_validation_epoch_end(self) -> None:
         for k, v in self._reduce().items():
-            self.log(f"val_{k}", v, sync_dist=False)
+            self.log(f"val_{k}", v, sync_dist=True)  # already summed over ranks: the mean of equal values
 
     def on_test_epoch_end(self) -> None:
         self.test_metrics = self._reduce()
         for k, v in self.test_metrics.items():
-            self.log(f"test_{k}", v, sync_dist=False)
+            self.log(f"test_{k}", v, sync_dist=True)

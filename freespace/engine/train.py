@@ -105,7 +105,7 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
         if changed:
             raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
                                      f"resume with the same options (only --epochs may grow)")
-    elif (run_dir / "config.yaml").is_file():
+    elif (run_dir / "config.yaml").is_file() and is_rank_zero():  # DDP children re-run the command: skip
         raise InvalidOptionError(f"{run_dir} already holds a run; add --resume to continue it or choose another --out")
     config.check()
     pl.seed_everything(config.seed, workers=True, verbose=False)

@@ -1,0 +1,139 @@
+"""Training runs: the run folder, exact resume, the homography augmentation, bad options, NaN loss,
+atomic checkpoints, DDP with two CPU processes."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+
+from freespace.cli import main
+from freespace.data.synthetic import SynthConfig, write_dataset
+from freespace.engine.config import TrainConfig
+from freespace.errors import FreespaceError
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("tiny")
+    write_dataset(root, 16, seed=2, config=SynthConfig(width=128, height=96, frames_per_scenario=2), progress=False)
+    return root
+
+
+def _train(root: Path, out: Path, *extra: str) -> int:
+    return main(["train", "--dataset", "synth", "--root", str(root), "--model", "segnet", "--batch-size", "4",
+                 "--no-progress", "--out", str(out), *extra])
+
+
+def _metrics(run: Path) -> dict:
+    m = json.loads((run / "metrics.json").read_text())
+    m.pop("seconds_per_frame")
+    return m
+
+
+def test_run_folder_and_exact_resume(tiny: Path, tmp_path: Path) -> None:
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert _train(tiny, a, "--epochs", "3") == 0
+    assert _train(tiny, b, "--epochs", "2") == 0
+    assert _train(tiny, b, "--epochs", "3", "--resume") == 0
+    assert _metrics(a) == _metrics(b)  # exactly
+    assert (a / "metrics.csv").read_text().splitlines()[1:] != []
+    rows_a = [r for r in csv.DictReader((a / "metrics.csv").open())]
+    rows_b = [r for r in csv.DictReader((b / "metrics.csv").open())]
+    assert [r["val_f_score"] for r in rows_a] == [r["val_f_score"] for r in rows_b] and len(rows_a) == 3
+    config = yaml.safe_load((a / "config.yaml").read_text())
+    assert config["model"] == "segnet" and config["image_size"] == [96, 128]
+    m = json.loads((a / "metrics.json").read_text())
+    assert {"accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap", "seconds_per_frame"} <= set(m)
+    assert all(0 <= m[k] <= 1 for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
+    assert sum(m["frames"].values()) == 16 and min(m["frames"].values()) >= 1
+    for name in ("best.ckpt", "last.ckpt"):
+        ckpt = torch.load(a / "checkpoints" / name, weights_only=True)  # loads no code
+        assert "state_dict" in ckpt and ckpt["hyper_parameters"]["model"] == "segnet"
+    for split in ("train", "val", "test"):
+        assert (a / "splits" / f"{split}.txt").is_file()
+
+
+def test_homography_augmentation_adds_generated_views(tiny: Path, tmp_path: Path) -> None:
+    run = tmp_path / "ha"
+    assert _train(tiny, run, "--epochs", "1", "--augment", "homography") == 0
+    m = json.loads((run / "metrics.json").read_text())
+    train_names = (run / "splits" / "train.txt").read_text().split()
+    assert m["frames"]["train"] == 2 * len(train_names)
+    assert sorted(p.stem for p in (run / "generated").glob("*.png")) == sorted(train_names)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--model", "fcn"], "unknown model"), (["--augment", "flip"], "--augment"), (["--epochs", "0"], "--epochs"),
+    (["--image-size", "12x5"], "--image-size"), (["--lr", "-1"], "--lr"), (["--strategy", "fsdp"], "--strategy"),
+])
+def test_bad_options_rejected_before_work(tiny: Path, tmp_path: Path, args: list[str], message: str,
+                                          capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "bad"
+    assert _train(tiny, out, *args) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_existing_run_and_resume_mistakes(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert _train(tiny, tmp_path / "none", "--resume") == 2
+    assert "--resume needs" in capsys.readouterr().err
+    run = tmp_path / "r"
+    assert _train(tiny, run, "--epochs", "1") == 0
+    assert _train(tiny, run, "--epochs", "1") == 2
+    assert "already holds a run" in capsys.readouterr().err
+    assert _train(tiny, run, "--epochs", "2", "--resume", "--lr", "0.01") == 2
+    assert "other options" in capsys.readouterr().err
+
+
+def test_nan_loss_stops_the_run(tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                capsys: pytest.CaptureFixture) -> None:
+    from freespace.models.base import SegmentationModel
+
+    def nan_loss(self, outputs, target, ignore_index=255):
+        return {"total": torch.nn.functional.cross_entropy(outputs, target, ignore_index=ignore_index) * float("nan")}
+
+    monkeypatch.setattr(SegmentationModel, "loss", nan_loss)
+    assert _train(tiny, tmp_path / "nan", "--epochs", "1") == 1
+    err = capsys.readouterr().err
+    assert "the loss became nan" in err and "lower --lr" in err
+
+
+def test_checkpoints_are_written_atomically(tmp_path: Path) -> None:
+    from freespace.engine.train import _atomic_io
+
+    io = _atomic_io()
+    path = tmp_path / "last.ckpt"
+    io.save_checkpoint({"epoch": 1}, path)
+    with pytest.raises(Exception):
+        io.save_checkpoint({"bad": lambda: 0}, path)  # cannot be pickled: the old file must survive
+    assert torch.load(path, weights_only=True) == {"epoch": 1}
+    assert [p.name for p in tmp_path.iterdir()] == ["last.ckpt"]
+
+
+def test_config_round_trip(tmp_path: Path) -> None:
+    c = TrainConfig(dataset="kitti", root=str(tmp_path), out=str(tmp_path / "o"), image_size=(64, 96))
+    c.save(tmp_path / "c.yaml")
+    assert TrainConfig.load(tmp_path / "c.yaml") == c
+    (tmp_path / "bad.yaml").write_text("!!python/object/apply:os.system ['echo hi']\n")
+    with pytest.raises(FreespaceError):
+        TrainConfig.load(tmp_path / "bad.yaml")
+
+
+def test_ddp_two_cpu_processes(tiny: Path, tmp_path: Path) -> None:
+    run = tmp_path / "ddp"
+    cmd = [sys.executable, "-m", "freespace.cli", "train", "--dataset", "synth", "--root", str(tiny), "--model",
+           "segnet", "--batch-size", "4", "--no-progress", "--epochs", "2", "--devices", "2", "--strategy", "ddp",
+           "--out", str(run)]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "Initializing distributed: GLOBAL_RANK: 0, MEMBER: 1/2" in res.stderr
+    assert len(list(csv.DictReader((run / "metrics.csv").open()))) == 2
+    assert json.loads((run / "metrics.json").read_text())["f_score"] >= 0
