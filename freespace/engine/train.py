@@ -87,6 +87,14 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
 
     Returns the test metrics (also written to ``RUN_DIR/metrics.json``).
     """
+    deterministic = torch.are_deterministic_algorithms_enabled()
+    try:
+        return _run(config, resume, progress)
+    finally:  # Lightning's deterministic mode is process-wide: give the caller its own setting back
+        torch.use_deterministic_algorithms(deterministic)
+
+
+def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     import lightning.pytorch as pl
 
     from freespace.engine.module import RoadModule
