@@ -132,6 +132,17 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    """``freespace evaluate``: a checkpoint on a dataset split."""
+    from freespace.engine.evaluate import evaluate_checkpoint
+
+    m = evaluate_checkpoint(args.checkpoint, args.dataset, args.root, args.out, split=args.split,
+                            splits_dir=args.splits, on_disk_split=args.disk_split, progress=not args.no_progress)
+    print(" ".join(f"{k} {m[k]:.4f}" for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
+          + f"  ({m['frames']} frames) → {args.out}")
+    return 0
+
+
 def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
     from freespace.io import write_json
@@ -277,6 +288,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder")
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("evaluate", help="evaluate a checkpoint: metrics, TP/FN/FP overlays, PR curve",
+                       description="Evaluate a training checkpoint on a split of a dataset; writes metrics.json, "
+                                   "overlays/ (TP green, FN red, FP blue) and pr_curve.png.")
+    p.add_argument("--checkpoint", required=True, help="a .ckpt from a run folder")
+    p.add_argument("--dataset", choices=DATASETS, required=True)
+    p.add_argument("--root", metavar="DIR", required=True)
+    p.add_argument("--split", default="test", help="train, val, test (the run's lists) or all (default test)")
+    p.add_argument("--splits", metavar="DIR", help="split lists (default: the checkpoint's run folder)")
+    p.add_argument("--disk-split", help="the dataset's on-disk split (default: the first, e.g. KITTI training)")
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.set_defaults(func=cmd_evaluate)
 
     p = sub.add_parser("evaluate-kitti", help="evaluate KITTI-format confidence maps like the KITTI road devkit",
                        description="Evaluate 8-bit road confidence PNGs against KITTI road ground truth as the "

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-__all__ = ["colorize_disparity", "overlay_road", "caption", "grid"]
+__all__ = ["colorize_disparity", "overlay_road", "overlay_errors", "caption", "grid"]
 
 
 def colorize_disparity(disparity: np.ndarray, max_disparity: float | None = None) -> np.ndarray:
@@ -32,6 +32,18 @@ def overlay_road(image: np.ndarray, road: np.ndarray, colour: tuple[int, int, in
     tint = np.array(colour, np.float32)
     out[road] = (out[road].astype(np.float32) * (1 - alpha) + tint * alpha).astype(np.uint8)
     return out
+
+
+def overlay_errors(image: np.ndarray, pred: np.ndarray, road: np.ndarray, valid: np.ndarray | None = None,
+                   alpha: float = 0.5) -> np.ndarray:
+    """The paper's figure colours: true positives green, false negatives red, false positives blue
+    (``pred``, ``road``, ``valid``: bool H×W; don't-care pixels untouched)."""
+    valid = np.ones(road.shape, bool) if valid is None else valid
+    out = image.astype(np.float32).copy() if image.ndim == 3 else np.repeat(image[..., None], 3, 2).astype(np.float32)
+    for mask, colour in ((pred & road, (0, 255, 0)), (~pred & road, (255, 0, 0)), (pred & ~road, (0, 0, 255))):
+        m = mask & valid
+        out[m] = out[m] * (1 - alpha) + np.array(colour, np.float32) * alpha
+    return out.astype(np.uint8)
 
 
 def caption(image: np.ndarray, text: str) -> np.ndarray:

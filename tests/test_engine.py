@@ -137,3 +137,25 @@ def test_ddp_two_cpu_processes(tiny: Path, tmp_path: Path) -> None:
     assert "Initializing distributed: GLOBAL_RANK: 0, MEMBER: 1/2" in res.stderr
     assert len(list(csv.DictReader((run / "metrics.csv").open()))) == 2
     assert json.loads((run / "metrics.json").read_text())["f_score"] >= 0
+
+
+def test_evaluate_checkpoint(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    run = tmp_path / "run"
+    assert _train(tiny, run, "--epochs", "1") == 0
+    out = tmp_path / "eval"
+    assert main(["evaluate", "--checkpoint", str(run / "checkpoints" / "best.ckpt"), "--dataset", "synth",
+                 "--root", str(tiny), "--out", str(out), "--no-progress"]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    trained = json.loads((run / "metrics.json").read_text())
+    for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"):  # same frames, same size
+        assert m[k] == pytest.approx(trained[k], abs=1e-6), k
+    test_names = (run / "splits" / "test.txt").read_text().split()
+    assert sorted(p.stem for p in (out / "overlays").glob("*.png")) == sorted(test_names)
+    assert (out / "pr_curve.png").stat().st_size > 1000
+    capsys.readouterr()
+    assert main(["evaluate", "--checkpoint", str(tmp_path / "none.ckpt"), "--dataset", "synth", "--root", str(tiny),
+                 "--out", str(tmp_path / "e2")]) == 2
+    (tmp_path / "junk.ckpt").write_bytes(b"not a checkpoint")
+    assert main(["evaluate", "--checkpoint", str(tmp_path / "junk.ckpt"), "--dataset", "synth", "--root", str(tiny),
+                 "--out", str(tmp_path / "e2")]) == 2
+    assert "not a freespace training checkpoint" in capsys.readouterr().err

@@ -27,7 +27,7 @@ class RoadModule(pl.LightningModule):
     confusion counts summed over the whole split (and over DDP ranks), never averaged per batch."""
 
     def __init__(self, model: str, model_options: dict[str, Any], lr: float, momentum: float,
-                 weight_decay: float) -> None:
+                 weight_decay: float, image_size: tuple[int, int] | list[int] | None = None) -> None:
         super().__init__()
         self.save_hyperparameters()
         self.net = create_model(model, **model_options)

@@ -131,7 +131,8 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                                            sampler=EpochSampler(len(frames), config.seed, shuffle),
                                            num_workers=config.workers, persistent_workers=config.workers > 0)
 
-    module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay)
+    module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay,
+                        image_size=list(size))
     if config.model == "dupsampling" and not resume:
         kept = module.net.fit_reconstruction(train[i]["label"] for i in range(len(data["train"])))
         log.info("DUpsampling reconstruction fitted from %d training labels (%.1f%% of the variance kept)",
