@@ -166,7 +166,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                          lr=args.lr, momentum=args.momentum, weight_decay=args.weight_decay, patience=args.patience,
                          image_size=parse_size(args.image_size), seed=args.seed, devices=args.devices,
                          strategy=args.strategy, workers=args.workers, splits=args.splits, max_frames=args.max_frames,
-                         disparity=args.disparity_source, cache_dir=args.cache_dir)
+                         disparity=args.disparity_source, cache_dir=args.cache_dir, tensorboard=args.tensorboard)
     config.check()
     metrics = run_training(config, resume=args.resume, progress=not args.no_progress)
     from freespace.engine.data import is_rank_zero
@@ -284,6 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-frames", type=int, help="use only the first N labelled frames (quick runs)")
     p.add_argument("--disparity-source", choices=("auto", "file", "sgbm", "none"), default="auto")
     p.add_argument("--cache-dir", metavar="DIR", help="SGBM disparity cache")
+    p.add_argument("--tensorboard", action="store_true", help="also write TensorBoard logs (needs tensorboard)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--out", required=True, metavar="RUN_DIR", help="run folder")

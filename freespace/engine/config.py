@@ -51,6 +51,7 @@ class TrainConfig:
     max_frames: int | None = None
     disparity: str = "auto"
     cache_dir: str | None = None
+    tensorboard: bool = False
 
     def check(self) -> None:
         """Reject bad options (one-line errors), before any work."""
@@ -78,6 +79,11 @@ class TrainConfig:
             raise InvalidOptionError(f"--strategy must be auto or ddp, got {self.strategy!r}")
         if self.max_frames is not None and self.max_frames < 3:
             raise InvalidOptionError("--max-frames must be ≥ 3 (train, val and test need a frame each)")
+        if self.tensorboard:
+            try:
+                import tensorboard  # noqa: F401
+            except ImportError:
+                raise InvalidOptionError("--tensorboard needs the tensorboard package: pip install tensorboard") from None
         if not Path(self.root).is_dir():
             raise InvalidOptionError(f"dataset root not found: {self.root}")
 

@@ -141,7 +141,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
         devices=config.devices, strategy="ddp" if config.strategy == "ddp" else "auto",
-        max_epochs=config.epochs, callbacks=callbacks, plugins=[_atomic_io()], logger=False,
+        max_epochs=config.epochs, callbacks=callbacks, plugins=[_atomic_io()], logger=_logger(config, run_dir),
         default_root_dir=str(run_dir), num_sanity_val_steps=0, deterministic=True,
         enable_progress_bar=progress, enable_model_summary=False, use_distributed_sampler=False,
         log_every_n_steps=1)
@@ -154,6 +154,15 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     if trainer.is_global_zero:
         write_json(run_dir / "metrics.json", metrics)
     return metrics
+
+
+def _logger(config: TrainConfig, run_dir: Path):
+    """TensorBoard logs in ``RUN_DIR/tensorboard`` when asked for (metrics.csv is always written)."""
+    if not config.tensorboard:
+        return False
+    from lightning.pytorch.loggers import TensorBoardLogger
+
+    return TensorBoardLogger(str(run_dir), name="tensorboard", version="")
 
 
 def _best_epoch(run_dir: Path) -> int | None:
