@@ -21,6 +21,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/generate.py
 	$(VENV)/bin/python bench/synth.py
 	$(VENV)/bin/python bench/models.py
+	$(VENV)/bin/python bench/train.py
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache

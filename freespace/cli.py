@@ -164,7 +164,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     config = TrainConfig(dataset=args.dataset, root=args.root, out=args.out, model=args.model, preset=args.preset,
                          split=args.split, augment=args.augment, epochs=args.epochs, batch_size=args.batch_size,
                          lr=args.lr, momentum=args.momentum, weight_decay=args.weight_decay, patience=args.patience,
-                         image_size=parse_size(args.image_size), seed=args.seed, devices=args.devices,
+                         image_size=parse_size(args.image_size), seed=args.seed, devices=args.devices, num_nodes=args.num_nodes,
                          strategy=args.strategy, workers=args.workers, splits=args.splits, max_frames=args.max_frames,
                          disparity=args.disparity_source, cache_dir=args.cache_dir, tensorboard=args.tensorboard)
     config.check()
@@ -278,6 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--image-size", help="HxW all frames are resized to (default: the first frame's size)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--devices", type=int, default=1)
+    p.add_argument("--num-nodes", type=int, default=1, help="machines, for multi-node DDP (see the README)")
     p.add_argument("--strategy", default="auto", help="auto or ddp")
     p.add_argument("--workers", type=int, default=0, help="data-loading processes")
     p.add_argument("--splits", metavar="DIR", help="train.txt/val.txt/test.txt to use (default: the paper's split)")

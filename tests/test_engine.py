@@ -159,3 +159,13 @@ def test_evaluate_checkpoint(tiny: Path, tmp_path: Path, capsys: pytest.CaptureF
     assert main(["evaluate", "--checkpoint", str(tmp_path / "junk.ckpt"), "--dataset", "synth", "--root", str(tiny),
                  "--out", str(tmp_path / "e2")]) == 2
     assert "not a freespace training checkpoint" in capsys.readouterr().err
+
+
+def test_tensorboard_is_optional(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    try:
+        import tensorboard  # noqa: F401
+        pytest.skip("tensorboard is installed here")
+    except ImportError:
+        pass
+    assert _train(tiny, tmp_path / "tb", "--tensorboard") == 2
+    assert "pip install tensorboard" in capsys.readouterr().err

@@ -45,6 +45,7 @@ class TrainConfig:
     image_size: tuple[int, int] | None = None
     seed: int = 0
     devices: int = 1
+    num_nodes: int = 1
     strategy: str = "auto"
     workers: int = 0
     splits: str | None = None
@@ -68,7 +69,7 @@ class TrainConfig:
             raise InvalidOptionError(f"--preset must be light or paper, got {self.preset!r}")
         if self.disparity not in DISPARITY_MODES:
             raise InvalidOptionError(f"--disparity-source must be one of {', '.join(DISPARITY_MODES)}")
-        for name in ("epochs", "batch_size", "patience", "devices"):
+        for name in ("epochs", "batch_size", "patience", "devices", "num_nodes"):
             if getattr(self, name) < 1:
                 raise InvalidOptionError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(self, name)}")
         if self.workers < 0:

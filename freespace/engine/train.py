@@ -108,7 +108,8 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         saved = TrainConfig.load(run_dir / "config.yaml")
         if config.image_size is None:
             config.image_size = saved.image_size  # "auto" was resolved when the run started
-        changed = [k for k, v in saved.to_dict().items() if k not in ("epochs", "out", "devices", "strategy", "workers")
+        changed = [k for k, v in saved.to_dict().items()
+                   if k not in ("epochs", "out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
                    and config.to_dict()[k] != v]
         if changed:
             raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
@@ -140,7 +141,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     callbacks, ckpt = _callbacks(run_dir, config.patience)
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
-        devices=config.devices, strategy="ddp" if config.strategy == "ddp" else "auto",
+        devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",
         max_epochs=config.epochs, callbacks=callbacks, plugins=[_atomic_io()], logger=_logger(config, run_dir),
         default_root_dir=str(run_dir), num_sanity_val_steps=0, deterministic=True,
         enable_progress_bar=progress, enable_model_summary=False, use_distributed_sampler=False,
