@@ -100,12 +100,13 @@ def test_onnx_export_matches_pytorch(name: str, tmp_path) -> None:
                           input_names=["image"], output_names=["logits"],
                           dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}, "logits": {0: "n", 2: "h", 3: "w"}})
     session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-    x = torch.rand(2, 3, 96, 128)
-    got = session.run(None, {"image": x.numpy()})[0]
-    with torch.no_grad():
-        want = model(x).numpy()
-    assert got.shape == want.shape
-    np.testing.assert_allclose(got, want, atol=2e-4, rtol=1e-3)
+    for shape in ((2, 3, 96, 128), (1, 3, 75, 110)):  # another size, and one that needs padding inside
+        x = torch.rand(*shape)
+        got = session.run(None, {"image": x.numpy()})[0]
+        with torch.no_grad():
+            want = model(x).numpy()
+        assert got.shape == want.shape == (shape[0], 2) + shape[2:]
+        np.testing.assert_allclose(got, want, atol=2e-4, rtol=1e-3)
 
 
 # --- particular to one network -----------------------------------------------------------------------

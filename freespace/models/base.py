@@ -29,6 +29,20 @@ IMAGENET_STD = (0.229, 0.224, 0.225)
 Outputs = torch.Tensor | dict[str, torch.Tensor]
 
 
+@torch.jit.script_if_tracing
+def _pad_to_multiple(x: torch.Tensor, divisor: int) -> torch.Tensor:
+    """Replicate-pad the bottom and right of ``x`` to multiples of ``divisor`` (scripted when traced, so an
+    exported model pads every input size correctly)."""
+    ph = (divisor - x.shape[2] % divisor) % divisor
+    pw = (divisor - x.shape[3] % divisor) % divisor
+    return F.pad(x, [0, pw, 0, ph], mode="replicate")
+
+
+@torch.jit.script_if_tracing
+def _crop_like(y: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
+    return y[:, :, : ref.shape[2], : ref.shape[3]]
+
+
 def main_logits(outputs: Outputs) -> torch.Tensor:
     """The ``N×C×H×W`` logits of a model's outputs (a tensor, or the ``"logits"`` entry of a dict)."""
     return outputs["logits"] if isinstance(outputs, dict) else outputs
@@ -59,16 +73,12 @@ class SegmentationModel(nn.Module):
         """``x``: ``N×3×H×W`` RGB in [0, 1]. Returns logits ``N×C×H×W`` (eval) or the train-mode outputs."""
         if x.dim() != 4 or x.shape[1] != 3:
             raise InvalidOptionError(f"expected an N×3×H×W image batch, got shape {tuple(x.shape)}")
-        h, w = x.shape[-2:]
-        d = self.divisor
-        ph, pw = (d - h % d) % d, (d - w % d) % d
-        x = (x - self.mean) / self.std
-        if ph or pw:
-            x = F.pad(x, (0, pw, 0, ph), mode="replicate")
+        image = x
+        x = _pad_to_multiple((x - self.mean) / self.std, self.divisor)
         out = self.forward_features(x)
         if isinstance(out, dict):
-            return {k: (v[..., :h, :w] if k in self.full_size_outputs else v) for k, v in out.items()}
-        return out[..., :h, :w]
+            return {k: (_crop_like(v, image) if k in self.full_size_outputs else v) for k, v in out.items()}
+        return _crop_like(out, image)
 
     #: dict outputs at the padded input size (cropped like the logits)
     full_size_outputs: tuple[str, ...] = ("logits",)
