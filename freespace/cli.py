@@ -148,7 +148,9 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     from freespace.io import write_json
     from freespace.kitti_eval import evaluate_kitti_dirs
 
-    results = evaluate_kitti_dirs(args.gt, args.pred)
+    if args.bev and not args.calib:
+        raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
+    results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib if args.bev else None)
     write_json(args.out, results)
     print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
     for cat, r in results.items():
@@ -175,6 +177,35 @@ def cmd_train(args: argparse.Namespace) -> int:
         return 0
     print(" ".join(f"{k} {metrics[k]:.4f}" for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
           + f"  → {args.out}/metrics.json")
+    return 0
+
+
+def cmd_predict(args: argparse.Namespace) -> int:
+    """``freespace predict``: road confidence PNGs (KITTI format) and overlays."""
+    from freespace.infer import Predictor, predict_folder
+
+    predictor = Predictor(checkpoint=args.checkpoint, onnx=args.onnx)
+    summary = predict_folder(predictor, args.input, args.out, batch_size=args.batch_size, progress=not args.no_progress)
+    print(f"{summary['frames']} images, {summary['seconds_per_frame'] * 1000:.1f} ms per frame → {args.out}")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """``freespace export``: ONNX or TorchScript, validated against PyTorch."""
+    from freespace.infer import export_model
+
+    r = export_model(args.checkpoint, args.format, args.out)
+    print(f"{r['format']} → {r['path']}  max abs difference to PyTorch {r['max_abs_diff']:.2e} "
+          f"(sizes {', '.join('×'.join(map(str, s[2:])) for s in r['checked_sizes'])})")
+    return 0
+
+
+def cmd_kitti_submit(args: argparse.Namespace) -> int:
+    """``freespace kitti-submit``: the testing split in the benchmark's BEV format, zipped."""
+    from freespace.infer import kitti_submit
+
+    r = kitti_submit(args.checkpoint, args.root, args.out, progress=not args.no_progress)
+    print(f"{r['frames']} bird's-eye-view maps → {args.out}; upload {r['zip']}")
     return 0
 
 
@@ -307,11 +338,45 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("evaluate-kitti", help="evaluate KITTI-format confidence maps like the KITTI road devkit",
                        description="Evaluate 8-bit road confidence PNGs against KITTI road ground truth as the "
                                    "official devkit does (256 thresholds, don't-care excluded, counts summed per "
-                                   "category, MaxF, 11-point AP, PRE/REC/FPR/FNR at MaxF). Perspective view.")
+                                   "category, MaxF, 11-point AP, PRE/REC/FPR/FNR at MaxF); perspective view, or "
+                                   "the benchmark's bird's-eye view with --bev --calib.")
     p.add_argument("--gt", required=True, help="ground-truth folder (gt_image_2: <cat>_road_<id>.png)")
     p.add_argument("--pred", required=True, help="prediction folder (<cat>_road_<id>.png or <cat>_<id>.png)")
+    p.add_argument("--bev", action="store_true", help="evaluate in the benchmark's bird's-eye view (needs --calib)")
+    p.add_argument("--calib", metavar="CALIB_DIR", help="calibration files <cat>_<id>.txt (for --bev)")
     p.add_argument("--out", required=True, help="output JSON")
     p.set_defaults(func=cmd_evaluate_kitti)
+
+    p = sub.add_parser("predict", help="road confidence maps (KITTI 8-bit PNG) and overlays for images",
+                       description="Predict every image of a file or folder with a checkpoint or an ONNX model; "
+                                   "writes <name>.png (8-bit road confidence, input size; 255 = sure road), "
+                                   "overlays/<name>.png and summary.json (runtime per frame).")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--checkpoint", help="a training checkpoint (.ckpt)")
+    src.add_argument("--onnx", help="a model exported with `freespace export --format onnx`")
+    p.add_argument("--input", required=True, help="an image or a folder of images")
+    p.add_argument("--batch-size", type=int, default=4)
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=cmd_predict)
+
+    p = sub.add_parser("export", help="export a checkpoint to ONNX or TorchScript (validated)",
+                       description="Export a checkpoint to ONNX (dynamic batch, height and width) or TorchScript; "
+                                   "the export is checked against PyTorch and the max abs difference printed.")
+    p.add_argument("--checkpoint", required=True)
+    p.add_argument("--format", choices=("onnx", "torchscript"), required=True)
+    p.add_argument("--out", required=True, help="output file")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("kitti-submit", help="KITTI road testing predictions in the benchmark's BEV format",
+                       description="Predict data_road/testing and write bird's-eye-view confidence maps "
+                                   "<cat>_road_<id>.png (800×400, x −10…10 m, z 6…46 m) made with each frame's "
+                                   "calibration as the devkit does, and submission.zip.")
+    p.add_argument("--checkpoint", required=True)
+    p.add_argument("--root", required=True, metavar="KITTI_DIR", help="folder holding data_road/testing")
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=cmd_kitti_submit)
 
     p = sub.add_parser("demo", help="run the built-in demo end to end",
                        description="Render stereo road scenes, run the DS-Generator on them and write the results.")

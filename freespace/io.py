@@ -41,6 +41,7 @@ __all__ = [
     "read_disparity",
     "write_disparity",
     "read_road_label",
+    "road_label_from_image",
     "road_label_to_kitti",
     "read_kitti_calib",
 ]
@@ -290,7 +291,11 @@ def read_road_label(path: PathLike) -> RoadLabel:
     * single-channel masks (or colour files whose three channels are equal): non-zero = road, every
       pixel valid.
     """
-    img = read_image(path, what="road label")
+    return road_label_from_image(read_image(path, what="road label"))
+
+
+def road_label_from_image(img: np.ndarray) -> RoadLabel:
+    """Decode a road label image already in memory (RGB or grey); see :func:`read_road_label`."""
     if img.ndim == 3 and not (np.array_equal(img[:, :, 0], img[:, :, 1])
                               and np.array_equal(img[:, :, 1], img[:, :, 2])):
         red, blue = img[:, :, 0], img[:, :, 2]

@@ -3,7 +3,8 @@
 Ground truth: ``GT_DIR/<cat>_road_<id>.png`` (KITTI colours, read as the devkit reads them: road = blue
 > 0, evaluated = red > 0). Predictions: ``PRED_DIR/<cat>_road_<id>.png`` (the benchmark's naming) or
 ``PRED_DIR/<cat>_<id>.png``, 8-bit grey (255 = sure road; colour files are converted to grey).
-Counts are summed per category (``um_road``, ``umm_road``, ``uu_road``) and over all images (``all``).
+Counts are summed per category (``um_road``, ``umm_road``, ``uu_road``) and over all images (``all``). With a calibration folder the
+evaluation is in the benchmark's bird's-eye view (``--bev``).
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ import cv2
 import numpy as np
 
 from freespace.errors import DatasetError, InputFileError, ShapeMismatchError
-from freespace.io import PathLike, read_image, read_road_label
+from freespace.bev import to_bev
+from freespace.io import PathLike, read_image, read_kitti_calib, road_label_from_image
 from freespace.metrics import KITTI_CATEGORIES, KittiCounts, kitti_counts, kitti_scores
 
 __all__ = ["evaluate_kitti_dirs", "read_confidence"]
@@ -30,8 +32,11 @@ def read_confidence(path: PathLike) -> np.ndarray:
     return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
 
 
-def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike) -> dict[str, Any]:
+def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLike | None = None) -> dict[str, Any]:
     """Evaluate every ground-truth file of ``gt_dir`` against its prediction in ``pred_dir``.
+
+    With ``calib_dir`` (``<cat>_<id>.txt`` KITTI calibration files), ground truth and predictions are
+    both transformed into the benchmark's bird's-eye view first (:mod:`freespace.bev`), as the server does.
 
     Returns:
         ``{category: {"max_f", "ap", "pre", "rec", "fpr", "fnr", "threshold", "images"}}`` for the
@@ -41,7 +46,11 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike) -> dict[str, Any]:
         InputFileError: a folder or a prediction is missing. ShapeMismatchError: sizes differ.
     """
     gt_dir, pred_dir = Path(gt_dir), Path(pred_dir)
-    for d, what in ((gt_dir, "ground-truth"), (pred_dir, "prediction")):
+    folders = [(gt_dir, "ground-truth"), (pred_dir, "prediction")]
+    if calib_dir is not None:
+        calib_dir = Path(calib_dir)
+        folders.append((calib_dir, "calibration"))
+    for d, what in folders:
         if not d.is_dir():
             raise InputFileError(f"{what} folder not found: {d}")
     gts = [p for p in sorted(gt_dir.glob("*.png")) if _GT.match(p.stem)]
@@ -62,11 +71,16 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike) -> dict[str, Any]:
     sums: dict[str, KittiCounts] = {}
     images: dict[str, int] = {}
     for cat, gt, pred in pairs:
-        label = read_road_label(gt)
+        gt_image = read_image(gt, what="ground truth")
         conf = read_confidence(pred)
-        if conf.shape != label.shape:
+        if conf.shape != gt_image.shape[:2]:
             raise ShapeMismatchError(f"{pred.name} is {conf.shape[1]}×{conf.shape[0]} but its ground truth is "
-                                     f"{label.shape[1]}×{label.shape[0]}")
+                                     f"{gt_image.shape[1]}×{gt_image.shape[0]}")
+        if calib_dir is not None:
+            calib_path = calib_dir / f"{gt.stem.replace('_road_', '_')}.txt"
+            calib = read_kitti_calib(calib_path)
+            gt_image, conf = to_bev(gt_image, calib), to_bev(conf, calib)
+        label = road_label_from_image(gt_image)
         counts = kitti_counts(conf, label.road, label.valid)
         for key in (cat, "all"):
             sums[key] = sums[key] + counts if key in sums else counts

@@ -1,0 +1,223 @@
+"""Inference for deployment: predictors from a checkpoint or an ONNX file, `predict`, `export`, `kitti-submit`."""
+
+from __future__ import annotations
+
+import io as _io
+import json
+import logging
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
+from freespace.io import PathLike, atomic_write_bytes, read_image, read_kitti_calib, write_image, write_json
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Predictor", "predict_folder", "export_model", "kitti_submit", "to_confidence"]
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm")
+
+
+def to_confidence(prob: np.ndarray) -> np.ndarray:
+    """KITTI 8-bit road confidence (255 = sure road) of a ``float`` probability map."""
+    return np.clip(np.round(prob * 255.0), 0, 255).astype(np.uint8)
+
+
+class Predictor:
+    """Road probabilities from a training checkpoint (PyTorch) or an exported ONNX model (onnxruntime).
+
+    Images are resized to the model's training size (kept in the checkpoint / the ONNX metadata) and the
+    probabilities back to each image's own size.
+    """
+
+    def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None) -> None:
+        if (checkpoint is None) == (onnx is None):
+            raise InvalidOptionError("give exactly one of --checkpoint and --onnx")
+        self.image_size: tuple[int, int] | None = None
+        if checkpoint is not None:
+            from freespace.engine.evaluate import load_checkpoint
+
+            self.model, hp = load_checkpoint(checkpoint)
+            self.image_size = tuple(hp["image_size"]) if hp.get("image_size") else None
+            self.name = hp["model"]
+            self.session = None
+        else:
+            import onnxruntime as ort
+
+            path = Path(onnx)  # type: ignore[arg-type]
+            if not path.is_file():
+                raise InputFileError(f"ONNX model not found: {path}")
+            try:
+                self.session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+            except Exception as exc:  # onnxruntime raises its own types for corrupt files
+                raise CorruptFileError(f"cannot load {path} as an ONNX model ({type(exc).__name__})") from None
+            meta = self.session.get_modelmeta().custom_metadata_map
+            self.image_size = tuple(json.loads(meta["image_size"])) if meta.get("image_size") else None
+            self.name = meta.get("model", path.stem)
+            self.model = None
+
+    def _run(self, batch: np.ndarray) -> np.ndarray:
+        if self.session is not None:
+            logits = self.session.run(None, {self.session.get_inputs()[0].name: batch})[0]
+        else:
+            import torch
+
+            with torch.no_grad():
+                logits = self.model(torch.from_numpy(batch)).numpy()
+        e = np.exp(logits - logits.max(1, keepdims=True))
+        return (e[:, 1] / e.sum(1)).astype(np.float32)
+
+    def predict(self, images: list[np.ndarray]) -> list[np.ndarray]:
+        """Road probability (``float32 H×W``) of each ``H×W×3 uint8`` RGB image."""
+        by_size: dict[tuple[int, int], list[int]] = {}
+        resized = []
+        for i, img in enumerate(images):
+            if img.ndim != 3 or img.shape[2] != 3:
+                raise InvalidOptionError(f"expected RGB images, got shape {img.shape}")
+            if self.image_size and img.shape[:2] != self.image_size:
+                img = cv2.resize(img, (self.image_size[1], self.image_size[0]), interpolation=cv2.INTER_AREA)
+            resized.append(img)
+            by_size.setdefault(img.shape[:2], []).append(i)
+        out: list[np.ndarray | None] = [None] * len(images)
+        for idx in by_size.values():
+            batch = np.stack([resized[i].transpose(2, 0, 1) for i in idx]).astype(np.float32) / 255.0
+            for i, prob in zip(idx, self._run(batch)):
+                h, w = images[i].shape[:2]
+                out[i] = prob if prob.shape == (h, w) else cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
+        return out  # type: ignore[return-value]
+
+
+def _inputs(path: Path) -> list[Path]:
+    if path.is_file():
+        return [path]
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise InputFileError(f"no images ({', '.join(IMAGE_SUFFIXES)}) in {path}")
+        return files
+    raise InputFileError(f"input not found: {path}")
+
+
+def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_size: int = 4,
+                   progress: bool = True) -> dict[str, Any]:
+    """Write ``OUT/<name>.png`` (8-bit road confidence, the input's size), ``OUT/overlays/<name>.png`` and
+    ``OUT/summary.json`` (frames, seconds per frame) for every image of ``inputs`` (a file or a folder)."""
+    from tqdm import tqdm
+
+    from freespace.viz import overlay_road
+
+    if batch_size < 1:
+        raise InvalidOptionError("--batch-size must be ≥ 1")
+    files = _inputs(Path(inputs))
+    out = Path(out)
+    seconds = 0.0
+    bar = tqdm(total=len(files), desc="predict", unit="image", disable=not progress)
+    for start in range(0, len(files), batch_size):
+        chunk = files[start:start + batch_size]
+        images = [read_image(p, what="input image") for p in chunk]
+        images = [np.repeat(im[..., None], 3, 2) if im.ndim == 2 else im for im in images]
+        t0 = time.perf_counter()
+        probs = predictor.predict(images)
+        seconds += time.perf_counter() - t0
+        for path, image, prob in zip(chunk, images, probs):
+            conf = to_confidence(prob)
+            write_image(out / f"{path.stem}.png", conf)
+            write_image(out / "overlays" / f"{path.stem}.png", overlay_road(image, conf >= 128))
+        bar.update(len(chunk))
+    bar.close()
+    summary = {"frames": len(files), "seconds_per_frame": seconds / len(files), "model": predictor.name,
+               "image_size": list(predictor.image_size) if predictor.image_size else None}
+    write_json(out / "summary.json", summary)
+    return summary
+
+
+def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any]:
+    """Export a checkpoint to ONNX (dynamic N, H, W; opset 17) or TorchScript (traced; dynamic H, W),
+    validated against PyTorch at the training size and at an odd size. Returns the max abs differences."""
+    import torch
+
+    from freespace.engine.evaluate import load_checkpoint
+
+    if fmt not in ("onnx", "torchscript"):
+        raise InvalidOptionError(f"--format must be onnx or torchscript, got {fmt!r}")
+    model, hp = load_checkpoint(checkpoint)
+    size = tuple(hp.get("image_size") or (384, 1248))
+    example = torch.rand(1, 3, *size)
+    checks = [torch.rand(1, 3, *size), torch.rand(2, 3, size[0] - 7, size[1] - 13)]
+    out = Path(out)
+    meta = {"model": hp["model"], "image_size": json.dumps(list(size)), "producer": "freespace"}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp_path = Path(tmp) / "model"
+        if fmt == "onnx":
+            import warnings
+
+            import onnx
+            import onnxruntime as ort
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                torch.onnx.export(model, (example,), str(tmp_path), dynamo=False, opset_version=17,
+                                  input_names=["image"], output_names=["logits"],
+                                  dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}, "logits": {0: "n", 2: "h", 3: "w"}})
+            proto = onnx.load(str(tmp_path))
+            for k, v in meta.items():
+                proto.metadata_props.add(key=k, value=v)
+            data = proto.SerializeToString()
+            session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
+
+            def run(x: torch.Tensor) -> np.ndarray:
+                return session.run(None, {"image": x.numpy()})[0]
+        else:
+            with torch.no_grad():
+                traced = torch.jit.trace(model, example, check_trace=False)
+            buf = _io.BytesIO()
+            torch.jit.save(traced, buf, _extra_files={"freespace.json": json.dumps(meta)})
+            data = buf.getvalue()
+            loaded = torch.jit.load(_io.BytesIO(data))
+
+            def run(x: torch.Tensor) -> np.ndarray:
+                with torch.no_grad():
+                    return loaded(x).numpy()
+        diffs = []
+        with torch.no_grad():
+            for x in checks:
+                diffs.append(float(np.abs(run(x) - model(x).numpy()).max()))
+    atomic_write_bytes(out, data)
+    return {"format": fmt, "path": str(out), "max_abs_diff": max(diffs), "checked_sizes": [list(x.shape) for x in checks]}
+
+
+def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: bool = True) -> dict[str, Any]:
+    """Predict the KITTI road testing split and write the benchmark's bird's-eye-view confidence maps
+    (``OUT/<cat>_road_<id>.png``, 800×400) and ``OUT/submission.zip`` holding them."""
+    from tqdm import tqdm
+
+    from freespace.bev import to_bev
+    from freespace.data.kitti_road import KittiRoad
+
+    predictor = Predictor(checkpoint=checkpoint)
+    ds = KittiRoad(root, "testing", disparity="none")
+    missing = [f.name for f in ds.frames if f.calib is None]
+    if missing:
+        raise InputFileError(f"{len(missing)} testing frames have no calibration (first: {missing[0]}); the BEV "
+                             f"transform needs data_road/testing/calib/<frame>.txt")
+    out = Path(out)
+    names = []
+    for i, frame in enumerate(tqdm(ds.frames, desc="kitti-submit", unit="frame", disable=not progress)):
+        image = ds.load(i, right=False, label=False, disparity=False).left
+        conf = to_confidence(predictor.predict([image])[0])
+        bev = to_bev(conf, read_kitti_calib(frame.calib))  # type: ignore[arg-type]
+        name = f"{frame.category}_road_{frame.name.split('_')[1]}.png"
+        write_image(out / name, bev)
+        names.append(name)
+    buf = _io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for name in names:
+            zf.write(out / name, arcname=name)
+    atomic_write_bytes(out / "submission.zip", buf.getvalue())
+    return {"frames": len(names), "zip": str(out / "submission.zip")}

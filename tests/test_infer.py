@@ -1,0 +1,140 @@
+"""Inference and deployment: the devkit's bird's-eye view, evaluate-kitti --bev, predict (checkpoint and
+ONNX), export (ONNX, TorchScript), kitti-submit."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from freespace.bev import BEV_SHAPE, bev_matrix, to_bev
+from freespace.cli import main
+from freespace.data.synthetic import SynthConfig, write_dataset
+from freespace.io import read_image, read_kitti_calib, read_road_label, write_image
+
+from conftest import shared_path
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    base = tmp_path_factory.mktemp("infer")
+    data = base / "data"
+    write_dataset(data, 12, seed=5, config=SynthConfig(width=160, height=128, frames_per_scenario=2), progress=False)
+    assert main(["train", "--dataset", "synth", "--root", str(data), "--model", "segnet", "--epochs", "1",
+                 "--batch-size", "4", "--no-progress", "--out", str(base / "run")]) == 0
+    return {"data": data, "ckpt": base / "run" / "checkpoints" / "best.ckpt", "base": base}
+
+
+def _literal_bev_cell(calib: dict, row: int, col: int, shape: tuple[int, int]) -> tuple[int, int] | None:
+    """The devkit's formula for one cell, written out in float64 (grid values rounded to float32 first)."""
+    x = float(np.float32(-9.975 + 0.05 * col))
+    z = float(np.float32(45.975 - 0.05 * row))
+    R = np.eye(4)
+    R[:3, :3] = calib["R0_rect"]
+    T = np.eye(4)
+    T[:3] = calib["Tr_cam_to_road"]
+    u, v, w = (calib["P2"] @ R @ np.linalg.inv(T))[:, [0, 2, 3]] @ np.array([x, z, 1.0])
+    u, v = u / w, v / w
+    if 1 <= u <= shape[1] and 1 <= v <= shape[0]:
+        return int(np.floor(v)) - 1, int(np.floor(u)) - 1
+    return None
+
+
+@pytest.mark.parametrize("name", ["um_000000", "uu_000001"])
+def test_bev_matches_the_devkit_formula(name: str) -> None:
+    calib = read_kitti_calib(shared_path("kitti_road_calib", f"{name}.txt"))
+    shape = (375, 1242)
+    index = np.arange(shape[0] * shape[1], dtype=np.int64).reshape(shape) + 1  # 0 is "outside"
+    bev = to_bev(index, calib)
+    assert bev.shape == BEV_SHAPE
+    rng = np.random.default_rng(0)
+    inside = 0
+    for row, col in zip(rng.integers(0, 800, 3000), rng.integers(0, 400, 3000)):
+        want = _literal_bev_cell(calib, int(row), int(col), shape)
+        got = bev[row, col]
+        if want is None:
+            assert got == 0
+        else:
+            inside += 1
+            assert got == index[want], (row, col)
+    assert inside > 1000  # most of the grid is in view
+    assert bev_matrix(calib).shape == (3, 3)
+
+
+def test_bev_of_a_rendered_road_is_the_road_ahead(run: dict[str, Path]) -> None:
+    tr = run["data"] / "data_road" / "training"
+    name = sorted(p.stem for p in (tr / "calib").glob("*.txt"))[0]
+    calib = read_kitti_calib(tr / "calib" / f"{name}.txt")
+    cat, idx = name.split("_")
+    label = read_road_label(tr / "gt_image_2" / f"{cat}_road_{idx}.png")
+    bev = to_bev(label.road.astype(np.uint8), calib)
+    # the ego lane, 1–2 m either side of the camera, 10–20 m ahead (rows 520–720), is road in the BEV
+    assert bev[520:720, 180:220].mean() > 0.9
+
+
+def test_evaluate_kitti_bev(run: dict[str, Path], tmp_path: Path) -> None:
+    tr = run["data"] / "data_road" / "training"
+    pred = tmp_path / "pred"
+    for gt in (tr / "gt_image_2").glob("*.png"):
+        write_image(pred / gt.name, (read_road_label(gt).road * 255).astype(np.uint8))
+    out = tmp_path / "bev.json"
+    assert main(["evaluate-kitti", "--bev", "--calib", str(tr / "calib"), "--gt", str(tr / "gt_image_2"),
+                 "--pred", str(pred), "--out", str(out)]) == 0
+    res = json.loads(out.read_text())
+    assert res["all"]["max_f"] == pytest.approx(1.0, abs=1e-9) and res["all"]["fpr"] == 0.0
+    assert main(["evaluate-kitti", "--bev", "--gt", str(tr / "gt_image_2"), "--pred", str(pred),
+                 "--out", str(tmp_path / "x.json")]) == 2
+
+
+def test_export_and_predict(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    onnx, ts = tmp_path / "m.onnx", tmp_path / "m.pt"
+    assert main(["export", "--checkpoint", str(run["ckpt"]), "--format", "onnx", "--out", str(onnx)]) == 0
+    out = capsys.readouterr().out
+    assert "max abs difference to PyTorch" in out and float(out.split("PyTorch ")[1].split()[0]) < 1e-3
+    assert main(["export", "--checkpoint", str(run["ckpt"]), "--format", "torchscript", "--out", str(ts)]) == 0
+    assert onnx.stat().st_size > 0 and ts.stat().st_size > 0
+    images = run["data"] / "data_road" / "training" / "image_2"
+    a, b = tmp_path / "pa", tmp_path / "pb"
+    assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(images), "--out", str(a), "--no-progress"]) == 0
+    assert main(["predict", "--onnx", str(onnx), "--input", str(images), "--out", str(b), "--no-progress"]) == 0
+    for img in images.glob("*.png"):
+        ca, cb = read_image(a / img.name), read_image(b / img.name)
+        assert ca.dtype == np.uint8 and ca.ndim == 2 and ca.shape == read_image(img).shape[:2]
+        assert np.abs(ca.astype(int) - cb.astype(int)).max() <= 1
+        assert (a / "overlays" / img.name).is_file()
+    summary = json.loads((a / "summary.json").read_text())
+    assert summary["frames"] == 12 and summary["seconds_per_frame"] > 0
+    # one file works too
+    one = next(images.glob("*.png"))
+    assert main(["predict", "--onnx", str(onnx), "--input", str(one), "--out", str(tmp_path / "one"), "--no-progress"]) == 0
+
+
+def test_inference_mistakes(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "m.onnx"
+    assert main(["export", "--checkpoint", str(tmp_path / "none.ckpt"), "--format", "onnx", "--out", str(out)]) == 2
+    assert not out.exists()
+    assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(tmp_path / "none"), "--out", str(tmp_path / "p")]) == 2
+    (tmp_path / "bad.onnx").write_bytes(b"junk")
+    assert main(["predict", "--onnx", str(tmp_path / "bad.onnx"), "--input", str(tmp_path), "--out", str(tmp_path / "p")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("freespace: error:") == 3
+
+
+def test_kitti_submit(run: dict[str, Path], tmp_path: Path) -> None:
+    root = tmp_path / "kitti"
+    src = run["data"] / "data_road" / "training"
+    for sub in ("image_2", "calib"):
+        shutil.copytree(src / sub, root / "data_road" / "testing" / sub)
+    out = tmp_path / "submit"
+    assert main(["kitti-submit", "--checkpoint", str(run["ckpt"]), "--root", str(root), "--out", str(out),
+                 "--no-progress"]) == 0
+    maps = sorted(out.glob("*_road_*.png"))
+    assert len(maps) == 12 and read_image(maps[0]).shape == BEV_SHAPE
+    with zipfile.ZipFile(out / "submission.zip") as zf:
+        assert sorted(zf.namelist()) == [m.name for m in maps]
+    (root / "data_road" / "testing" / "calib" / maps[0].name.replace("_road_", "_").replace(".png", ".txt")).unlink()
+    assert main(["kitti-submit", "--checkpoint", str(run["ckpt"]), "--root", str(root), "--out", str(tmp_path / "s2")]) == 2
