@@ -22,6 +22,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/synth.py
 	$(VENV)/bin/python bench/models.py
 	$(VENV)/bin/python bench/train.py
+	$(VENV)/bin/python bench/infer.py
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache
