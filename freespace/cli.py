@@ -11,6 +11,7 @@ import argparse
 import logging
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from freespace import __version__
 from freespace.errors import FreespaceError, InvalidOptionError
@@ -213,15 +214,34 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
     from freespace.demo import run_demo
 
-    result = run_demo(args.out, num_frames=args.num, seed=args.seed)
+    result = run_demo(args.out, num_frames=args.num, seed=args.seed, full=args.full, epochs=args.epochs)
     print(f"{'frame':<12} {'weather':<8} {'roll':>7} {'fit':>7} {'SGBM fit':>8}   road |L−R|  road |L−G|")
     for f in result["frames"]:
+        sgbm = f"{f['sgbm_roll_deg']:+8.3f}" if f["sgbm_roll_deg"] is not None else f"{'—':>8}"
         print(f"{f['frame']:<12} {f['weather']:<8} {f['true_roll_deg']:+7.3f} {f['fitted_roll_deg']:+7.3f} "
-              f"{f['sgbm_roll_deg']:+8.3f}   {f['road_mae_right']:10.1f}  {f['road_mae_generated']:10.1f}")
+              f"{sgbm}   {f['road_mae_right']:10.1f}  {f['road_mae_generated']:10.1f}")
     print(f"on the road the generated view differs from the left image by {result['mean_road_mae_generated']:.1f} "
           f"grey levels on average, the raw right image by {result['mean_road_mae_right']:.1f}")
-    print(f"figures: {result['figures']}   ({result['seconds']:.0f} s)")
+    if "results_md" in result:
+        print()
+        print(Path(result["results_md"]).read_text().rstrip())
+    print(f"figures: {result['figures']}, {args.out}/experiment/figures   ({result['seconds']:.0f} s)")
     return 1 if result["generate_failed"] else 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    """``freespace reproduce``: every network with and without the augmentation; tables and figures."""
+    from freespace.engine.config import parse_size
+    from freespace.experiments.reproduce import reproduce
+    from freespace.models import list_models
+
+    models = list_models() if args.models == "all" else [m.strip() for m in args.models.split(",") if m.strip()]
+    r = reproduce(args.dataset, args.root, args.out, models=models, seeds=args.seeds, epochs=args.epochs,
+                  image_size=parse_size(args.image_size), patience=args.patience, batch_size=args.batch_size,
+                  workers=args.workers, max_frames=args.max_frames, progress=not args.no_progress)
+    print(Path(args.out, "results.md").read_text().rstrip())
+    print(f"{len(r['runs'])} runs → {args.out} (results.md, results.csv, figures/, index.json)")
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -378,10 +398,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_kitti_submit)
 
+    p = sub.add_parser("reproduce", help="the paper's experiments: every network with and without HA; tables, figures",
+                       description="Train every chosen network on the original and on the augmented training set "
+                                   "(same seeds, budget, early stopping), test them, and write results.md/.csv "
+                                   "(mean ± std over seeds, HA gain), figures and an index of the runs. Finished "
+                                   "runs are skipped when run again.")
+    p.add_argument("--dataset", choices=DATASETS, required=True)
+    p.add_argument("--root", metavar="DIR", required=True)
+    p.add_argument("--models", default="all", help="all or a comma-separated list (default all)")
+    p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
+    p.add_argument("--epochs", type=int, default=50)
+    p.add_argument("--patience", type=int, default=10)
+    p.add_argument("--batch-size", type=int, default=4)
+    p.add_argument("--image-size", help="HxW (default: the first frame's size)")
+    p.add_argument("--workers", type=int, default=0)
+    p.add_argument("--max-frames", type=int, help="use only the first N labelled frames")
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.set_defaults(func=cmd_reproduce)
+
     p = sub.add_parser("demo", help="run the built-in demo end to end",
                        description="Render stereo road scenes, run the DS-Generator on them and write the results.")
     p.add_argument("--out", default="demo_out", help="output folder (default demo_out)")
-    p.add_argument("--num", type=int, default=4, help="number of scenes (default 4)")
+    p.add_argument("--num", type=int, default=60, help="number of rendered frames (default 60)")
+    p.add_argument("--full", action="store_true", help="the six-network protocol with three seeds (long)")
+    p.add_argument("--epochs", type=int, help="training epochs (default 12; 30 with --full)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.set_defaults(func=cmd_demo)
     return parser

@@ -1,7 +1,7 @@
-"""The built-in demo: render stereo road scenes, run the DS-Generator on them, measure and draw.
+"""The built-in demo: render stereo road scenes, run the DS-Generator on them, then train a light network
+with and without the augmentation, evaluate both and compare (``--full``: the six-network protocol).
 
 ``freespace demo`` (and ``make demo``) runs it end to end on a fresh machine, with no data files.
-Torch-free.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 
 from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, write_dataset
-from freespace.errors import InvalidOptionError
+from freespace.errors import FreespaceError, InvalidOptionError
 from freespace.generate import generate_dataset
 from freespace.geometry import compute_disparity, fit_road_model
 from freespace.io import PathLike, read_disparity, read_image, read_road_label, write_image, write_json
@@ -30,19 +30,23 @@ def _mae(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
     return float(np.abs(a.astype(np.float64) - b.astype(np.float64))[mask].mean())
 
 
-def run_demo(out: PathLike, num_frames: int = 4, seed: int = 0, config: SynthConfig | None = None) -> dict[str, Any]:
-    """Render ``num_frames`` stereo frames, generate their augmented views, and report.
+def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthConfig | None = None,
+             train: bool = True, full: bool = False, epochs: int | None = None, figures: int = 4) -> dict[str, Any]:
+    """Render ``num_frames`` stereo frames, generate their augmented views, and report; then (``train``)
+    run :func:`freespace.experiments.reproduce.reproduce` on them: U-Net (light) with and without the
+    augmentation, one seed — or, with ``full``, all six networks and three seeds.
 
     Writes under ``out``: ``dataset/`` (KITTI road tree), ``generated/`` (DS-Generator output and
-    reports), ``figures/<frame>.jpg`` (left, right, disparity, label, generated view) and
+    reports), ``figures/<frame>.jpg`` (left, right, disparity, label, generated view, for the first
+    ``figures`` frames), ``experiment/`` (runs, results.md/csv, prediction figures) and
     ``demo_summary.json``. Returns the summary: per frame the true and fitted roll (from the exact and
     from SGBM disparity) and the mean absolute difference to the left image on the road of the raw
-    right image and of the generated image.
+    right image and of the generated image; and the results table.
     """
     if num_frames < 1:
         raise InvalidOptionError(f"--num must be ≥ 1, got {num_frames}")
     out = Path(out)
-    config = config or SynthConfig(frames_per_scenario=1)
+    config = config or SynthConfig(width=160, height=128, frames_per_scenario=4)
     t0 = time.perf_counter()
     log.info("rendering %d stereo frames into %s", num_frames, out / "dataset")
     rows = write_dataset(out / "dataset", num_frames, seed=seed, config=config)
@@ -51,19 +55,25 @@ def run_demo(out: PathLike, num_frames: int = 4, seed: int = 0, config: SynthCon
     log.info("running the DS-Generator")
     summary = generate_dataset(dataset, out / "generated")
     per_frame = []
-    for frame, row in zip(frames, sorted(rows, key=lambda r: r["frame"])):
+    for frame, row in list(zip(frames, sorted(rows, key=lambda r: r["frame"])))[:figures]:
         left, right = read_image(frame.left), read_image(frame.right)
         generated = read_image(out / "generated" / f"{frame.name}.png")
         label = read_road_label(frame.label)
         disparity = read_disparity(frame.disparity)
         road = label.road & label.valid
-        sgbm = compute_disparity(left, right)
+        # search as far as the true road disparity goes (the rig's baseline varies per scenario)
+        reach = int(np.ceil(np.nanmax(np.where(road, disparity, np.nan)) / 16.0 + 0.5)) * 16
+        sgbm = compute_disparity(left, right, max_disparity=min(max(reach, 16), 256))
         fit_true = fit_road_model(disparity, road)
-        fit_sgbm = fit_road_model(sgbm, road)
+        try:
+            fit_sgbm = fit_road_model(sgbm, road)
+        except FreespaceError as exc:
+            log.warning("%s: no road model from SGBM (%s)", frame.name, exc)
+            fit_sgbm = None
         per_frame.append({
             "frame": frame.name, "weather": row["weather"], "true_roll_deg": float(row["roll_deg"]),
-            "fitted_roll_deg": fit_true.roll_deg, "sgbm_roll_deg": fit_sgbm.roll_deg,
-            "sgbm_inlier_fraction": fit_sgbm.num_inliers / fit_sgbm.num_valid,
+            "fitted_roll_deg": fit_true.roll_deg, "sgbm_roll_deg": fit_sgbm.roll_deg if fit_sgbm else None,
+            "sgbm_inlier_fraction": fit_sgbm.num_inliers / fit_sgbm.num_valid if fit_sgbm else None,
             "road_mae_right": _mae(right, left, road), "road_mae_generated": _mae(generated, left, road),
         })
         figure = grid([[caption(left, f"left {frame.name} ({row['weather']})"), caption(right, "right"),
@@ -77,10 +87,22 @@ def run_demo(out: PathLike, num_frames: int = 4, seed: int = 0, config: SynthCon
         "mean_road_mae_right": float(np.mean([f["road_mae_right"] for f in per_frame])),
         "mean_road_mae_generated": float(np.mean([f["road_mae_generated"] for f in per_frame])),
         "max_roll_error_deg": float(max(abs(f["fitted_roll_deg"] - f["true_roll_deg"]) for f in per_frame)),
-        "max_sgbm_roll_error_deg": float(max(abs(f["sgbm_roll_deg"] - f["true_roll_deg"]) for f in per_frame)),
+        "max_sgbm_roll_error_deg": max((abs(f["sgbm_roll_deg"] - f["true_roll_deg"]) for f in per_frame
+                                        if f["sgbm_roll_deg"] is not None), default=None),
         "generate_failed": summary["failed"],
         "seconds": round(time.perf_counter() - t0, 2),
         "figures": str(out / "figures"),
     }
+    if train:
+        from freespace.experiments.reproduce import reproduce
+        from freespace.models import list_models
+
+        log.info("training %s with and without the augmentation", "all six networks" if full else "U-Net")
+        experiment = reproduce("synth", out / "dataset", out / "experiment", models=list_models() if full else ["unet"],
+                               seeds=3 if full else 1, epochs=epochs or (30 if full else 12), patience=5,
+                               batch_size=8, figures=3)
+        result["results"] = experiment["table"]
+        result["results_md"] = str(out / "experiment" / "results.md")
+    result["seconds"] = round(time.perf_counter() - t0, 2)
     write_json(out / "demo_summary.json", result)
     return result

@@ -15,7 +15,8 @@ from freespace.viz import caption, colorize_disparity, grid, overlay_road
 
 
 def test_demo_end_to_end(tmp_path: Path) -> None:
-    result = run_demo(tmp_path, num_frames=3, seed=4, config=SynthConfig(width=320, height=240, frames_per_scenario=1))
+    result = run_demo(tmp_path, num_frames=3, seed=4, config=SynthConfig(width=320, height=240, frames_per_scenario=1),
+                      train=False)
     assert len(result["frames"]) == 3 and not result["generate_failed"]
     assert result["max_roll_error_deg"] < 0.01
     assert result["max_sgbm_roll_error_deg"] < 0.5
@@ -24,10 +25,16 @@ def test_demo_end_to_end(tmp_path: Path) -> None:
     assert json.loads((tmp_path / "demo_summary.json").read_text())["frames"][0]["frame"]
 
 
+@pytest.mark.slow
 def test_demo_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    assert main(["demo", "--out", str(tmp_path), "--num", "1"]) == 0
+    """The whole `freespace demo` (about 2 minutes here): DS-Generator, U-Net with and without HA, table."""
+    assert main(["demo", "--out", str(tmp_path), "--num", "24", "--epochs", "2"]) == 0
     out = capsys.readouterr().out
-    assert "generated view differs" in out and "figures:" in out
+    assert "generated view differs" in out and "| HA-unet |" in out and "figures:" in out
+    assert (tmp_path / "experiment" / "figures" / "unet.png").is_file()
+
+
+def test_demo_mistake(tmp_path: Path) -> None:
     assert main(["demo", "--out", str(tmp_path), "--num", "0"]) == 2
 
 

@@ -1,0 +1,1 @@
+"""The paper's experiments: every network trained with and without the augmentation, tables, figures."""
