@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import io as _io
+import json
 import logging
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ from freespace.io import PathLike, atomic_write_text, write_image, write_json
 
 log = logging.getLogger(__name__)
 
-__all__ = ["reproduce", "VARIANTS", "METRICS"]
+__all__ = ["reproduce", "tables_from_index", "VARIANTS", "METRICS"]
 
 VARIANTS = ("none", "homography")
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
@@ -61,8 +62,6 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
                 config.check()
                 entry = {"run": str(run_dir.relative_to(out)), "model": model, "variant": variant, "seed": seed}
                 if (run_dir / "metrics.json").is_file():
-                    import json
-
                     metrics = json.loads((run_dir / "metrics.json").read_text())
                     entry["status"] = "done (skipped)"
                 else:
@@ -74,19 +73,22 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
                 index.append(entry)
                 results.setdefault((model, variant), []).append(entry["metrics"])
                 write_json(out / "index.json", index)
+                _write_tables(out, _table(models, results), dataset, seeds)  # the table so far, after every run
     table = _table(models, results)
-    _write_tables(out, table, dataset, seeds)
     for model in models:
         _figure(out, model, dataset, root, figures)
     return {"table": table, "runs": index}
 
 
 def _table(models: list[str], results: dict[tuple[str, str], list[dict[str, float]]]) -> list[dict[str, Any]]:
+    """Rows X and HA-X per network (mean ± std over the finished seeds); the gain once both exist."""
     rows = []
     for model in models:
         means = {}
         for variant in VARIANTS:
-            runs = results[(model, variant)]
+            runs = results.get((model, variant))
+            if not runs:
+                continue
             row: dict[str, Any] = {"network": ("HA-" if variant == "homography" else "") + model, "seeds": len(runs)}
             for k in METRICS:
                 vals = 100 * np.array([r[k] for r in runs])
@@ -94,21 +96,23 @@ def _table(models: list[str], results: dict[tuple[str, str], list[dict[str, floa
                 row[f"{k}_std"] = float(vals.std(ddof=1)) if len(vals) > 1 else 0.0
             means[variant] = row
             rows.append(row)
-        rows[-1]["gain_f_score"] = means["homography"]["f_score"] - means["none"]["f_score"]
-        rows[-1]["gain_iou"] = means["homography"]["iou"] - means["none"]["iou"]
+        if len(means) == 2:
+            rows[-1]["gain_f_score"] = means["homography"]["f_score"] - means["none"]["f_score"]
+            rows[-1]["gain_iou"] = means["homography"]["iou"] - means["none"]["iou"]
     return rows
 
 
 def _write_tables(out: Path, rows: list[dict[str, Any]], dataset: str, seeds: int) -> None:
     names = {"accuracy": "Accuracy", "precision": "Precision", "recall": "Recall", "f_score": "F-score", "iou": "IoU"}
-    md = [f"Results on `{dataset}` (test split, %, mean ± std over {seeds} seed{'s' if seeds > 1 else ''}); "
+    md = [f"Results on `{dataset}` (test split, %, mean ± std over up to {seeds} seed{'s' if seeds > 1 else ''}, "
+          f"column `n` = seeds finished); "
           f"HA gain = HA-X − X in points ({PAPER_GAINS}).", "",
-          "| Network | " + " | ".join(names.values()) + " | HA gain F | HA gain IoU |",
-          "|---|" + "---:|" * (len(names) + 2)]
+          "| Network | n | " + " | ".join(names.values()) + " | HA gain F | HA gain IoU |",
+          "|---|---:|" + "---:|" * (len(names) + 2)]
     for r in rows:
         cells = [f"{r[k]:.2f} ± {r[k + '_std']:.2f}" for k in names]
         gains = [f"{r['gain_f_score']:+.2f}", f"{r['gain_iou']:+.2f}"] if "gain_f_score" in r else ["", ""]
-        md.append(f"| {r['network']} | " + " | ".join(cells + gains) + " |")
+        md.append(f"| {r['network']} | {r['seeds']} | " + " | ".join(cells + gains) + " |")
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
     buf = _io.StringIO()
     fields = ["network", "seeds"] + [x for k in METRICS for x in (k, f"{k}_std")] + ["gain_f_score", "gain_iou"]
@@ -141,3 +145,16 @@ def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int) ->
             row.append(caption(overlay_errors(s.left, pred, s.label.road, s.label.valid), label))
         rows.append(row)
     write_image(out / "figures" / f"{model}.png", grid(rows, width=min(480, rows[0][0].shape[1])))
+
+
+def tables_from_index(out: PathLike, dataset: str, seeds: int) -> list[dict[str, Any]]:
+    """Rebuild ``results.md``/``results.csv`` from ``OUT/index.json`` (e.g. of an interrupted run)."""
+    out = Path(out)
+    index = json.loads((out / "index.json").read_text())
+    models = list(dict.fromkeys(e["model"] for e in index))
+    results: dict[tuple[str, str], list[dict[str, float]]] = {}
+    for e in index:
+        results.setdefault((e["model"], e["variant"]), []).append(e["metrics"])
+    table = _table(models, results)
+    _write_tables(out, table, dataset, seeds)
+    return table
