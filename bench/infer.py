@@ -8,10 +8,8 @@ HA-DeepLabv3+ (on a GPU). Prints the figures and writes them to BENCHMARKS.md.
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
 import tempfile
-import time
 import warnings
 from pathlib import Path
 
@@ -19,21 +17,11 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine, write_section  # noqa: E402
+from _common import machine, timeit, write_section  # noqa: E402
 
 from freespace.models import create_model, list_models  # noqa: E402
 
 H, W = 375, 1242
-
-
-def median_seconds(fn, repeat: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def main() -> None:
@@ -49,7 +37,7 @@ def main() -> None:
     for name in list_models():
         model = create_model(name, preset=args.preset).eval()
         with torch.inference_mode():
-            t_torch = median_seconds(lambda: model(x), args.repeat)
+            t_torch = timeit(lambda: model(x), args.repeat, warmup=1)
         with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
             warnings.simplefilter("ignore")
             path = f"{tmp}/m.onnx"
@@ -57,7 +45,7 @@ def main() -> None:
                               dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}})
             session = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
             xn = x.numpy()
-            t_ort = median_seconds(lambda: session.run(None, {"image": xn}), args.repeat)
+            t_ort = timeit(lambda: session.run(None, {"image": xn}), args.repeat, warmup=1)
             with torch.inference_mode():
                 diff = float(np.abs(session.run(None, {"image": xn})[0] - model(x).numpy()).max())
         rows.append(f"| {name} | {t_torch:.3f} | {t_ort:.3f} | {diff:.1e} |")
