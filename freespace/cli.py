@@ -34,12 +34,19 @@ def _open_dataset(args: argparse.Namespace):  # -> StereoRoadDataset (import kep
     return get_dataset(args.dataset, args.root, args.split, **options)
 
 
+def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, required: bool = True,
+                      split: bool = True) -> None:
+    """``--dataset``, ``--root`` and (optionally) ``--split``, shared by every command that reads a dataset."""
+    p.add_argument("--dataset", choices=DATASETS, required=required,
+                   help="layout: kitti (KITTI road; synth = the renderer's output), synthia, carla/syn-stereo, generic")
+    p.add_argument("--root", metavar="DIR", required=required, help="dataset folder")
+    if split:
+        p.add_argument("--split", help="on-disk split (KITTI: training or testing; default: the first)")
+
+
 def _add_dataset_options(p: argparse.ArgumentParser, required: bool) -> None:
     g = p.add_argument_group("dataset")
-    g.add_argument("--dataset", choices=DATASETS, required=required,
-                   help="layout: kitti (KITTI road; synth = the renderer's output), synthia, carla/syn-stereo, generic")
-    g.add_argument("--root", metavar="DIR", required=required, help="dataset folder")
-    g.add_argument("--split", help="on-disk split (KITTI: training or testing; default: the first)")
+    _add_dataset_root(g, required)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
     g.add_argument("--disparity-source", choices=("auto", "file", "sgbm", "none"), default="auto",
                    help="auto: file, else depth + camera, else cached SGBM (default)")
@@ -292,8 +299,7 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Count frames per split and category, report resolution and which files "
                                     "are there, open every file and list every problem by frame. Exit 0 only "
                                     "when there is none.")
-    q.add_argument("--dataset", choices=DATASETS, required=True, help="layout")
-    q.add_argument("--root", metavar="DIR", required=True, help="dataset folder")
+    _add_dataset_root(q, split=False)
     q.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of user-supplied disparities")
     q.add_argument("--seed", type=int, default=0, help="seed of the train/val/test split shown (default 0)")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -303,9 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Split the labelled frames by scenario with the paper's sizes (289 → "
                                     "173/58/58, 300 → 180/60/60, else 60/20/20 %%) and write train.txt, val.txt, "
                                     "test.txt (frame names).")
-    q.add_argument("--dataset", choices=DATASETS, required=True, help="layout")
-    q.add_argument("--root", metavar="DIR", required=True, help="dataset folder")
-    q.add_argument("--split", help="on-disk split (default: the first, e.g. KITTI training)")
+    _add_dataset_root(q)
     q.add_argument("--seed", type=int, default=0, help="shuffling seed (default 0)")
     q.add_argument("--out", required=True, help="folder for the list files")
     q.set_defaults(func=cmd_datasets_split)
@@ -314,9 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Train a segmentation network on a dataset's train split, validate each epoch, "
                                    "stop early on the validation F-score and test the best checkpoint. The run "
                                    "folder holds config.yaml, splits/, metrics.csv, checkpoints/ and metrics.json.")
-    p.add_argument("--dataset", choices=DATASETS, required=True, help="layout")
-    p.add_argument("--root", metavar="DIR", required=True, help="dataset folder")
-    p.add_argument("--split", help="on-disk split (default: the first, e.g. KITTI training)")
+    _add_dataset_root(p)
     p.add_argument("--model", default="unet", help="segnet, unet, deeplabv3plus, denseaspp, dupsampling, gscnn")
     p.add_argument("--preset", default="light", help="light (CPU) or paper")
     p.add_argument("--augment", default="none", help="none or homography (adds the DS-Generator views)")
@@ -346,8 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Evaluate a training checkpoint on a split of a dataset; writes metrics.json, "
                                    "overlays/ (TP green, FN red, FP blue) and pr_curve.png.")
     p.add_argument("--checkpoint", required=True, help="a .ckpt from a run folder")
-    p.add_argument("--dataset", choices=DATASETS, required=True)
-    p.add_argument("--root", metavar="DIR", required=True)
+    _add_dataset_root(p, split=False)
     p.add_argument("--split", default="test", help="train, val, test (the run's lists) or all (default test)")
     p.add_argument("--splits", metavar="DIR", help="split lists (default: the checkpoint's run folder)")
     p.add_argument("--disk-split", help="the dataset's on-disk split (default: the first, e.g. KITTI training)")
@@ -403,8 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "(same seeds, budget, early stopping), test them, and write results.md/.csv "
                                    "(mean ± std over seeds, HA gain), figures and an index of the runs. Finished "
                                    "runs are skipped when run again.")
-    p.add_argument("--dataset", choices=DATASETS, required=True)
-    p.add_argument("--root", metavar="DIR", required=True)
+    _add_dataset_root(p, split=False)
     p.add_argument("--models", default="all", help="all or a comma-separated list (default all)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
     p.add_argument("--epochs", type=int, default=50)

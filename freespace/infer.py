@@ -63,13 +63,12 @@ class Predictor:
             self.model = None
 
     def _run(self, batch: np.ndarray) -> np.ndarray:
-        if self.session is not None:
-            logits = self.session.run(None, {self.session.get_inputs()[0].name: batch})[0]
-        else:
+        if self.session is None:
             import torch
 
             with torch.no_grad():
-                logits = self.model(torch.from_numpy(batch)).numpy()
+                return torch.softmax(self.model(torch.from_numpy(batch)), 1)[:, 1].numpy()
+        logits = self.session.run(None, {self.session.get_inputs()[0].name: batch})[0]
         e = np.exp(logits - logits.max(1, keepdims=True))
         return (e[:, 1] / e.sum(1)).astype(np.float32)
 

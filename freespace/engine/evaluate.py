@@ -13,7 +13,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
 
@@ -25,7 +24,7 @@ from freespace.metrics import Counts, KittiCounts, confusion_counts, kitti_count
 from freespace.models import SegmentationModel, create_model
 from freespace.viz import overlay_errors
 
-__all__ = ["load_checkpoint", "evaluate_checkpoint", "predict_probability"]
+__all__ = ["load_checkpoint", "evaluate_checkpoint"]
 
 
 def load_checkpoint(path: PathLike) -> tuple[SegmentationModel, dict[str, Any]]:
@@ -44,16 +43,6 @@ def load_checkpoint(path: PathLike) -> tuple[SegmentationModel, dict[str, Any]]:
     return model.eval(), hp
 
 
-@torch.no_grad()
-def predict_probability(model: SegmentationModel, image: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:
-    """Road probability (``float32 H×W``, the image's size) of an ``H×W×3 uint8`` image, predicted at ``size``."""
-    h, w = image.shape[:2]
-    x = image if size is None or tuple(size) == (h, w) else cv2.resize(image, (size[1], size[0]), interpolation=cv2.INTER_AREA)
-    t = torch.from_numpy(np.ascontiguousarray(x.transpose(2, 0, 1))).float().div_(255.0)[None]
-    prob = torch.softmax(model(t), 1)[0, 1].numpy()
-    return prob if prob.shape == (h, w) else cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
-
-
 def _frames(ds, split: str, checkpoint: Path, splits_dir: PathLike | None) -> list[str]:
     labelled = [f.name for f in ds.frames if f.label is not None]
     if split == "all":
@@ -70,8 +59,10 @@ def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out:
     """Evaluate ``checkpoint`` on ``split`` (train/val/test from the run's lists, or all) of a dataset."""
     if split not in ("train", "val", "test", "all"):
         raise InvalidOptionError(f"--split must be train, val, test or all, got {split!r}")
+    from freespace.infer import Predictor
+
     checkpoint, out = Path(checkpoint), Path(out)
-    model, hp = load_checkpoint(checkpoint)
+    predictor = Predictor(checkpoint=checkpoint)
     ds = get_dataset(dataset, root, on_disk_split, disparity="none")
     names = _frames(ds, split, checkpoint, splits_dir)
     if not names:
@@ -82,7 +73,7 @@ def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out:
     for name in tqdm(names, desc="evaluate", unit="frame", disable=not progress):
         sample = ds.load(ds.index(name), right=False, disparity=False)
         t0 = time.perf_counter()
-        prob = predict_probability(model, sample.left, hp.get("image_size"))
+        prob = predictor.predict([sample.left])[0]
         seconds += time.perf_counter() - t0
         label = sample.label
         pred = prob >= 0.5
