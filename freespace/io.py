@@ -1,4 +1,4 @@
-"""Reading and writing images, disparity maps, road labels and KITTI calibration; atomic writes.
+"""Reading and writing images, disparity and depth maps, road labels and KITTI calibration; atomic writes.
 
 Conventions (the same in the whole package):
 
@@ -14,6 +14,7 @@ Only NumPy and OpenCV are imported here.
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from dataclasses import dataclass
@@ -23,11 +24,12 @@ from typing import Any
 import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
 
 PathLike = str | os.PathLike[str]
 
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
+DEPTH_SUFFIXES = (".png", ".npy", ".pfm")
 
 __all__ = [
     "RoadLabel",
@@ -40,6 +42,7 @@ __all__ = [
     "encode_image",
     "read_disparity",
     "write_disparity",
+    "read_depth",
     "read_road_label",
     "road_label_from_image",
     "road_label_to_kitti",
@@ -174,8 +177,8 @@ def _invalid_to_nan(disp: np.ndarray) -> np.ndarray:
     return disp
 
 
-def _read_pfm(path: PathLike) -> np.ndarray:
-    data = _read_bytes(path, "disparity")
+def _read_pfm(path: PathLike, what: str = "disparity") -> np.ndarray:
+    data = _read_bytes(path, what)
     try:
         header, rest = data.split(b"\n", 1)
         dims, rest = rest.split(b"\n", 1)
@@ -186,16 +189,16 @@ def _read_pfm(path: PathLike) -> np.ndarray:
         width, height = (int(x) for x in dims.split())
         scale = float(scale_line)
     except ValueError:
-        raise CorruptFileError(f"cannot decode disparity {path}: not a PFM file (bad header)") from None
+        raise CorruptFileError(f"cannot decode {what} {path}: not a PFM file (bad header)") from None
     channels = 3 if header == b"PF" else 1
     dtype = "<f4" if scale < 0 else ">f4"
     count = width * height * channels
     if len(raw) < 4 * count:
-        raise CorruptFileError(f"cannot decode disparity {path}: PFM data truncated "
+        raise CorruptFileError(f"cannot decode {what} {path}: PFM data truncated "
                                f"({len(raw)} bytes for {width}×{height}×{channels} floats)")
     arr = np.frombuffer(raw, dtype=dtype, count=count).reshape(height, width, channels)
     if channels != 1:
-        raise CorruptFileError(f"disparity {path} is a 3-channel PFM; expected a single-channel ('Pf') map")
+        raise CorruptFileError(f"{what} {path} is a 3-channel PFM; expected a single-channel ('Pf') map")
     return np.flipud(arr[:, :, 0])  # PFM stores rows bottom to top
 
 
@@ -261,6 +264,68 @@ def write_disparity(path: PathLike, disparity: np.ndarray) -> Path:
         return atomic_write_bytes(path, header + np.flipud(disp).astype("<f4").tobytes())
     raise InvalidOptionError(f"unknown disparity format {suffix!r} for {path}; use one of "
                              f"{', '.join(DISPARITY_SUFFIXES)}")
+
+
+# ---------------------------------------------------------------------------------------------------
+# depth
+
+
+def read_depth(path: PathLike, *, png_scale: float = 0.001,
+               shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Read a depth map (distance along the camera's optical axis, Z).
+
+    Formats, chosen by suffix:
+
+    * ``.png``: SNE-RoadSeg's ``depth_u16`` — 16-bit, one channel, ``Z = value · png_scale`` (default
+      millimetres: 0.001 m per unit); 0 and 65535 mean "no depth" (65535 is where an interpolation
+      saturated).
+    * ``.npy`` (2-D numeric array) and ``.pfm`` (single channel): float depth in metres.
+
+    Args:
+        path: the depth file.
+        png_scale: metres per stored unit of a PNG (> 0); float files are always metres.
+        shape: ``(H, W)`` the map must have (e.g. its image's), or None not to check.
+
+    Returns:
+        ``float32 H×W`` depth in metres; NaN where there is no value (0/65535 in a PNG; ≤ 0, NaN or
+        inf in a float file).
+
+    Raises:
+        InputFileError: missing or unreadable file. CorruptFileError: not a depth map of a known kind
+        (an 8-bit or colour PNG, a non-2-D array, a truncated file). ShapeMismatchError: not ``shape``.
+        InvalidOptionError: an unknown suffix or a bad ``png_scale``.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if not (math.isfinite(png_scale) and png_scale > 0):
+        raise InvalidOptionError(f"the depth PNG scale must be a positive number of metres per unit, got {png_scale}")
+    if suffix == ".png":
+        raw = _decode(path, "depth", cv2.IMREAD_UNCHANGED)
+        if raw.dtype != np.uint16 or raw.ndim != 2:
+            bits = "8-bit" if raw.dtype == np.uint8 else str(raw.dtype)
+            chans = 1 if raw.ndim == 2 else raw.shape[2]
+            raise CorruptFileError(f"depth {path} is a {bits} image with {chans} channel(s); expected a 16-bit "
+                                   f"one-channel depth PNG (depth_u16: millimetres, 0 = none)")
+        depth = raw.astype(np.float32) * np.float32(png_scale)
+        depth[(raw == 0) | (raw == 65535)] = np.nan
+    elif suffix == ".npy":
+        _read_bytes(path, "depth")
+        try:
+            arr = np.load(path, allow_pickle=False)
+        except (ValueError, OSError, EOFError) as exc:
+            raise CorruptFileError(f"cannot decode depth {path}: {str(exc).splitlines()[0]}") from None
+        if arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+            raise CorruptFileError(f"depth {path} holds a {arr.dtype} array of shape {arr.shape}; "
+                                   f"expected a 2-D float array in metres")
+        depth = _invalid_to_nan(arr)
+    elif suffix == ".pfm":
+        depth = _invalid_to_nan(_read_pfm(path, "depth"))
+    else:
+        raise InvalidOptionError(f"unknown depth format {suffix!r} for {path}; use one of {', '.join(DEPTH_SUFFIXES)}")
+    if shape is not None and depth.shape != tuple(shape):
+        raise ShapeMismatchError(f"depth {path} is {depth.shape[1]}×{depth.shape[0]} but its image is "
+                                 f"{shape[1]}×{shape[0]} (W×H); use the depth map of this frame")
+    return depth
 
 
 # ---------------------------------------------------------------------------------------------------
