@@ -177,3 +177,13 @@ def test_virtual_baseline_scales_only_kappa_hat(real_frame) -> None:
     # measured 0.000 / 0.014 / 0.021°
     assert abs(fit_road_model(virt_disp, road).roll_deg - fit_road_model(real_disp, road).roll_deg) < 0.05
     assert math.isfinite(virt.homography[0, 2])
+
+
+def test_new_modules_never_import_torch() -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys, freespace.geometry.depth, freespace.geometry.lidar, freespace.video, freespace.shard; "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
