@@ -50,19 +50,19 @@ os.umask(_UMASK)
 
 @contextlib.contextmanager
 def _quiet_opencv() -> Iterator[None]:
-    """Silence OpenCV's and FFmpeg's own console messages while a capture opens: failures become one
-    typed error line instead of backend warnings. ``OPENCV_FFMPEG_LOGLEVEL`` set by the user wins."""
+    """Silence OpenCV's and FFmpeg's own console messages while a capture or writer opens: a failure
+    becomes one typed error line instead of backend warnings. ``OPENCV_FFMPEG_LOGLEVEL`` set by the
+    user wins (it is only defaulted to quiet)."""
     os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
-    try:
-        old = cv2.utils.logging.getLogLevel()
-        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
-    except AttributeError:  # pragma: no cover - OpenCV builds without the logging module
-        yield
-        return
+    cv_log = getattr(getattr(cv2, "utils", None), "logging", None)
+    old = cv_log.getLogLevel() if cv_log is not None else None
+    if cv_log is not None:
+        cv_log.setLogLevel(cv_log.LOG_LEVEL_ERROR)
     try:
         yield
     finally:
-        cv2.utils.logging.setLogLevel(old)
+        if cv_log is not None:
+            cv_log.setLogLevel(old)
 
 
 def _natural_key(path: Path) -> list[object]:

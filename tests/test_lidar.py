@@ -15,12 +15,13 @@ import cv2
 import numpy as np
 import pytest
 
-from freespace.data.synthetic import SynthConfig, render_sample
+from freespace.data.synthetic import SynthConfig, format_kitti_calib, render_sample
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
 from freespace.geometry import fit_road_model
 from freespace.geometry.depth import depth_to_disparity, disparity_from_depth_file
 from freespace.geometry.lidar import (
     densify_nearest,
+    disparity_from_velodyne_file,
     project_velodyne,
     read_velodyne,
     velodyne_to_disparity,
@@ -111,6 +112,11 @@ def test_projected_disparity_equals_the_exact_one(scene, scan) -> None:
     depth = project_velodyne(points, calib, sample.disparity.shape)
     np.testing.assert_array_equal(np.isfinite(depth), sampled)
     assert (depth[sampled] > 0).all()
+    # the same through the files: a KITTI calibration text file and the .bin scan
+    calib_file = path.parent / "calib.txt"
+    calib_file.write_text(format_kitti_calib(calib))
+    from_files = disparity_from_velodyne_file(path, calib_file, sample.disparity.shape)
+    np.testing.assert_allclose(from_files, disparity, rtol=1e-6, equal_nan=True)
 
 
 def test_road_from_depth_and_lidar_matches_exact_fit(scene, scan, tmp_path: Path) -> None:

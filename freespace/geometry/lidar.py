@@ -28,7 +28,7 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
 from freespace.geometry.depth import depth_to_disparity, rig_from_kitti
-from freespace.io import PathLike, atomic_write_bytes
+from freespace.io import PathLike, atomic_write_bytes, read_kitti_calib
 
 __all__ = [
     "read_velodyne",
@@ -36,6 +36,7 @@ __all__ = [
     "velodyne_to_camera",
     "project_velodyne",
     "velodyne_to_disparity",
+    "disparity_from_velodyne_file",
     "densify_nearest",
     "DEFAULT_MIN_DEPTH_M",
 ]
@@ -176,6 +177,16 @@ def velodyne_to_disparity(points: np.ndarray, calib: dict[str, np.ndarray], shap
     rig = rig_from_kitti(calib, baseline=baseline)
     disparity = depth_to_disparity(project_velodyne(points, calib, shape, min_depth=min_depth), rig.fx, rig.baseline)
     return densify_nearest(disparity, densify_gap) if densify_gap else disparity
+
+
+def disparity_from_velodyne_file(scan_path: PathLike, calibration: dict[str, np.ndarray] | PathLike,
+                                 shape: tuple[int, int], *, baseline: float | None = None,
+                                 min_depth: float = DEFAULT_MIN_DEPTH_M, densify_gap: int = 0) -> np.ndarray:
+    """Read a ``velodyne/<frame>.bin`` scan and its KITTI calibration (dict or file path) and return the
+    ``float32 H×W`` disparity of the P2 image (NaN = none); options as :func:`velodyne_to_disparity`."""
+    calib = calibration if isinstance(calibration, dict) else read_kitti_calib(calibration)
+    return velodyne_to_disparity(read_velodyne(scan_path), calib, shape, baseline=baseline, min_depth=min_depth,
+                                 densify_gap=densify_gap)
 
 
 def densify_nearest(disparity: np.ndarray, max_gap_px: float) -> np.ndarray:
