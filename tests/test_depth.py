@@ -8,7 +8,6 @@ parked cars' shadows' edges).
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import cv2
@@ -176,7 +175,10 @@ def test_virtual_baseline_scales_only_kappa_hat(real_frame) -> None:
     # the robust fit's inlier threshold is in pixels, so its inlier set — and the roll — move a little:
     # measured 0.000 / 0.014 / 0.021°
     assert abs(fit_road_model(virt_disp, road).roll_deg - fit_road_model(real_disp, road).roll_deg) < 0.05
-    assert math.isfinite(virt.homography[0, 2])
+    # the virtual right camera's homography: every coefficient of d = a·u + b·v + c scales by B'/B
+    ratio = DEFAULT_VIRTUAL_BASELINE_M / real_rig.baseline
+    np.testing.assert_allclose(np.array(virt.affine), ratio * np.array(real.affine), rtol=1e-5)
+    np.testing.assert_allclose(virt.homography[0], [1 - virt.affine[0], -virt.affine[1], -virt.affine[2]], rtol=1e-12)
 
 
 def test_new_modules_never_import_torch() -> None:

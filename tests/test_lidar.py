@@ -18,7 +18,7 @@ import pytest
 from freespace.data.synthetic import SynthConfig, format_kitti_calib, render_sample
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
 from freespace.geometry import fit_road_model
-from freespace.geometry.depth import depth_to_disparity, disparity_from_depth_file
+from freespace.geometry.depth import disparity_from_depth_file
 from freespace.geometry.lidar import (
     densify_nearest,
     disparity_from_velodyne_file,
@@ -192,4 +192,3 @@ def test_projection_needs_tr_velo_to_cam(scene) -> None:
     no_tr = {k: v for k, v in calib.items() if k != "Tr_velo_to_cam"}
     with pytest.raises(CorruptFileError, match="no Tr_velo_to_cam"):
         project_velodyne(np.zeros((1, 4), np.float32), no_tr, (10, 10))
-    assert np.isnan(depth_to_disparity(np.array([np.nan]), 1.0, 1.0)).all()
