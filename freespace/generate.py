@@ -20,11 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import FreespaceError, InvalidOptionError, ShapeMismatchError
+from freespace.errors import FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError
 from freespace.geometry import RoadModel, compute_disparity, fit_road_model, generate_view
 from freespace.io import (
     PathLike,
     atomic_write_text,
+    check_outputs,
     encode_image,
     atomic_write_bytes,
     read_disparity,
@@ -50,8 +51,8 @@ class FitOptions:
 
     def check(self) -> None:
         """Raise InvalidOptionError for out-of-range values."""
-        if not self.inlier_threshold > 0:
-            raise InvalidOptionError(f"--inlier-threshold must be > 0 pixels, got {self.inlier_threshold}")
+        if not 0 < self.inlier_threshold < math.inf:
+            raise InvalidOptionError(f"--inlier-threshold must be a finite number of pixels > 0, got {self.inlier_threshold}")
         if not 1 <= self.max_disparity <= 1024:
             raise InvalidOptionError(f"--max-disparity must be in 1..1024 pixels, got {self.max_disparity}")
 
@@ -103,7 +104,7 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
         raise ShapeMismatchError(f"road mask is {_size(road.shape)} but the images are {_size(reference.shape)}; "
                                  f"give the label of the reference image")
     if not road.any():
-        raise FreespaceError("the road mask marks no road pixel; give a label with road (magenta in KITTI "
+        raise RoadFitError("the road mask marks no road pixel; give a label with road (magenta in KITTI "
                              "colours, non-zero in a single-channel mask)")
     source = "file"
     if disparity is None:
@@ -115,7 +116,9 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
         raise ShapeMismatchError(f"disparity is {_size(disparity.shape)} but the images are "
                                  f"{_size(reference.shape)}; give the disparity of the reference image")
     if not np.isfinite(disparity).any():
-        raise FreespaceError("the disparity map has no valid value (all 0, NaN or inf); check the disparity file")
+        hint = ("the stereo matcher found no match: check that the images are one rectified pair"
+                if source == "sgbm" else "check the disparity file")
+        raise RoadFitError(f"the disparity map has no valid value (all 0, NaN or inf); {hint}")
     t0 = time.perf_counter()
     model = fit_road_model(disparity, road, robust=options.robust, inlier_threshold=options.inlier_threshold)
     timings["fit"] = time.perf_counter() - t0
@@ -140,6 +143,8 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
     options.check()
     if out is not None:
         check_output_image_path(out)
+    check_outputs({"--out": out, "--model-json": model_json},
+                  {"--reference": reference, "--target": target, "--road-mask": road_mask, "--disparity": disparity})
     t_start = time.perf_counter()
     ref = read_image(reference, what="reference image")
     tgt = read_image(target, what="target image")
@@ -197,13 +202,55 @@ def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> 
 def _init_worker(dataset: Any) -> None:
     import cv2
 
+    from freespace.parallel import die_with_parent
+
+    die_with_parent()
     global _DATASET
     _DATASET = dataset
     cv2.setNumThreads(1)
 
 
+SETTINGS_NAME = "settings.json"
+
+
+def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
+    """What a generated dataset depends on (written to ``OUT/settings.json``)."""
+    return {"dataset": dataset.name, "root": str(Path(dataset.root).resolve()), "split": dataset.split,
+            "robust": options.robust, "inlier_threshold": options.inlier_threshold,
+            "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode}
+
+
+def _claim_output(out_dir: Path, settings: dict[str, Any], overwrite: bool) -> None:
+    """Make ``out_dir`` this run's. A folder generated with other settings is refused unless ``overwrite``,
+    which removes what the earlier run wrote; a non-empty folder that ``generate`` did not write is refused."""
+    if not out_dir.is_dir() or not any(out_dir.iterdir()):
+        return
+    recorded: Any = None
+    try:  # summary.json's "options": folders written before settings.json existed
+        recorded = json.loads((out_dir / SETTINGS_NAME).read_text()) if (out_dir / SETTINGS_NAME).is_file() \
+            else json.loads((out_dir / "summary.json").read_text())["options"]
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    if not isinstance(recorded, dict):
+        raise InvalidOptionError(f"--out {out_dir} holds files that freespace generate did not write; choose a "
+                                 f"new or empty folder")
+    differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
+    if differ and not overwrite:
+        what = ", ".join(f"{k} {recorded[k]!r} → {settings[k]!r}" for k in differ)
+        raise InvalidOptionError(f"--out {out_dir} holds frames generated with other settings ({what}); choose "
+                                 f"another --out, or add --overwrite to replace them")
+    if overwrite:
+        reports = out_dir / "reports"
+        for report in sorted(reports.glob("*.json")) if reports.is_dir() else []:
+            (out_dir / f"{report.stem}.png").unlink(missing_ok=True)
+            report.unlink()
+        for name in (SETTINGS_NAME, "summary.json", "report.csv"):
+            (out_dir / name).unlink(missing_ok=True)
+
+
 def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
-                     options: FitOptions = FitOptions(), progress: bool = True) -> dict[str, Any]:
+                     options: FitOptions = FitOptions(), progress: bool = True,
+                     overwrite: bool = False) -> dict[str, Any]:
     """Generate the augmented image of every frame of a dataset and write a report.
 
     Args:
@@ -216,6 +263,9 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
 
     Frames whose image and report already exist are skipped (resumable). A failing frame (missing
     partner, unreadable file, too little road, ...) is recorded with its reason and does not stop the run.
+    The settings (dataset, fit and disparity options) are recorded in ``settings.json``: a folder made
+    with other settings is refused, unless ``overwrite`` replaces what was generated there. ``out_dir``
+    may not lie inside the dataset's root (nor hold it).
 
     Returns:
         The summary (also written to ``summary.json``): counts, ``failed`` (frame → reason), means.
@@ -227,6 +277,10 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the generated dataset")
+    check_outputs({"--out": out_dir}, {"--root": dataset.root})
+    settings = _settings(dataset, options)
+    _claim_output(out_dir, settings, overwrite)
+    write_json(out_dir / SETTINGS_NAME, settings)
     report_dir = out_dir / "reports"
     frames = dataset.frames
     records: dict[str, dict[str, Any]] = {}

@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +48,7 @@ __all__ = [
     "road_label_from_image",
     "road_label_to_kitti",
     "read_kitti_calib",
+    "check_outputs",
 ]
 
 
@@ -89,6 +91,40 @@ def atomic_write_text(path: PathLike, text: str) -> Path:
 def write_json(path: PathLike, obj: Any) -> Path:
     """Write ``obj`` as indented JSON (NaN/inf are rejected: use None) atomically."""
     return atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+
+
+def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLike | None]) -> None:
+    """Refuse outputs that would overwrite or land among a command's inputs, before any work.
+
+    Args:
+        outputs: option name → output path (file or folder; None = not given).
+        inputs: option name → input path (file or folder; None = not given).
+
+    Raises :class:`InvalidOptionError` when an output is an input, lies inside an input folder, or is a
+    folder that holds an input, or when two outputs are the same path. Symbolic links are resolved
+    first, so a link to an input counts as the input.
+    """
+    def real(p: PathLike) -> Path:
+        return Path(os.path.realpath(os.path.expanduser(os.fspath(p))))
+
+    outs = {k: real(v) for k, v in outputs.items() if v is not None}
+    ins = {k: real(v) for k, v in inputs.items() if v is not None}
+    for out_name, out in outs.items():
+        for in_name, src in ins.items():
+            if out == src:
+                raise InvalidOptionError(f"{out_name} {out} is the input {in_name}; the command would overwrite "
+                                         f"it: choose another output path")
+            if out.is_relative_to(src):
+                raise InvalidOptionError(f"{out_name} {out} lies inside the input {in_name} {src}; choose an "
+                                         f"output outside the input folder")
+            if src.is_relative_to(out):
+                raise InvalidOptionError(f"the input {in_name} {src} lies inside {out_name} {out}; choose an "
+                                         f"output folder that holds no input")
+    seen: dict[Path, str] = {}
+    for out_name, out in outs.items():
+        if out in seen:
+            raise InvalidOptionError(f"{out_name} and {seen[out]} are the same path {out}; give two paths")
+        seen[out] = out_name
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -403,11 +439,26 @@ def read_kitti_calib(path: PathLike) -> dict[str, np.ndarray]:
         except ValueError:
             raise CorruptFileError(f"calibration file {path} line {lineno} is not 'KEY: numbers'") from None
         key = key.strip()
-        if key.startswith("P") and arr.size == 12 or key.startswith("Tr") and arr.size == 12:
+        if not np.isfinite(arr).all():
+            raise CorruptFileError(f"calibration file {path}: {key} has a value that is not finite (NaN or inf)")
+        if re.fullmatch(r"P\d|Tr_\w+", key):
+            if arr.size != 12:
+                raise CorruptFileError(f"calibration file {path}: {key} has {arr.size} numbers, a 3×4 matrix "
+                                       f"needs 12")
             arr = arr.reshape(3, 4)
-        elif key.startswith("R") and arr.size == 9:
+        elif re.fullmatch(r"R0?_rect", key):
+            if arr.size != 9:
+                raise CorruptFileError(f"calibration file {path}: {key} has {arr.size} numbers, a 3×3 matrix "
+                                       f"needs 9")
             arr = arr.reshape(3, 3)
         calib[key] = arr
     if "P2" not in calib:
         raise CorruptFileError(f"calibration file {path} has no P2 line; expected a KITTI calibration file")
+    for key in [k for k in calib if k.startswith("Tr_")] + [k for k in ("R0_rect", "R_rect") if k in calib]:
+        rotation = calib[key][:, :3]
+        if abs(np.linalg.det(rotation)) < 1e-6:
+            raise CorruptFileError(f"calibration file {path}: {key} is singular (its rotation part has "
+                                   f"determinant {np.linalg.det(rotation):.1e}); expected a rigid transform")
+    if abs(np.linalg.det(calib["P2"][:, :3])) < 1e-9:
+        raise CorruptFileError(f"calibration file {path}: P2 is singular; expected a camera projection matrix")
     return calib

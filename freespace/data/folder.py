@@ -72,7 +72,28 @@ class FolderSpec:
         folders.update({k: str(data.pop(k)) for k in list(data) if k in folder_keys})
         for key in ("road_ids", "ignore_ids"):
             if key in data:
-                data[key] = tuple(int(x) for x in (data[key] if isinstance(data[key], list) else [data[key]]))
+                ids = data[key] if isinstance(data[key], list) else [data[key]]
+                if not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in ids):
+                    raise InvalidOptionError(f"{path}: {key} must be a list of class ids (integers ≥ 0), "
+                                             f"got {data[key]!r}")
+                data[key] = tuple(ids)
+        for key in ("label_channel", "depth_channel"):
+            if key in data and (not isinstance(data[key], int) or isinstance(data[key], bool)
+                                or not 0 <= data[key] <= 3):
+                raise InvalidOptionError(f"{path}: {key} must be a channel index 0…3 (RGB order, 3 = alpha), "
+                                         f"got {data[key]!r}")
+        if "depth_scale" in data and (isinstance(data["depth_scale"], bool)
+                                      or not isinstance(data["depth_scale"], (int, float))
+                                      or not 0 < data["depth_scale"] < float("inf")):
+            raise InvalidOptionError(f"{path}: depth_scale must be a positive number (metres per stored unit), "
+                                     f"got {data['depth_scale']!r}")
+        for key in ("label_encoding", "depth_encoding", "scenario_pattern"):
+            if key in data and not isinstance(data[key], str):
+                raise InvalidOptionError(f"{path}: {key} must be a string, got {data[key]!r}")
+        if "camera" in data and (not isinstance(data["camera"], dict) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in data["camera"].values())):
+            raise InvalidOptionError(f"{path}: camera must be a mapping of numbers (fx, cx, cy, baseline), "
+                                     f"got {data['camera']!r}")
         spec = replace(self, folders=folders, **data)
         spec.check(path)
         return spec
@@ -82,6 +103,11 @@ class FolderSpec:
             raise InvalidOptionError(f"{where}: label_encoding must be one of {LABEL_ENCODINGS}")
         if self.depth_encoding not in DEPTH_ENCODINGS:
             raise InvalidOptionError(f"{where}: depth_encoding must be one of {DEPTH_ENCODINGS}")
+        if self.scenario_pattern is not None:
+            try:
+                re.compile(self.scenario_pattern)
+            except re.error as exc:
+                raise InvalidOptionError(f"{where}: scenario_pattern is not a regular expression ({exc})") from None
         if self.camera is not None:
             missing = {"fx", "cx", "cy", "baseline"} - set(self.camera)
             if missing:

@@ -53,6 +53,10 @@ def compute_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int
     if max_disparity < 1 or block_size < 1 or block_size % 2 == 0:
         raise InvalidOptionError(f"max_disparity must be ≥ 1 and block_size odd (got {max_disparity}, {block_size})")
     num = int(np.ceil(max_disparity / 16.0)) * 16
+    if num >= gl.shape[1]:
+        raise InvalidOptionError(f"the stereo matcher's maximum disparity ({num} px, --max-disparity rounded up to "
+                                 f"a multiple of 16) must be smaller than the image width ({gl.shape[1]} px); "
+                                 f"lower --max-disparity or give a disparity file")
     matcher = cv2.StereoSGBM_create(
         minDisparity=0, numDisparities=num, blockSize=block_size,
         P1=8 * block_size * block_size, P2=32 * block_size * block_size,
