@@ -172,7 +172,7 @@ class RoadEvaluator:
         self.images = 0
 
     def process(self, prediction: np.ndarray, road: np.ndarray, valid: np.ndarray | None = None) -> None:
-        """Add one image, or a batch (any leading dimensions; counts are sums over pixels).
+        """Add one image (``H×W``) or a batch (``N×H×W``; the counts are sums over all its pixels).
 
         Args:
             prediction: road probability (``float``, ``H×W`` or ``N×H×W``, in [0, 1]; road where
