@@ -6,8 +6,6 @@ checks every input before it writes anything, and writes every output atomically
 
 from __future__ import annotations
 
-import csv
-import io as _io
 import json
 import logging
 import math
@@ -24,13 +22,13 @@ from freespace.errors import FreespaceError, InvalidOptionError, RoadFitError, S
 from freespace.geometry import RoadModel, compute_disparity, fit_road_model, generate_view
 from freespace.io import (
     PathLike,
-    atomic_write_text,
     check_outputs,
     encode_image,
     atomic_write_bytes,
     read_disparity,
     read_image,
     read_road_label,
+    write_csv,
     write_json,
 )
 
@@ -355,12 +353,10 @@ _CSV_FIELDS = ["frame", "status", "roll_deg", "kappa_hat", "kappa", "num_valid",
 
 
 def _write_report_csv(path: Path, records: list[dict[str, Any]]) -> None:
-    buf = _io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=_CSV_FIELDS, extrasaction="ignore", lineterminator="\n")
-    writer.writeheader()
+    rows = []
     for record in records:
         row = dict(record)
         seconds = record.get("seconds") or {}
         row["seconds"] = round(seconds.get("total", math.nan), 4) if seconds else ""
-        writer.writerow(row)
-    atomic_write_text(path, buf.getvalue())
+        rows.append(row)
+    write_csv(path, _CSV_FIELDS, rows, extra="ignore")

@@ -1,4 +1,4 @@
-"""Inference for deployment: predictors from a checkpoint or an ONNX file, `predict`, `export`, `kitti-submit`."""
+"""Inference for deployment: `predict`, `export`, `kitti-submit` (the predictor itself: :mod:`freespace.predictor`)."""
 
 from __future__ import annotations
 
@@ -11,85 +11,18 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
+from freespace.errors import InputFileError, InvalidOptionError
 from freespace.io import PathLike, atomic_write_bytes, read_image, read_kitti_calib, write_image, write_json
+from freespace.metrics import to_confidence
+from freespace.predictor import Predictor, load_checkpoint
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Predictor", "predict_folder", "export_model", "kitti_submit", "to_confidence"]
+__all__ = ["predict_folder", "export_model", "kitti_submit"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm")
-
-
-def to_confidence(prob: np.ndarray) -> np.ndarray:
-    """KITTI 8-bit road confidence (255 = sure road) of a ``float`` probability map."""
-    return np.clip(np.round(prob * 255.0), 0, 255).astype(np.uint8)
-
-
-class Predictor:
-    """Road probabilities from a training checkpoint (PyTorch) or an exported ONNX model (onnxruntime).
-
-    Images are resized to the model's training size (kept in the checkpoint / the ONNX metadata) and the
-    probabilities back to each image's own size.
-    """
-
-    def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None) -> None:
-        if (checkpoint is None) == (onnx is None):
-            raise InvalidOptionError("give exactly one of --checkpoint and --onnx")
-        self.image_size: tuple[int, int] | None = None
-        if checkpoint is not None:
-            from freespace.engine.evaluate import load_checkpoint
-
-            self.model, hp = load_checkpoint(checkpoint)
-            self.image_size = tuple(hp["image_size"]) if hp.get("image_size") else None
-            self.name = hp["model"]
-            self.session = None
-        else:
-            import onnxruntime as ort
-
-            path = Path(onnx)  # type: ignore[arg-type]
-            if not path.is_file():
-                raise InputFileError(f"ONNX model not found: {path}")
-            try:
-                self.session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-            except Exception as exc:  # onnxruntime raises its own types for corrupt files
-                raise CorruptFileError(f"cannot load {path} as an ONNX model ({type(exc).__name__})") from None
-            meta = self.session.get_modelmeta().custom_metadata_map
-            self.image_size = tuple(json.loads(meta["image_size"])) if meta.get("image_size") else None
-            self.name = meta.get("model", path.stem)
-            self.model = None
-
-    def _run(self, batch: np.ndarray) -> np.ndarray:
-        if self.session is None:
-            import torch
-
-            with torch.no_grad():
-                return torch.softmax(self.model(torch.from_numpy(batch)), 1)[:, 1].numpy()
-        logits = self.session.run(None, {self.session.get_inputs()[0].name: batch})[0]
-        e = np.exp(logits - logits.max(1, keepdims=True))
-        return (e[:, 1] / e.sum(1)).astype(np.float32)
-
-    def predict(self, images: list[np.ndarray]) -> list[np.ndarray]:
-        """Road probability (``float32 H×W``) of each ``H×W×3 uint8`` RGB image."""
-        by_size: dict[tuple[int, int], list[int]] = {}
-        resized = []
-        for i, img in enumerate(images):
-            if img.ndim != 3 or img.shape[2] != 3:
-                raise InvalidOptionError(f"expected RGB images, got shape {img.shape}")
-            if self.image_size and img.shape[:2] != self.image_size:
-                img = cv2.resize(img, (self.image_size[1], self.image_size[0]), interpolation=cv2.INTER_AREA)
-            resized.append(img)
-            by_size.setdefault(img.shape[:2], []).append(i)
-        out: list[np.ndarray | None] = [None] * len(images)
-        for idx in by_size.values():
-            batch = np.stack([resized[i].transpose(2, 0, 1) for i in idx]).astype(np.float32) / 255.0
-            for i, prob in zip(idx, self._run(batch)):
-                h, w = images[i].shape[:2]
-                out[i] = prob if prob.shape == (h, w) else cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
-        return out  # type: ignore[return-value]
 
 
 def _inputs(path: Path) -> list[Path]:
@@ -140,8 +73,6 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any
     """Export a checkpoint to ONNX (dynamic N, H, W; opset 17) or TorchScript (traced; dynamic H, W),
     validated against PyTorch at the training size and at an odd size. Returns the max abs differences."""
     import torch
-
-    from freespace.engine.evaluate import load_checkpoint
 
     if fmt not in ("onnx", "torchscript"):
         raise InvalidOptionError(f"--format must be onnx or torchscript, got {fmt!r}")

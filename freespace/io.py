@@ -5,6 +5,7 @@ Conventions (the same in the whole package):
 * images are ``H×W×3 uint8`` RGB (colour files) or ``H×W uint8`` (grey files) in memory;
 * a disparity map is ``float32 H×W`` in pixels, NaN for "no value";
 * a road label is a pair of ``bool H×W`` arrays: ``road`` and ``valid`` (``valid`` False = don't care);
+  as a class map (training, losses) it is 1 road, 0 non-road, :data:`IGNORE_INDEX` (255) don't care;
 * every writer writes to a temporary file beside the target and renames it, so a crash or a user
   mistake never leaves a partial output file.
 
@@ -13,14 +14,17 @@ Only NumPy and OpenCV are imported here.
 
 from __future__ import annotations
 
+import csv
+import io as _io
 import json
 import math
 import os
 import re
 import tempfile
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -32,11 +36,16 @@ PathLike = str | os.PathLike[str]
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
 DEPTH_SUFFIXES = (".png", ".npy", ".pfm")
 
+#: the class id of don't-care pixels in label class maps (losses ignore it, metrics skip it)
+IGNORE_INDEX = 255
+
 __all__ = [
+    "IGNORE_INDEX",
     "RoadLabel",
     "atomic_write_bytes",
     "atomic_write_text",
     "write_json",
+    "write_csv",
     "read_image",
     "read_raw",
     "write_image",
@@ -125,6 +134,20 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
         if out in seen:
             raise InvalidOptionError(f"{out_name} and {seen[out]} are the same path {out}; give two paths")
         seen[out] = out_name
+
+
+def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str, Any]],
+              extra: Literal["raise", "ignore"] = "raise") -> Path:
+    """Write ``rows`` (dicts) as a CSV file with the header ``fields``, atomically.
+
+    Values are written with ``str`` (missing keys as empty cells), lines end with ``\n``. ``extra``: what a
+    key outside ``fields`` does — ``"raise"`` (ValueError, a programming error) or ``"ignore"``.
+    """
+    buf = _io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(fields), extrasaction=extra, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return atomic_write_text(path, buf.getvalue())
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -289,8 +312,6 @@ def write_disparity(path: PathLike, disparity: np.ndarray) -> Path:
         raw[valid] = np.clip(np.round(disp[valid] * 256.0), 1, 65535).astype(np.uint16)
         return atomic_write_bytes(path, encode_image(raw, ".png"))
     if suffix == ".npy":
-        import io as _io
-
         buf = _io.BytesIO()
         np.save(buf, disp)
         return atomic_write_bytes(path, buf.getvalue())

@@ -14,7 +14,7 @@ import pytest
 from freespace.cli import main
 from freespace.io import read_image, road_label_to_kitti, write_disparity, write_image
 
-from conftest import synthetic_pair
+from helpers import synthetic_pair
 
 
 @pytest.fixture

@@ -16,10 +16,10 @@ from freespace.data.folder import CarlaStereo, SynthiaStereo
 from freespace.data.kitti_road import KittiRoad
 from freespace.data.splits import make_splits, read_splits, split_sizes, write_splits
 from freespace.data.synthetic import format_kitti_calib
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError
+from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
 from freespace.io import road_label_to_kitti, write_disparity, write_image
 
-from conftest import synthetic_pair
+from helpers import synthetic_pair
 
 SHAPE = (160, 320)
 
@@ -242,7 +242,7 @@ def test_generic_config_mistakes(tmp_path: Path) -> None:
     with pytest.raises(InvalidOptionError, match="unknown keys"):
         get_dataset("generic", tmp_path)
     (tmp_path / "freespace.yaml").write_text("left: [unclosed\n")
-    with pytest.raises(Exception, match="cannot parse"):
+    with pytest.raises(CorruptFileError, match="cannot parse .*freespace.yaml"):
         get_dataset("generic", tmp_path)
     (tmp_path / "freespace.yaml").write_text("left: L\n")
     with pytest.raises(DatasetError, match="no frames"):
@@ -322,7 +322,8 @@ def test_generate_on_every_layout(layout: str, tmp_path: Path, capsys: pytest.Ca
 
 def test_torch_dataset(tmp_path: Path) -> None:
     torch = pytest.importorskip("torch")
-    from freespace.data.torch_dataset import IGNORE_INDEX, RoadSegmentationDataset
+    from freespace.data.torch_dataset import RoadSegmentationDataset
+    from freespace.io import IGNORE_INDEX
 
     kitti_tree(tmp_path, 3)
     ds = RoadSegmentationDataset(KittiRoad(tmp_path, disparity="none"))
@@ -336,6 +337,34 @@ def test_torch_dataset(tmp_path: Path) -> None:
     kitti_tree(tmp_path / "t", 1, split="testing", label=False)
     with pytest.raises(DatasetError, match="no road label"):
         RoadSegmentationDataset(KittiRoad(tmp_path / "t", "testing"), names=["um_000000"])
+
+
+def test_torch_dataset_training_options(tmp_path: Path) -> None:
+    """Resize (labels nearest), image overrides (DS-Generator views), cache, augmentation drawn from
+    (seed, epoch, i) only."""
+    torch = pytest.importorskip("torch")
+    from freespace.data.torch_dataset import Item, RoadSegmentationDataset
+    from freespace.io import IGNORE_INDEX
+
+    names = kitti_tree(tmp_path, 3)
+    kitti = KittiRoad(tmp_path, disparity="none")
+    view = np.full(SHAPE + (3,), 200, np.uint8)
+    write_image(tmp_path / "view.png", view)
+    items = [Item(kitti.index(names[0]), names[0]), Item(kitti.index(names[1]), names[1], str(tmp_path / "view.png"))]
+    plain = RoadSegmentationDataset(kitti, items, size=(40, 80))
+    cached = RoadSegmentationDataset(kitti, items, size=(40, 80), cache=True)
+    a, b = plain[1], cached[1]
+    assert a["image"].shape == (3, 40, 80) and a["name"] == names[1] and a["index"] == 1
+    assert torch.equal(a["image"], torch.full((3, 40, 80), 200 / 255.0))  # the override image, resized
+    full = RoadSegmentationDataset(kitti, items)[1]["label"]
+    assert torch.equal(a["label"], full[::4, ::4])  # nearest (OpenCV: source pixel 4·i): no new values
+    assert torch.equal(a["label"], b["label"]) and set(cached._cache) == {1} and not plain._cache
+    aug = RoadSegmentationDataset(kitti, items, size=(40, 80), augment=True, seed=3)
+    again = RoadSegmentationDataset(kitti, items, size=(40, 80), augment=True, seed=3)
+    draws = [aug[(e, 0)]["label"] for e in range(4)]
+    assert all(torch.equal(d, again[(e, 0)]["label"]) for e, d in enumerate(draws))  # (seed, epoch, i) only
+    assert not all(torch.equal(draws[0], d) for d in draws[1:])  # epochs differ
+    assert set(torch.unique(torch.stack(draws)).tolist()) <= {0, 1, IGNORE_INDEX}
 
 
 def test_datasets_split_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

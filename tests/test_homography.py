@@ -11,7 +11,7 @@ from freespace.errors import InvalidOptionError
 from freespace.geometry import RoadModel, StereoCalibration, homography_from_pose, road_homography
 from freespace.io import read_kitti_calib
 
-from conftest import shared_path
+from helpers import shared_path
 
 
 def _rot(rx: float, ry: float, rz: float) -> np.ndarray:

@@ -20,9 +20,10 @@ from typing import Any
 import torch
 
 from freespace.engine.config import TrainConfig
-from freespace.engine.data import EpochSampler, RoadFrames, is_rank_zero, prepare_data
+from freespace.data.torch_dataset import RoadSegmentationDataset
+from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
 from freespace.errors import InvalidOptionError
-from freespace.io import atomic_write_bytes, atomic_write_text, write_json
+from freespace.io import atomic_write_bytes, write_csv, write_json
 
 log = logging.getLogger(__name__)
 
@@ -56,11 +57,7 @@ def _callbacks(run_dir: Path, patience: int):
             row = {"epoch": trainer.current_epoch, "lr": trainer.optimizers[0].param_groups[0]["lr"],
                    "seconds": round(time.perf_counter() - self.t0, 3)}
             row.update({k: f"{float(m[k]):.6f}" for k in CSV_FIELDS if k in m})
-            buf = _io.StringIO()
-            writer = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
-            writer.writeheader()
-            writer.writerows(rows + [row])
-            atomic_write_text(self.path, buf.getvalue())
+            write_csv(self.path, CSV_FIELDS, rows + [row])
 
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor="val_f_score", mode="max",
                            save_top_k=1, save_last=True, enable_version_counter=False)
@@ -123,11 +120,10 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         config.image_size = tuple(data["size"])  # resolved
         config.save(run_dir / "config.yaml")
     ds, size = data["dataset"], tuple(data["size"])
-    train = RoadFrames(ds, data["train"], size, augment=True, seed=config.seed)
-    val = RoadFrames(ds, data["val"], size, augment=False, seed=config.seed)
-    test = RoadFrames(ds, data["test"], size, augment=False, seed=config.seed)
+    train, val, test = (RoadSegmentationDataset(ds, data[k], size=size, augment=k == "train", seed=config.seed,
+                                                cache=True) for k in ("train", "val", "test"))
 
-    def loader(frames: RoadFrames, shuffle: bool) -> torch.utils.data.DataLoader:
+    def loader(frames: RoadSegmentationDataset, shuffle: bool) -> torch.utils.data.DataLoader:
         return torch.utils.data.DataLoader(frames, batch_size=config.batch_size if shuffle else 1,
                                            sampler=EpochSampler(len(frames), config.seed, shuffle),
                                            num_workers=config.workers, persistent_workers=config.workers > 0)

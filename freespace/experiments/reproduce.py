@@ -11,8 +11,6 @@ Finished runs are skipped when the command is run again; interrupted ones resume
 
 from __future__ import annotations
 
-import csv
-import io as _io
 import json
 import logging
 from pathlib import Path
@@ -22,7 +20,7 @@ import numpy as np
 
 from freespace.engine.config import TrainConfig
 from freespace.errors import InvalidOptionError
-from freespace.io import PathLike, atomic_write_text, write_image, write_json
+from freespace.io import PathLike, atomic_write_text, write_csv, write_image, write_json
 
 log = logging.getLogger(__name__)
 
@@ -114,19 +112,16 @@ def _write_tables(out: Path, rows: list[dict[str, Any]], dataset: str, seeds: in
         gains = [f"{r['gain_f_score']:+.2f}", f"{r['gain_iou']:+.2f}"] if "gain_f_score" in r else ["", ""]
         md.append(f"| {r['network']} | {r['seeds']} | " + " | ".join(cells + gains) + " |")
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
-    buf = _io.StringIO()
     fields = ["network", "seeds"] + [x for k in METRICS for x in (k, f"{k}_std")] + ["gain_f_score", "gain_iou"]
-    writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows([{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
-    atomic_write_text(out / "results.csv", buf.getvalue())
+    write_csv(out / "results.csv", fields,
+              [{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
 
 
 def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int) -> None:
     """``figures/<model>.png``: test frames of seed 0 — image, X prediction, HA-X prediction (TP/FN/FP)."""
     from freespace.data.base import get_dataset
     from freespace.data.splits import read_splits
-    from freespace.infer import Predictor
+    from freespace.predictor import Predictor
     from freespace.viz import caption, grid, overlay_errors
 
     runs = {v: out / "runs" / _name(model, v, 0) for v in VARIANTS}

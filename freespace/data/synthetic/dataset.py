@@ -17,7 +17,6 @@ configuration whatever ``num`` is.
 from __future__ import annotations
 
 import csv
-import io as _io
 import json
 import multiprocessing
 import shutil
@@ -31,7 +30,8 @@ import numpy as np
 from freespace.data.synthetic.render import StereoSample, render_sample
 from freespace.data.synthetic.scene import SynthConfig
 from freespace.errors import InvalidOptionError
-from freespace.io import PathLike, atomic_write_text, road_label_to_kitti, write_disparity, write_image, write_json
+from freespace.io import (PathLike, atomic_write_text, road_label_to_kitti, write_csv, write_disparity, write_image,
+                          write_json)
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
 
@@ -155,11 +155,7 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
                 bar.update()
     bar.close()
     rows = _merge_index(out, rows)
-    buf = _io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=INDEX_FIELDS, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    atomic_write_text(out / "index.csv", buf.getvalue())
+    write_csv(out / "index.csv", INDEX_FIELDS, rows)
     write_json(out / "synth.json", {**settings, "num": len(rows)})
     return rows
 
