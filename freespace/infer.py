@@ -200,7 +200,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
     from freespace.data.kitti_road import KittiRoad
 
     predictor = Predictor(checkpoint=checkpoint)
-    ds = KittiRoad(root, "testing", disparity="none")
+    ds = KittiRoad(root, "testing", disparity_mode="none")
     missing = [f.name for f in ds.frames if f.calib is None]
     if missing:
         raise InputFileError(f"{len(missing)} testing frames have no calibration (first: {missing[0]}); the BEV "

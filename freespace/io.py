@@ -28,8 +28,11 @@ from freespace.errors import CorruptFileError, InputFileError, InvalidOptionErro
 PathLike = str | os.PathLike[str]
 
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")  # what OpenCV reads and writes here
 
 __all__ = [
+    "DISPARITY_SUFFIXES",
+    "IMAGE_SUFFIXES",
     "RoadLabel",
     "atomic_write_bytes",
     "atomic_write_text",

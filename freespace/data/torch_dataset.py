@@ -39,7 +39,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
     def __init__(self, dataset: StereoRoadDataset, names: Sequence[str] | None = None,
                  transform: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None) -> None:
         self.dataset = dataset
-        wanted = list(names) if names is not None else [f.name for f in dataset.frames if f.label is not None]
+        wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
         self.indices = [dataset.index(n) for n in wanted]
         unlabelled = [n for n, i in zip(wanted, self.indices) if dataset.frames[i].label is None]
         if unlabelled:

@@ -9,17 +9,11 @@ import lightning.pytorch as pl
 import numpy as np
 import torch
 
-from freespace.errors import FreespaceError
+from freespace.errors import TrainingError
 from freespace.metrics import Counts, KittiCounts, kitti_scores
 from freespace.models import IGNORE_INDEX, create_model, main_logits
 
 __all__ = ["RoadModule", "TrainingError"]
-
-
-class TrainingError(FreespaceError):
-    """Training cannot go on (e.g. the loss became NaN)."""
-
-    exit_code = 1
 
 
 class RoadModule(pl.LightningModule):
