@@ -20,9 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import FreespaceError, InvalidOptionError, ShapeMismatchError
-from freespace.geometry import RoadModel, compute_disparity, fit_road_model, generate_view
+from freespace.errors import DatasetError, FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError
+from freespace.geometry import SGBM_MAX_DISPARITY, RoadModel, compute_disparity, fit_road_model, generate_view
 from freespace.io import (
+    IMAGE_SUFFIXES,
     PathLike,
     atomic_write_text,
     encode_image,
@@ -35,9 +36,7 @@ from freespace.io import (
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FitOptions", "GenerateResult", "generate_pair", "generate_dataset", "IMAGE_SUFFIXES"]
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")
+__all__ = ["FitOptions", "GenerateResult", "generate_pair", "generate_dataset"]
 
 
 @dataclass(frozen=True)
@@ -46,7 +45,7 @@ class FitOptions:
 
     robust: bool = True
     inlier_threshold: float = 1.0
-    max_disparity: int = 128
+    max_disparity: int = SGBM_MAX_DISPARITY
 
     def check(self) -> None:
         """Raise InvalidOptionError for out-of-range values."""
@@ -103,7 +102,7 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
         raise ShapeMismatchError(f"road mask is {_size(road.shape)} but the images are {_size(reference.shape)}; "
                                  f"give the label of the reference image")
     if not road.any():
-        raise FreespaceError("the road mask marks no road pixel; give a label with road (magenta in KITTI "
+        raise RoadFitError("the road mask marks no road pixel; give a label with road (magenta in KITTI "
                              "colours, non-zero in a single-channel mask)")
     source = "file"
     if disparity is None:
@@ -115,7 +114,7 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
         raise ShapeMismatchError(f"disparity is {_size(disparity.shape)} but the images are "
                                  f"{_size(reference.shape)}; give the disparity of the reference image")
     if not np.isfinite(disparity).any():
-        raise FreespaceError("the disparity map has no valid value (all 0, NaN or inf); check the disparity file")
+        raise RoadFitError("the disparity map has no valid value (all 0, NaN or inf); check the disparity file")
     t0 = time.perf_counter()
     model = fit_road_model(disparity, road, robust=options.robust, inlier_threshold=options.inlier_threshold)
     timings["fit"] = time.perf_counter() - t0
@@ -174,9 +173,9 @@ def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> 
     record: dict[str, Any] = {"frame": frame.name}
     try:
         if frame.right is None:
-            raise FreespaceError("missing right image")
+            raise DatasetError("missing right image")
         if frame.label is None:
-            raise FreespaceError("missing road label")
+            raise DatasetError("missing road label")
         sample = _DATASET.load(index)
         result = generate_arrays(sample.left, sample.right, sample.label.road & sample.label.valid,
                                  sample.disparity, options)

@@ -15,13 +15,11 @@ import cv2
 import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
-from freespace.io import PathLike, atomic_write_bytes, read_image, read_kitti_calib, write_image, write_json
+from freespace.io import IMAGE_SUFFIXES, PathLike, atomic_write_bytes, read_image, read_kitti_calib, write_image, write_json
 
 log = logging.getLogger(__name__)
 
 __all__ = ["Predictor", "predict_folder", "export_model", "kitti_submit", "to_confidence"]
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm")
 
 
 def to_confidence(prob: np.ndarray) -> np.ndarray:

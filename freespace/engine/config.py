@@ -77,7 +77,7 @@ class TrainConfig:
     out: str = _option("run folder", metavar="RUN_DIR")
     model: str = _option("network", "unet", choices=_models)
     preset: str = _option("network size: light (CPU) or paper", "light", choices=PRESETS)
-    split: str | None = _option("on-disk split (KITTI: training or testing; default: the layout's first)")
+    split: str | None = _option("on-disk split (KITTI: training or testing; default: the layout's first)", None)
     augment: str = _option("homography adds the DS-Generator view of every training frame", "none", choices=AUGMENTS)
     epochs: int = _option("most epochs", 50)
     batch_size: int = _option("training batch size", 4)
@@ -248,7 +248,7 @@ def add_config_arguments(parser: argparse.ArgumentParser, names: Iterable[str] |
         choices = _choices(f)
         if choices is not None:
             text += f"; one of {', '.join(choices)}"
-        if default not in (None, False):
+        if default is not None and default is not False:
             text += "; default %(default)s"
         kwargs: dict[str, Any] = {"dest": f.name, "default": default, "help": text}
         if hint is bool:
