@@ -77,6 +77,29 @@ def test_kitti_training_and_testing(tmp_path: Path) -> None:
     assert check_dataset(test) == []  # no labels expected in testing
 
 
+def test_subset_and_labelled(tmp_path: Path) -> None:
+    kitti_tree(tmp_path, 4)
+    (tmp_path / "data_road" / "training" / "gt_image_2" / "um_road_000003.png").unlink()
+    ds = KittiRoad(tmp_path, disparity_mode="none")
+    assert [f.name for f in ds.labelled()] == ["um_000000", "umm_000001", "uu_000002"]
+    sub = ds.subset(["uu_000002", "um_000000"])
+    assert [f.name for f in sub] == ["uu_000002", "um_000000"] and sub.index("um_000000") == 1
+    np.testing.assert_array_equal(sub.load(1).left, ds.load(0).left)
+    assert (sub.split, sub.disparity_mode, len(ds)) == ("training", "none", 4)  # same options; ds untouched
+    assert ds.subset([]).frames == []
+    with pytest.raises(DatasetError, match="'um_000009' is not in kitti training"):
+        ds.subset(["um_000009"])
+
+
+def test_missing_root_is_the_same_error_everywhere(tmp_path: Path) -> None:
+    from freespace.data.info import dataset_info
+
+    for open_missing in (lambda: get_dataset("kitti", tmp_path / "none"), lambda: KittiRoad(tmp_path / "none"),
+                         lambda: dataset_info("synthia", tmp_path / "none")):
+        with pytest.raises(InputFileError, match="dataset root not found"):
+            open_missing()
+
+
 def test_kitti_without_right_images_and_user_disparity(tmp_path: Path) -> None:
     names = kitti_tree(tmp_path, 3, right=False)
     ds = KittiRoad(tmp_path)
