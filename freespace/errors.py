@@ -40,3 +40,9 @@ class DatasetError(FreespaceError, ValueError):
 
 class OutputError(FreespaceError, OSError):
     """An output file or folder cannot be written (permissions, a file where a folder should be, ...)."""
+
+
+class TrainingError(FreespaceError):
+    """Training cannot go on (e.g. the loss became NaN); exit code 1, as for a run that failed."""
+
+    exit_code = 1

@@ -18,9 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError
-from freespace.geometry import RoadModel, compute_disparity, fit_road_model, generate_view
+from freespace.errors import DatasetError, FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError
+from freespace.geometry import SGBM_MAX_DISPARITY, RoadModel, compute_disparity, fit_road_model, generate_view
 from freespace.io import (
+    IMAGE_SUFFIXES,
     PathLike,
     check_outputs,
     encode_image,
@@ -34,9 +35,7 @@ from freespace.io import (
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FitOptions", "GenerateResult", "generate_pair", "generate_dataset", "IMAGE_SUFFIXES"]
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")
+__all__ = ["FitOptions", "GenerateResult", "generate_pair", "generate_dataset"]
 
 
 @dataclass(frozen=True)
@@ -45,7 +44,7 @@ class FitOptions:
 
     robust: bool = True
     inlier_threshold: float = 1.0
-    max_disparity: int = 128
+    max_disparity: int = SGBM_MAX_DISPARITY
 
     def check(self) -> None:
         """Raise InvalidOptionError for out-of-range values."""
@@ -177,9 +176,9 @@ def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> 
     record: dict[str, Any] = {"frame": frame.name}
     try:
         if frame.right is None:
-            raise FreespaceError("missing right image")
+            raise DatasetError("missing right image")
         if frame.label is None:
-            raise FreespaceError("missing road label")
+            raise DatasetError("missing road label")
         sample = _DATASET.load(index)
         result = generate_arrays(sample.left, sample.right, sample.label.road & sample.label.valid,
                                  sample.disparity, options)

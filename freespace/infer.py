@@ -14,15 +14,13 @@ from typing import Any
 import numpy as np
 
 from freespace.errors import InputFileError, InvalidOptionError
-from freespace.io import PathLike, atomic_write_bytes, read_image, read_kitti_calib, write_image, write_json
+from freespace.io import IMAGE_SUFFIXES, PathLike, atomic_write_bytes, read_image, read_kitti_calib, write_image, write_json
 from freespace.metrics import to_confidence
 from freespace.predictor import Predictor, load_checkpoint
 
 log = logging.getLogger(__name__)
 
 __all__ = ["predict_folder", "export_model", "kitti_submit"]
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm")
 
 
 def _inputs(path: Path) -> list[Path]:
@@ -131,7 +129,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
     from freespace.data.kitti_road import KittiRoad
 
     predictor = Predictor(checkpoint=checkpoint)
-    ds = KittiRoad(root, "testing", disparity="none")
+    ds = KittiRoad(root, "testing", disparity_mode="none")
     missing = [f.name for f in ds.frames if f.calib is None]
     if missing:
         raise InputFileError(f"{len(missing)} testing frames have no calibration (first: {missing[0]}); the BEV "

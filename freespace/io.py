@@ -35,12 +35,15 @@ PathLike = str | os.PathLike[str]
 
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
 DEPTH_SUFFIXES = (".png", ".npy", ".pfm")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")  # what OpenCV reads and writes here
 
 #: the class id of don't-care pixels in label class maps (losses ignore it, metrics skip it)
 IGNORE_INDEX = 255
 
 __all__ = [
     "IGNORE_INDEX",
+    "DISPARITY_SUFFIXES",
+    "IMAGE_SUFFIXES",
     "RoadLabel",
     "atomic_write_bytes",
     "atomic_write_text",

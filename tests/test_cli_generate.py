@@ -194,3 +194,16 @@ def test_unwritable_model_json_leaves_no_image(pair_files: dict[str, Path], tmp_
                       str(tmp_path / "blocker" / "M.json"))
     assert main(args) == 2
     assert not out.exists()
+
+
+def test_unusable_inputs_raise_typed_errors() -> None:
+    from freespace.errors import RoadFitError
+    from freespace.generate import generate_arrays
+
+    image = np.zeros((40, 60, 3), np.uint8)
+    road = np.zeros((40, 60), bool)
+    with pytest.raises(RoadFitError, match="marks no road pixel"):
+        generate_arrays(image, image, road, np.ones((40, 60), np.float32))
+    road[30:, :] = True
+    with pytest.raises(RoadFitError, match="no valid value"):
+        generate_arrays(image, image, road, np.full((40, 60), np.nan, np.float32))

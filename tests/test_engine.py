@@ -4,6 +4,7 @@ atomic checkpoints, DDP with two CPU processes."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import subprocess
@@ -17,7 +18,7 @@ import yaml
 from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.engine.config import TrainConfig
-from freespace.errors import FreespaceError
+from freespace.errors import FreespaceError, InputFileError
 from freespace.io import IGNORE_INDEX
 
 
@@ -131,6 +132,59 @@ def test_config_round_trip(tmp_path: Path) -> None:
     (tmp_path / "bad.yaml").write_text("!!python/object/apply:os.system ['echo hi']\n")
     with pytest.raises(FreespaceError):
         TrainConfig.load(tmp_path / "bad.yaml")
+
+
+def test_config_file_and_flags(tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                               capsys: pytest.CaptureFixture) -> None:
+    import freespace.engine.train as train_module
+
+    seen: list[TrainConfig] = []
+
+    def fake_training(config: TrainConfig, resume: bool, progress: bool) -> dict[str, float]:
+        seen.append(config)
+        return dict.fromkeys(("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"), 0.5)
+
+    monkeypatch.setattr(train_module, "run_training", fake_training)
+    run = TrainConfig(dataset="synth", root=str(tiny), out=str(tmp_path / "a"), model="segnet", epochs=7,
+                      image_size=(64, 96), splits_dir=str(tmp_path), disparity_mode="sgbm", tensorboard=False)
+    run.save(tmp_path / "config.yaml")
+    # a run's config.yaml, flags override it
+    assert main(["train", "--config", str(tmp_path / "config.yaml"), "--epochs", "3", "--out", str(tmp_path / "b")]) == 0
+    assert seen[-1] == dataclasses.replace(run, epochs=3, out=str(tmp_path / "b"))
+    # flags alone: every field has one (names of the CLI kept: --splits, --disparity-source)
+    assert main(["train", "--dataset", "synth", "--root", str(tiny), "--out", str(tmp_path / "c"), "--model", "segnet",
+                 "--epochs", "7", "--image-size", "64x96", "--splits", str(tmp_path), "--disparity-source", "sgbm"]) == 0
+    assert seen[-1] == dataclasses.replace(run, out=str(tmp_path / "c"))
+    # a config.yaml written before the renames still reads
+    old = {**run.to_dict(), "splits": str(tmp_path), "disparity": "sgbm"}
+    del old["splits_dir"], old["disparity_mode"]
+    (tmp_path / "old.yaml").write_text(yaml.safe_dump(old))
+    assert TrainConfig.load(tmp_path / "old.yaml") == run
+    capsys.readouterr()
+    for text, message in [("epoch: 3\n", "unknown option epoch;"), ("epochs: ten\n", "epochs must be an integer"),
+                          ("image_size: 12x5\n", "--image-size must be HxW"), ("- 3\n", "not a freespace training config")]:
+        (tmp_path / "bad.yaml").write_text(text)
+        assert main(["train", "--config", str(tmp_path / "bad.yaml"), "--dataset", "synth", "--root", str(tiny),
+                     "--out", str(tmp_path / "d")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    assert main(["train", "--config", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "d")]) == 2
+    assert "config file not found" in capsys.readouterr().err
+    assert len(seen) == 2 and not (tmp_path / "d").exists()
+
+
+def test_missing_root_error(tmp_path: Path) -> None:
+    with pytest.raises(InputFileError, match="dataset root not found"):
+        TrainConfig(dataset="synth", root=str(tmp_path / "none"), out=str(tmp_path / "o")).check()
+
+
+def test_evaluate_subset_names(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["evaluate", "--checkpoint", str(tmp_path / "x.ckpt"), "--dataset", "synth", "--root", str(tiny),
+                 "--subset", "every", "--out", str(tmp_path / "e")]) == 2
+    assert "--subset must be train, val, test or all" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # the on-disk split is --split; --disk-split is gone
+        main(["evaluate", "--checkpoint", "x", "--dataset", "synth", "--root", str(tiny), "--disk-split", "training",
+              "--out", str(tmp_path / "e")])
 
 
 def test_ddp_two_cpu_processes(tiny: Path, tmp_path: Path) -> None:

@@ -23,15 +23,23 @@ from typing import Any
 
 import numpy as np
 
-from freespace.data.base import FrameRef, Problem, StereoRoadDataset, register_dataset
+from freespace.data.base import FrameRef, Problem, StereoRoadDataset
+from freespace.data.registry import register_dataset
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
 from freespace.geometry import StereoCalibration
-from freespace.io import DISPARITY_SUFFIXES, PathLike, RoadLabel, read_disparity, read_raw, read_road_label
+from freespace.io import (
+    DISPARITY_SUFFIXES,
+    IMAGE_SUFFIXES,
+    PathLike,
+    RoadLabel,
+    read_disparity,
+    read_raw,
+    read_road_label,
+)
 
 __all__ = ["FolderSpec", "GenericStereo", "SynthiaStereo", "CarlaStereo", "CONFIG_NAME"]
 
 CONFIG_NAME = "freespace.yaml"
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 LABEL_ENCODINGS = ("class_id", "kitti", "mask")
 DEPTH_ENCODINGS = ("png16", "carla_rgb", "float")
 

@@ -21,7 +21,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from freespace.data.base import FrameRef, Problem, StereoRoadDataset, register_dataset
+from freespace.data.base import FrameRef, Problem, StereoRoadDataset
+from freespace.data.registry import register_dataset
 from freespace.errors import DatasetError, InputFileError
 from freespace.geometry import StereoCalibration
 from freespace.io import DISPARITY_SUFFIXES, PathLike, RoadLabel, read_kitti_calib, read_road_label

@@ -78,7 +78,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
                  size: tuple[int, int] | None = None, augment: bool = False, seed: int = 0,
                  cache: bool = False) -> None:
         self.dataset = dataset
-        wanted = list(names) if names is not None else [f.name for f in dataset.frames if f.label is not None]
+        wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
         self.items = [n if isinstance(n, Item) else Item(dataset.index(n), n) for n in wanted]
         unlabelled = [it.name for it in self.items if dataset.frames[it.index].label is None]
         if unlabelled:

@@ -4,7 +4,6 @@ decoded-image caching) are :class:`freespace.data.torch_dataset.RoadSegmentation
 
 from __future__ import annotations
 
-import copy
 import logging
 import os
 from pathlib import Path
@@ -13,7 +12,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from freespace.data.base import StereoRoadDataset, get_dataset
+from freespace.data.base import StereoRoadDataset
+from freespace.data.registry import get_dataset
 from freespace.data.splits import make_splits, read_splits, write_splits
 from freespace.data.torch_dataset import Item
 from freespace.engine.config import TrainConfig
@@ -61,16 +61,17 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
 
     Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`) and ``"size"`` (H, W).
     """
-    ds = get_dataset(config.dataset, config.root, config.split, disparity=config.disparity, cache_dir=config.cache_dir)
-    labelled = [f for f in ds.frames if f.label is not None]
+    ds = get_dataset(config.dataset, config.root, config.split, disparity_mode=config.disparity_mode,
+                     cache_dir=config.cache_dir)
+    labelled = ds.labelled().frames
     if config.max_frames is not None:
         labelled = labelled[: config.max_frames]
     if len(labelled) < 3:
         raise DatasetError(f"{config.dataset} at {config.root} has {len(labelled)} labelled frames; training needs ≥ 3")
     names = [f.name for f in labelled]
     split_dir = run_dir / "splits"
-    if config.splits:
-        splits = read_splits(config.splits, known=names)
+    if config.splits_dir:
+        splits = read_splits(config.splits_dir, known=names)
     elif (split_dir / "train.txt").is_file():
         splits = read_splits(split_dir, known=names)
     else:
@@ -92,8 +93,7 @@ def _generated_views(ds: StereoRoadDataset, indices: list[int], folder: Path) ->
     """DS-Generator views of the given frames (made once, resumable), as items with the frames' labels."""
     from freespace.generate import generate_dataset
 
-    sub = copy.copy(ds)
-    sub.frames = [ds.frames[i] for i in indices if ds.frames[i].right is not None]
+    sub = ds.subset(ds.frames[i].name for i in indices if ds.frames[i].right is not None)
     if not sub.frames:
         raise DatasetError("--augment homography needs right images; this dataset has none")
     if is_rank_zero():

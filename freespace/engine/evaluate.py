@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from freespace.data.base import get_dataset
+from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError
 from freespace.io import PathLike, write_image, write_json
@@ -23,28 +23,28 @@ from freespace.viz import overlay_errors, write_pr_curve
 __all__ = ["evaluate_checkpoint"]
 
 
-def _frames(ds, split: str, checkpoint: Path, splits_dir: PathLike | None) -> list[str]:
-    labelled = [f.name for f in ds.frames if f.label is not None]
-    if split == "all":
-        return labelled
+def _frames(ds, subset: str, checkpoint: Path, splits_dir: PathLike | None) -> list[str]:
+    if subset == "all":
+        return [f.name for f in ds.labelled()]
     folder = Path(splits_dir) if splits_dir else checkpoint.parent.parent / "splits"
-    if not (folder / f"{split}.txt").is_file():
-        raise InputFileError(f"no split lists at {folder}; give --splits DIR (train.txt, val.txt, test.txt) or --split all")
-    return read_splits(folder, known=[f.name for f in ds.frames])[split]
+    if not (folder / f"{subset}.txt").is_file():
+        raise InputFileError(f"no split lists at {folder}; give --splits DIR (train.txt, val.txt, test.txt) or --subset all")
+    return read_splits(folder, known=[f.name for f in ds.frames])[subset]
 
 
-def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out: PathLike, split: str = "test",
-                        splits_dir: PathLike | None = None, on_disk_split: str | None = None,
+def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out: PathLike, subset: str = "test",
+                        splits_dir: PathLike | None = None, split: str | None = None,
                         progress: bool = True) -> dict[str, Any]:
-    """Evaluate ``checkpoint`` on ``split`` (train/val/test from the run's lists, or all) of a dataset."""
-    if split not in ("train", "val", "test", "all"):
-        raise InvalidOptionError(f"--split must be train, val, test or all, got {split!r}")
+    """Evaluate ``checkpoint`` on ``subset`` (train/val/test from the run's lists, or all labelled frames) of
+    the on-disk ``split`` of a dataset."""
+    if subset not in ("train", "val", "test", "all"):
+        raise InvalidOptionError(f"--subset must be train, val, test or all, got {subset!r}")
     checkpoint, out = Path(checkpoint), Path(out)
     predictor = Predictor(checkpoint=checkpoint)
-    ds = get_dataset(dataset, root, on_disk_split, disparity="none")
-    names = _frames(ds, split, checkpoint, splits_dir)
+    ds = get_dataset(dataset, root, split, disparity_mode="none")
+    names = _frames(ds, subset, checkpoint, splits_dir)
     if not names:
-        raise DatasetError(f"split {split!r} has no labelled frames")
+        raise DatasetError(f"subset {subset!r} has no labelled frames")
     from tqdm import tqdm
 
     evaluator, seconds = RoadEvaluator(), 0.0
@@ -59,7 +59,7 @@ def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out:
         write_image(out / "overlays" / f"{name}.png", overlay_errors(sample.left, pred, label.road, label.valid))
     scores = evaluator.evaluate()
     metrics = {**{k: scores[k] for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap")},
-               "seconds_per_frame": seconds / len(names), "frames": len(names), "split": split,
+               "seconds_per_frame": seconds / len(names), "frames": len(names), "split": subset,
                "checkpoint": str(checkpoint)}
     write_pr_curve(out / "pr_curve.png", *evaluator.kitti.pr_curve())
     write_json(out / "metrics.json", metrics)

@@ -9,18 +9,12 @@ import lightning.pytorch as pl
 import numpy as np
 import torch
 
-from freespace.errors import FreespaceError
+from freespace.errors import TrainingError
 from freespace.io import IGNORE_INDEX
 from freespace.metrics import RoadEvaluator
 from freespace.models import create_model, main_logits
 
 __all__ = ["RoadModule", "TrainingError"]
-
-
-class TrainingError(FreespaceError):
-    """Training cannot go on (e.g. the loss became NaN)."""
-
-    exit_code = 1
 
 
 class RoadModule(pl.LightningModule):

@@ -24,7 +24,7 @@ from freespace.io import PathLike, atomic_write_text, write_csv, write_image, wr
 
 log = logging.getLogger(__name__)
 
-__all__ = ["reproduce", "tables_from_index", "VARIANTS", "METRICS"]
+__all__ = ["reproduce", "VARIANTS", "METRICS"]
 
 VARIANTS = ("none", "homography")
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
@@ -119,7 +119,7 @@ def _write_tables(out: Path, rows: list[dict[str, Any]], dataset: str, seeds: in
 
 def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int) -> None:
     """``figures/<model>.png``: test frames of seed 0 — image, X prediction, HA-X prediction (TP/FN/FP)."""
-    from freespace.data.base import get_dataset
+    from freespace.data.registry import get_dataset
     from freespace.data.splits import read_splits
     from freespace.predictor import Predictor
     from freespace.viz import caption, grid, overlay_errors
@@ -128,7 +128,7 @@ def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int) ->
     ckpts = {v: r / "checkpoints" / "best.ckpt" for v, r in runs.items()}
     if not all(c.is_file() for c in ckpts.values()) or frames < 1:
         return
-    ds = get_dataset(dataset, root, disparity="none")
+    ds = get_dataset(dataset, root, disparity_mode="none")
     names = read_splits(runs["none"] / "splits")["test"][:frames]
     predictors = {v: Predictor(checkpoint=c) for v, c in ckpts.items()}
     rows = []
@@ -141,15 +141,3 @@ def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int) ->
         rows.append(row)
     write_image(out / "figures" / f"{model}.png", grid(rows, width=min(480, rows[0][0].shape[1])))
 
-
-def tables_from_index(out: PathLike, dataset: str, seeds: int) -> list[dict[str, Any]]:
-    """Rebuild ``results.md``/``results.csv`` from ``OUT/index.json`` (e.g. of an interrupted run)."""
-    out = Path(out)
-    index = json.loads((out / "index.json").read_text())
-    models = list(dict.fromkeys(e["model"] for e in index))
-    results: dict[tuple[str, str], list[dict[str, float]]] = {}
-    for e in index:
-        results.setdefault((e["model"], e["variant"]), []).append(e["metrics"])
-    table = _table(models, results)
-    _write_tables(out, table, dataset, seeds)
-    return table
