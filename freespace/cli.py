@@ -68,6 +68,8 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
     g.add_argument("--cache-dir", metavar="DIR", help="SGBM disparity cache (default ~/.cache/freespace/sgbm)")
     p.add_argument("--workers", type=int, default=1, help="processes, for --dataset (default 1)")
     p.add_argument("--out", required=True, help="output image (one pair) or folder (dataset)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="--dataset: replace what an earlier run with other settings generated in --out")
     g = p.add_argument_group("road fit")
     g.add_argument("--inlier-threshold", type=float, default=1.0, metavar="PX",
                    help="disparity residual (pixels) above which a road pixel is an outlier (default 1.0)")
@@ -104,7 +106,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     from freespace.generate import generate_dataset
 
     dataset = _open_dataset(args)
-    summary = generate_dataset(dataset, args.out, workers=args.workers, options=options)
+    summary = generate_dataset(dataset, args.out, workers=args.workers, options=options, overwrite=args.overwrite)
     failed = summary["failed"]
     print(f"{summary['generated']} generated, {summary['skipped']} already done, {len(failed)} failed "
           f"of {summary['frames']} frames → {args.out}")
@@ -128,6 +130,8 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-roll", type=float, default=3.0, help="rig roll range ± degrees (default 3)")
     p.add_argument("--weather", help="comma-separated subset of clear,cloudy,rain,sunset,dusk,fog (default all)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a dataset rendered with other settings in --out (default: refuse)")
     p.set_defaults(func=cmd_synth)
 
 
@@ -139,7 +143,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
     config = SynthConfig(width=args.width, height=args.height, frames_per_scenario=args.frames_per_scenario,
                          planar=not args.non_planar, baseline=args.baseline, max_roll_deg=args.max_roll,
                          weathers=weathers)
-    rows = write_dataset(args.out, args.num, seed=args.seed, config=config, workers=args.workers)
+    rows = write_dataset(args.out, args.num, seed=args.seed, config=config, workers=args.workers,
+                         overwrite=args.overwrite)
     scenarios = len({r["scenario"] for r in rows})
     print(f"{len(rows)} stereo frames in {scenarios} scenarios ({args.width}×{args.height}) → {args.out}")
     return 0
@@ -183,7 +188,9 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     """``freespace datasets split``: the paper's train/val/test split by scenario, as list files."""
     from freespace.data.registry import get_dataset
     from freespace.data.splits import make_splits, write_splits
+    from freespace.io import check_outputs
 
+    check_outputs({"--out": args.out}, {"--root": args.root})
     dataset = get_dataset(args.dataset, args.root, args.split, disparity_mode="none")
     labelled = [(f.name, f.scenario) for f in dataset.labelled()]
     if not labelled:
@@ -274,8 +281,11 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     from freespace.io import write_json
     from freespace.kitti_eval import evaluate_kitti_dirs
 
+    from freespace.io import check_outputs
+
     if args.bev and not args.calib:
         raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
+    check_outputs({"--out": args.out}, {"--gt": args.gt, "--pred": args.pred, "--calib": args.calib})
     results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib if args.bev else None)
     write_json(args.out, results)
     print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
@@ -301,7 +311,9 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
 def cmd_predict(args: argparse.Namespace) -> int:
     """``freespace predict``: road confidence PNGs (KITTI format) and overlays."""
     from freespace.infer import Predictor, predict_folder
+    from freespace.io import check_outputs
 
+    check_outputs({"--out": args.out}, {"--input": args.input, "--checkpoint": args.checkpoint, "--onnx": args.onnx})
     predictor = Predictor(checkpoint=args.checkpoint, onnx=args.onnx)
     summary = predict_folder(predictor, args.input, args.out, batch_size=args.batch_size, progress=not args.no_progress)
     print(f"{summary['frames']} images, {summary['seconds_per_frame'] * 1000:.1f} ms per frame → {args.out}")

@@ -15,8 +15,8 @@ import numpy as np
 
 from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, write_dataset
-from freespace.data.synthetic.dataset import MAX_FRAMES, MAX_SEED
-from freespace.errors import FreespaceError, InvalidOptionError
+from freespace.data.synthetic.dataset import MAX_FRAMES
+from freespace.errors import FreespaceError, InvalidOptionError, check_seed
 from freespace.generate import generate_dataset
 from freespace.geometry import compute_disparity, fit_road_model
 from freespace.io import PathLike, read_disparity, read_image, read_road_label, write_image, write_json
@@ -52,8 +52,7 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
                                  + f", got {num_frames}")
     if epochs is not None and epochs < 1:
         raise InvalidOptionError(f"--epochs must be ≥ 1, got {epochs}")
-    if not 0 <= seed <= MAX_SEED:
-        raise InvalidOptionError(f"--seed must be in 0…2^63−1, got {seed}")
+    check_seed(seed)
     out = Path(out)
     t0 = time.perf_counter()
     log.info("rendering %d stereo frames into %s", num_frames, out / "dataset")

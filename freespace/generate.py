@@ -293,9 +293,9 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
                 pass  # unreadable report: do the frame again
         jobs.append((i, image_path, report_path, options))
     log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
-    from tqdm import tqdm
+    from freespace.log import progress_bar
 
-    bar = tqdm(total=len(jobs), desc="generate", unit="frame", disable=not progress or not jobs)
+    bar = progress_bar(None, total=len(jobs), desc="generate", unit="frame", enabled=progress and bool(jobs))
     t0 = time.perf_counter()
     if workers == 1 or len(jobs) <= 1:
         previous, _DATASET = _DATASET, dataset

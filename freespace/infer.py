@@ -14,7 +14,17 @@ from typing import Any
 import numpy as np
 
 from freespace.errors import InputFileError, InvalidOptionError
-from freespace.io import IMAGE_SUFFIXES, PathLike, atomic_write_bytes, read_image, read_kitti_calib, write_image, write_json
+from freespace.io import (
+    IMAGE_SUFFIXES,
+    PathLike,
+    atomic_write_bytes,
+    check_outputs,
+    read_image,
+    read_kitti_calib,
+    staged_folder,
+    write_image,
+    write_json,
+)
 from freespace.metrics import to_confidence
 from freespace.predictor import Predictor, load_checkpoint
 
@@ -37,17 +47,25 @@ def _inputs(path: Path) -> list[Path]:
 def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_size: int = 4,
                    progress: bool = True) -> dict[str, Any]:
     """Write ``OUT/<name>.png`` (8-bit road confidence, the input's size), ``OUT/overlays/<name>.png`` and
-    ``OUT/summary.json`` (frames, seconds per frame) for every image of ``inputs`` (a file or a folder)."""
-    from tqdm import tqdm
+    ``OUT/summary.json`` (frames, seconds per frame) for every image of ``inputs`` (a file or a folder).
+
+    The folder is written all or nothing and replaces an earlier ``predict`` output there whole."""
+    if batch_size < 1:
+        raise InvalidOptionError("--batch-size must be ≥ 1")
+    check_outputs({"--out": out}, {"--input": inputs})
+    files = _inputs(Path(inputs))
+    with staged_folder(out, "summary.json", "predict") as staging:
+        return _predict_into(predictor, files, staging, batch_size, progress)
+
+
+def _predict_into(predictor: Predictor, files: list[Path], out: Path, batch_size: int,
+                  progress: bool) -> dict[str, Any]:
+    from freespace.log import progress_bar
 
     from freespace.viz import overlay_road
 
-    if batch_size < 1:
-        raise InvalidOptionError("--batch-size must be ≥ 1")
-    files = _inputs(Path(inputs))
-    out = Path(out)
     seconds = 0.0
-    bar = tqdm(total=len(files), desc="predict", unit="image", disable=not progress)
+    bar = progress_bar(None, total=len(files), desc="predict", unit="image", enabled=progress)
     for start in range(0, len(files), batch_size):
         chunk = files[start:start + batch_size]
         images = [read_image(p, what="input image") for p in chunk]
@@ -74,6 +92,7 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any
 
     if fmt not in ("onnx", "torchscript"):
         raise InvalidOptionError(f"--format must be onnx or torchscript, got {fmt!r}")
+    check_outputs({"--out": out}, {"--checkpoint": checkpoint})
     model, hp = load_checkpoint(checkpoint)
     size = tuple(hp.get("image_size") or (384, 1248))
     example = torch.rand(1, 3, *size)
@@ -122,24 +141,36 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any
 
 def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: bool = True) -> dict[str, Any]:
     """Predict the KITTI road testing split and write the benchmark's bird's-eye-view confidence maps
-    (``OUT/<cat>_road_<id>.png``, 800×400) and ``OUT/submission.zip`` holding them."""
-    from tqdm import tqdm
+    (``OUT/<cat>_road_<id>.png``, 800×400) and ``OUT/submission.zip`` holding them.
 
-    from freespace.bev import to_bev
+    Every calibration file is read before any prediction; the folder is written all or nothing and
+    replaces an earlier submission there whole."""
     from freespace.data.kitti_road import KittiRoad
 
-    predictor = Predictor(checkpoint=checkpoint)
+    check_outputs({"--out": out}, {"--checkpoint": checkpoint, "--root": root})
     ds = KittiRoad(root, "testing", disparity_mode="none")
     missing = [f.name for f in ds.frames if f.calib is None]
     if missing:
         raise InputFileError(f"{len(missing)} testing frames have no calibration (first: {missing[0]}); the BEV "
                              f"transform needs data_road/testing/calib/<frame>.txt")
-    out = Path(out)
+    calibs = [read_kitti_calib(f.calib) for f in ds.frames]  # type: ignore[arg-type]  # every file checked first
+    predictor = Predictor(checkpoint=checkpoint)
+    with staged_folder(out, "submission.zip", "kitti-submit") as staging:
+        names = _submit_into(predictor, ds, calibs, staging, progress)
+    return {"frames": len(names), "zip": str(Path(out) / "submission.zip")}
+
+
+def _submit_into(predictor: Predictor, ds: Any, calibs: list[dict[str, np.ndarray]], out: Path,
+                 progress: bool) -> list[str]:
+    from freespace.log import progress_bar
+
+    from freespace.bev import to_bev
+
     names = []
-    for i, frame in enumerate(tqdm(ds.frames, desc="kitti-submit", unit="frame", disable=not progress)):
+    for i, frame in enumerate(progress_bar(ds.frames, desc="kitti-submit", unit="frame", enabled=progress)):
         image = ds.load(i, right=False, label=False, disparity=False).left
         conf = to_confidence(predictor.predict([image])[0])
-        bev = to_bev(conf, read_kitti_calib(frame.calib))  # type: ignore[arg-type]
+        bev = to_bev(conf, calibs[i])
         name = f"{frame.category}_road_{frame.name.split('_')[1]}.png"
         write_image(out / name, bev)
         names.append(name)
@@ -148,4 +179,4 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
         for name in names:
             zf.write(out / name, arcname=name)
     atomic_write_bytes(out / "submission.zip", buf.getvalue())
-    return {"frames": len(names), "zip": str(out / "submission.zip")}
+    return names

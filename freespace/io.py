@@ -20,8 +20,10 @@ import json
 import math
 import os
 import re
+import shutil
 import tempfile
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -37,11 +39,16 @@ DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
 DEPTH_SUFFIXES = (".png", ".npy", ".pfm")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")  # what OpenCV reads and writes here
 
+#: the largest image side (pixels) a network is trained or run at: bounds sizes read from options and files
+MAX_IMAGE_SIDE = 8192
+
 #: the class id of don't-care pixels in label class maps (losses ignore it, metrics skip it)
 IGNORE_INDEX = 255
 
 __all__ = [
     "IGNORE_INDEX",
+    "MAX_IMAGE_SIDE",
+    "staged_folder",
     "DISPARITY_SUFFIXES",
     "IMAGE_SUFFIXES",
     "RoadLabel",
@@ -151,6 +158,46 @@ def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str,
     writer.writeheader()
     writer.writerows(rows)
     return atomic_write_text(path, buf.getvalue())
+
+
+@contextmanager
+def staged_folder(out: PathLike, marker: str, command: str) -> Iterator[Path]:
+    """An output folder written all or nothing, never mixed with an earlier run's files.
+
+    Yields a temporary folder beside ``out`` to write into. When the block ends normally the temporary
+    folder takes the place of ``out`` (an earlier output of the same command there is replaced whole);
+    when it raises, the temporary folder is removed and ``out`` is left as it was.
+
+    Args:
+        out: the output folder.
+        marker: a file name that the command always writes, by which an earlier output of it is known
+            (e.g. ``summary.json``). A non-empty ``out`` without it is refused: it holds someone else's files.
+        command: the command's name, for the message.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InvalidOptionError(f"--out {out} is a file; give a folder")
+    if out.is_dir() and any(out.iterdir()) and not (out / marker).is_file():
+        raise InvalidOptionError(f"--out {out} holds files that freespace {command} did not write; choose a new or "
+                                 f"empty folder")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    except OSError as exc:
+        raise OutputError(f"cannot write {out}: {exc.strerror}; choose a writable output folder") from None
+    try:
+        yield tmp
+        os.chmod(tmp, 0o777 & ~_UMASK)
+        old = None
+        if out.exists():
+            old = out.parent / f".{out.name}.{tmp.name}.old"
+            os.replace(out, old)
+        os.replace(tmp, out)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 # ---------------------------------------------------------------------------------------------------

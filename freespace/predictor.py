@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
-from freespace.io import PathLike
+from freespace.io import MAX_IMAGE_SIDE, PathLike
 
 if TYPE_CHECKING:
     from freespace.models import SegmentationModel
@@ -51,6 +51,29 @@ def load_checkpoint(path: PathLike) -> tuple[SegmentationModel, dict[str, Any]]:
     return model.eval(), hp
 
 
+def _image_size(size: Any, source: PathLike) -> tuple[int, int] | None:
+    """The training size ``(H, W)`` a model file states, checked: 1…MAX_IMAGE_SIDE pixels a side."""
+    if size is None:
+        return None
+    if (not isinstance(size, (list, tuple)) or len(size) != 2
+            or not all(isinstance(x, int) and not isinstance(x, bool) and 1 <= x <= MAX_IMAGE_SIDE for x in size)):
+        raise CorruptFileError(f"{source} states an image size of {size!r}; a freespace model's is [H, W] with "
+                               f"1…{MAX_IMAGE_SIDE} pixels a side")
+    return int(size[0]), int(size[1])
+
+
+def _check_onnx_signature(session: Any, path: Path) -> None:
+    """Refuse an ONNX model that does not take one N×3×H×W image and give N×C×H×W logits (C ≥ 2)."""
+    inputs, outputs = session.get_inputs(), session.get_outputs()
+    ok = (len(inputs) == 1 and len(outputs) >= 1 and len(inputs[0].shape) == 4 and inputs[0].shape[1] in (3, "3")
+          and "float" in inputs[0].type and len(outputs[0].shape) == 4
+          and not (isinstance(outputs[0].shape[1], int) and outputs[0].shape[1] < 2))
+    if not ok:
+        got = ", ".join(f"{i.name} {i.shape}" for i in inputs)
+        raise CorruptFileError(f"{path} is not a freespace road model: it takes {got or 'no input'}, expected one "
+                               f"float image N×3×H×W (export one with freespace export --format onnx)")
+
+
 class Predictor:
     """Road probabilities from a training checkpoint (PyTorch) or an exported ONNX model (onnxruntime).
 
@@ -64,7 +87,7 @@ class Predictor:
         self.image_size: tuple[int, int] | None = None
         if checkpoint is not None:
             self.model, hp = load_checkpoint(checkpoint)
-            self.image_size = tuple(hp["image_size"]) if hp.get("image_size") else None
+            self.image_size = _image_size(hp.get("image_size"), checkpoint)
             self.name = hp["model"]
             self.session = None
         else:
@@ -77,8 +100,13 @@ class Predictor:
                 self.session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
             except Exception as exc:  # onnxruntime raises its own types for corrupt files
                 raise CorruptFileError(f"cannot load {path} as an ONNX model ({type(exc).__name__})") from None
+            _check_onnx_signature(self.session, path)
             meta = self.session.get_modelmeta().custom_metadata_map
-            self.image_size = tuple(json.loads(meta["image_size"])) if meta.get("image_size") else None
+            try:
+                size = json.loads(meta["image_size"]) if meta.get("image_size") else None
+            except ValueError:
+                size = "unreadable"
+            self.image_size = _image_size(size, path)
             self.name = meta.get("model", path.stem)
             self.model = None
 

@@ -25,7 +25,7 @@ from freespace.geometry.depth import (
 )
 from freespace.io import read_depth, read_kitti_calib, write_disparity
 
-from conftest import shared_path
+from helpers import shared_path
 
 # --- d = f·B/Z ---------------------------------------------------------------------------------------
 

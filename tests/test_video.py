@@ -14,7 +14,7 @@ from freespace.errors import CorruptFileError, InputFileError, InvalidOptionErro
 from freespace.io import write_image
 from freespace.video import DEFAULT_FPS, VideoWriter, iter_frames, open_frames
 
-from conftest import textured_image
+from helpers import textured_image
 
 
 def _frames(n: int, shape: tuple[int, int] = (96, 128)) -> list[np.ndarray]:

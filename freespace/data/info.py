@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from collections import Counter
-from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from freespace.data.base import Problem, StereoRoadDataset, check_dataset_root
 from freespace.data.registry import get_dataset, get_dataset_class
@@ -35,12 +36,12 @@ def check_dataset(dataset: StereoRoadDataset, progress: bool = False) -> list[Pr
 
 def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[list[Problem], dict[str, tuple[int, int]]]:
     """:func:`check_dataset`, plus the ``(H, W)`` of every readable left image by frame name."""
-    from tqdm import tqdm
+    from freespace.log import progress_bar
 
     problems = list(dataset.orphans())
     left_sizes: dict[str, tuple[int, int]] = {}
     expect = dataset.expected_partners()
-    for frame in tqdm(dataset.frames, desc="check", unit="frame", disable=not progress):
+    for frame in progress_bar(dataset.frames, desc="check", unit="frame", enabled=progress):
         sizes: dict[str, tuple[int, int]] = {}
         for kind in ("left", "right", "label", "disparity", "depth"):
             path = getattr(frame, kind)
@@ -48,9 +49,18 @@ def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[li
                 if kind in expect:
                     problems.append(Problem(frame.name, f"missing {kind} file"))
                 continue
-            try:
-                if kind == "disparity" and Path(path).suffix.lower() != ".png":
-                    sizes[kind] = read_disparity(path).shape  # type: ignore[assignment]
+            try:  # read as generate and train read them, so that every problem they would hit shows here
+                if kind == "disparity":
+                    disparity = read_disparity(path)
+                    sizes[kind] = disparity.shape  # type: ignore[assignment]
+                    if not np.isfinite(disparity).any():
+                        problems.append(Problem(frame.name, f"disparity {path} has no valid value (all 0 or NaN)"))
+                elif kind == "label":
+                    label = dataset.read_label(frame)
+                    sizes[kind] = label.road.shape  # type: ignore[assignment]
+                    if not (label.road & label.valid).any():
+                        problems.append(Problem(frame.name, f"label {path} marks no road pixel (the DS-Generator "
+                                                            f"needs road to fit)"))
                 else:
                     sizes[kind] = image_size(path)
             except FreespaceError as exc:

@@ -13,8 +13,8 @@ from dataclasses import MISSING, Field, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Union, get_args, get_origin, get_type_hints
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
-from freespace.io import PathLike, atomic_write_text
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, check_seed
+from freespace.io import MAX_IMAGE_SIDE, PathLike, atomic_write_text
 
 __all__ = ["TrainConfig", "parse_size", "AUGMENTS", "PRESETS", "STRATEGIES", "add_config_arguments",
            "config_from_args", "read_config_yaml"]
@@ -32,8 +32,9 @@ def parse_size(text: str | None) -> tuple[int, int] | None:
     if text is None or str(text).lower() == "auto":
         return None
     m = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", str(text))
-    if not m or min(int(m.group(1)), int(m.group(2))) < 32:
-        raise InvalidOptionError(f"--image-size must be HxW with both ≥ 32 (e.g. 384x1248), got {text!r}")
+    if not m or min(int(m.group(1)), int(m.group(2))) < 32 or max(int(m.group(1)), int(m.group(2))) > MAX_IMAGE_SIDE:
+        raise InvalidOptionError(f"--image-size must be HxW with both in 32…{MAX_IMAGE_SIDE} (e.g. 384x1248), "
+                                 f"got {text!r}")
     return int(m.group(1)), int(m.group(2))
 
 
@@ -116,6 +117,7 @@ class TrainConfig:
                 raise InvalidOptionError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(self, name)}")
         if self.workers < 0:
             raise InvalidOptionError("--workers must be ≥ 0")
+        check_seed(self.seed)
         if not (0 < self.lr < 10) or not (0 <= self.momentum < 1) or self.weight_decay < 0:
             raise InvalidOptionError("--lr must be in (0, 10), --momentum in [0, 1), --weight-decay ≥ 0")
         if self.max_frames is not None and self.max_frames < 3:

@@ -15,7 +15,7 @@ from typing import Any
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError
-from freespace.io import PathLike, write_image, write_json
+from freespace.io import PathLike, check_outputs, staged_folder, write_image, write_json
 from freespace.metrics import RoadEvaluator
 from freespace.predictor import Predictor
 from freespace.viz import overlay_errors, write_pr_curve
@@ -40,27 +40,30 @@ def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out:
     if subset not in ("train", "val", "test", "all"):
         raise InvalidOptionError(f"--subset must be train, val, test or all, got {subset!r}")
     checkpoint, out = Path(checkpoint), Path(out)
+    check_outputs({"--out": out}, {"--checkpoint": checkpoint, "--root": root})
     predictor = Predictor(checkpoint=checkpoint)
     ds = get_dataset(dataset, root, split, disparity_mode="none")
     names = _frames(ds, subset, checkpoint, splits_dir)
     if not names:
         raise DatasetError(f"subset {subset!r} has no labelled frames")
-    from tqdm import tqdm
+    from freespace.log import progress_bar
 
     evaluator, seconds = RoadEvaluator(), 0.0
-    for name in tqdm(names, desc="evaluate", unit="frame", disable=not progress):
-        sample = ds.load(ds.index(name), right=False, disparity=False)
-        t0 = time.perf_counter()
-        prob = predictor.predict([sample.left])[0]
-        seconds += time.perf_counter() - t0
-        label = sample.label
-        evaluator.process(prob, label.road, label.valid)
-        pred = prob >= evaluator.threshold
-        write_image(out / "overlays" / f"{name}.png", overlay_errors(sample.left, pred, label.road, label.valid))
-    scores = evaluator.evaluate()
-    metrics = {**{k: scores[k] for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap")},
-               "seconds_per_frame": seconds / len(names), "frames": len(names), "split": subset,
-               "checkpoint": str(checkpoint)}
-    write_pr_curve(out / "pr_curve.png", *evaluator.kitti.pr_curve())
-    write_json(out / "metrics.json", metrics)
+    with staged_folder(out, "metrics.json", "evaluate") as staging:  # all or nothing
+        for name in progress_bar(names, desc="evaluate", unit="frame", enabled=progress):
+            sample = ds.load(ds.index(name), right=False, disparity=False)
+            t0 = time.perf_counter()
+            prob = predictor.predict([sample.left])[0]
+            seconds += time.perf_counter() - t0
+            label = sample.label
+            evaluator.process(prob, label.road, label.valid)
+            pred = prob >= evaluator.threshold
+            write_image(staging / "overlays" / f"{name}.png",
+                        overlay_errors(sample.left, pred, label.road, label.valid))
+        scores = evaluator.evaluate()
+        metrics = {**{k: scores[k] for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap")},
+                   "seconds_per_frame": seconds / len(names), "frames": len(names), "split": subset,
+                   "checkpoint": str(checkpoint)}
+        write_pr_curve(staging / "pr_curve.png", *evaluator.kitti.pr_curve())
+        write_json(staging / "metrics.json", metrics)
     return metrics

@@ -35,6 +35,10 @@ def _name(model: str, variant: str, seed: int) -> str:
     return f"{model}-{'ha' if variant == 'homography' else 'orig'}-s{seed}"
 
 
+#: more seeds than this is a typo, not an experiment (each seed trains every network and variant)
+MAX_SEEDS = 1000
+
+
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str], seeds: int = 3, epochs: int = 50,
               image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4, workers: int = 0,
               max_frames: int | None = None, figures: int = 3, progress: bool = True) -> dict[str, Any]:
@@ -45,8 +49,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     unknown = [m for m in models if m not in list_models()]
     if unknown or not models:
         raise InvalidOptionError(f"unknown models {unknown}; choose from {', '.join(list_models())} or all")
-    if seeds < 1:
-        raise InvalidOptionError("--seeds must be ≥ 1")
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
     out = Path(out)
     index: list[dict[str, Any]] = []
     results: dict[tuple[str, str], list[dict[str, float]]] = {}

@@ -29,7 +29,7 @@ import numpy as np
 
 from freespace.data.synthetic.render import StereoSample, render_sample
 from freespace.data.synthetic.scene import SynthConfig
-from freespace.errors import InvalidOptionError
+from freespace.errors import InvalidOptionError, check_seed
 from freespace.io import (PathLike, atomic_write_text, road_label_to_kitti, write_csv, write_disparity, write_image,
                           write_json)
 
@@ -85,7 +85,6 @@ def _init_worker() -> None:
 
 
 MAX_FRAMES = 1_000_000
-MAX_SEED = 2**63 - 1
 
 
 def _claim_output(out: Path, settings: dict[str, Any], overwrite: bool) -> None:
@@ -118,7 +117,7 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
                   workers: int = 1, progress: bool = True, overwrite: bool = False) -> list[dict[str, Any]]:
     """Render frames ``0 … num−1`` and write them as a KITTI road tree (see the module docstring).
 
-    ``num`` is at most :data:`MAX_FRAMES`, ``seed`` in ``0 … 2⁶³−1``. A folder that already holds a dataset
+    ``num`` is at most :data:`MAX_FRAMES`, ``seed`` in ``0 … 2³²−1``. A folder that already holds a dataset
     rendered with other settings (seed or configuration, from its ``synth.json``) is refused unless
     ``overwrite``, which removes it first; with the same settings the frames are (re)written and the
     index covers frames ``0 … num−1``.
@@ -129,8 +128,7 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
     config.check()
     if not 1 <= num <= MAX_FRAMES:
         raise InvalidOptionError(f"--num must be in 1…{MAX_FRAMES:,}, got {num}")
-    if not 0 <= seed <= MAX_SEED:
-        raise InvalidOptionError(f"--seed must be in 0…2^63−1, got {seed}")
+    check_seed(seed)
     if workers < 1:
         raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
     out = Path(out)
@@ -138,10 +136,10 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
         raise InvalidOptionError(f"--out {out} is a file; give a folder for the dataset")
     settings = {"seed": seed, "config": json.loads(json.dumps(asdict(config)))}
     _claim_output(out, settings, overwrite)
-    from tqdm import tqdm
+    from freespace.log import progress_bar
 
     jobs = ((i, seed, config, str(out)) for i in range(num))
-    bar = tqdm(total=num, desc="synth", unit="frame", disable=not progress)
+    bar = progress_bar(None, total=num, desc="synth", unit="frame", enabled=progress)
     rows: list[dict[str, Any]] = []
     if workers == 1:
         for job in jobs:
