@@ -10,6 +10,7 @@ import json
 import logging
 import math
 import multiprocessing
+import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -196,12 +197,12 @@ def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> 
     return record
 
 
-def _init_worker(dataset: Any) -> None:
+def _init_worker(dataset: Any, parent: int) -> None:
     import cv2
 
     from freespace.parallel import die_with_parent
 
-    die_with_parent()
+    die_with_parent(parent)
     global _DATASET
     _DATASET = dataset
     cv2.setNumThreads(1)
@@ -308,7 +309,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
             _DATASET = previous
     else:
         # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset,),
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset, os.getpid()),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = [pool.submit(_process_frame, *job) for job in jobs]
             for future in as_completed(futures):

@@ -20,13 +20,14 @@ __all__ = ["die_with_parent"]
 _PR_SET_PDEATHSIG = 1
 
 
-def die_with_parent(poll_seconds: float = 1.0) -> None:
+def die_with_parent(parent: int, poll_seconds: float = 1.0) -> None:
     """Arrange for this (worker) process to end when its parent process ends.
 
     Args:
+        parent: the process id of the parent, taken in the parent (``os.getpid()`` there): a worker that
+            starts after its parent died sees another parent and ends at once.
         poll_seconds: how often the fallback watcher checks the parent, in seconds.
     """
-    parent = os.getppid()
     if sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)

@@ -70,7 +70,7 @@ def _check_onnx_signature(session: Any, path: Path) -> None:
           and not (isinstance(outputs[0].shape[1], int) and outputs[0].shape[1] < 2))
     if not ok:
         got = ", ".join(f"{i.name} {i.shape}" for i in inputs)
-        raise CorruptFileError(f"{path} is not a freespace road model: it takes {got or 'no input'}, expected one "
+        raise CorruptFileError(f"{path} is not a freespace road model: its input is {got or 'nothing'}, expected one "
                                f"float image N×3×H×W (export one with freespace export --format onnx)")
 
 

@@ -123,7 +123,7 @@ def test_kitti_problems_are_listed_by_frame(tmp_path: Path, capsys: pytest.Captu
     write_image(tmp_path / "data_road_right/training/image_3/um_000099.png",          # mispaired
                 np.zeros(SHAPE + (3,), np.uint8))
     (tr / "gt_image_2/uu_road_000002.png").write_bytes(b"\x89PNG\r\n\x1a\ntruncated")  # corrupt
-    write_image(tr / "gt_image_2/um_road_000003.png", np.zeros((100, 320, 3), np.uint8))  # wrong size
+    write_image(tr / "gt_image_2/um_road_000003.png", np.full((100, 320, 3), (255, 0, 255), np.uint8))  # wrong size
     problems = [str(p) for p in check_dataset(KittiRoad(tmp_path))]
     joined = "\n".join(problems)
     assert "umm_000001: missing right file" in joined
@@ -371,7 +371,7 @@ def test_torch_dataset_training_options(tmp_path: Path) -> None:
     from freespace.io import IGNORE_INDEX
 
     names = kitti_tree(tmp_path, 3)
-    kitti = KittiRoad(tmp_path, disparity="none")
+    kitti = KittiRoad(tmp_path, disparity_mode="none")
     view = np.full(SHAPE + (3,), 200, np.uint8)
     write_image(tmp_path / "view.png", view)
     items = [Item(kitti.index(names[0]), names[0]), Item(kitti.index(names[1]), names[1], str(tmp_path / "view.png"))]

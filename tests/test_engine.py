@@ -109,9 +109,9 @@ def test_nan_loss_stops_the_run(tiny: Path, tmp_path: Path, monkeypatch: pytest.
 
 
 def test_checkpoints_are_written_atomically(tmp_path: Path) -> None:
-    from freespace.engine.train import _atomic_io
+    from freespace.engine.train import _checkpoint_io
 
-    io = _atomic_io()
+    io = _checkpoint_io(tmp_path)
     path = tmp_path / "last.ckpt"
     io.save_checkpoint({"epoch": 1}, path)
 
@@ -123,6 +123,22 @@ def test_checkpoints_are_written_atomically(tmp_path: Path) -> None:
         io.save_checkpoint({"bad": Unpicklable()}, path)  # the old file must survive
     assert torch.load(path, weights_only=True) == {"epoch": 1}
     assert [p.name for p in tmp_path.iterdir()] == ["last.ckpt"]
+
+
+def test_resumed_checkpoint_paths_stay_in_the_run_folder(tmp_path: Path) -> None:
+    """A checkpoint callback state that names files elsewhere (a moved run, a crafted file) is confined."""
+    from freespace.engine.train import _checkpoint_io
+
+    io = _checkpoint_io(tmp_path / "run")
+    elsewhere = "/elsewhere/checkpoints/"
+    state = {"dirpath": elsewhere, "best_model_path": elsewhere + "best.ckpt", "last_model_path": "/etc/passwd",
+             "kth_best_model_path": elsewhere + "best.ckpt", "best_k_models": {elsewhere + "best.ckpt": 0.5}}
+    path = tmp_path / "last.ckpt"
+    io.save_checkpoint({"state_dict": {}, "callbacks": {"ModelCheckpoint{}": state}}, path)
+    loaded = io.load_checkpoint(path)["callbacks"]["ModelCheckpoint{}"]
+    folder = str(tmp_path / "run" / "checkpoints")
+    assert loaded["dirpath"] == folder and loaded["best_model_path"] == folder + "/best.ckpt"
+    assert loaded["last_model_path"] == "" and loaded["best_k_models"] == {folder + "/best.ckpt": 0.5}
 
 
 def test_config_round_trip(tmp_path: Path) -> None:

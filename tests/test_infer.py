@@ -129,7 +129,7 @@ def test_predict_then_evaluate_kitti_equals_evaluate(run: dict[str, Path], tmp_p
     assert main(["evaluate-kitti", "--gt", str(tr / "gt_image_2"), "--pred", str(pred), "--out",
                  str(tmp_path / "kitti.json")]) == 0
     assert main(["evaluate", "--checkpoint", str(run["ckpt"]), "--dataset", "synth", "--root", str(run["data"]),
-                 "--split", "all", "--out", str(tmp_path / "eval"), "--no-progress"]) == 0
+                 "--subset", "all", "--out", str(tmp_path / "eval"), "--no-progress"]) == 0
     kitti = json.loads((tmp_path / "kitti.json").read_text())["all"]
     evaluated = json.loads((tmp_path / "eval" / "metrics.json").read_text())
     assert kitti["images"] == evaluated["frames"] == 12
@@ -149,7 +149,7 @@ def test_inference_mistakes(run: dict[str, Path], tmp_path: Path, capsys: pytest
     assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(tmp_path / "none"), "--out", str(tmp_path / "p")]) == 2
     assert "input not found" in capsys.readouterr().err
     (tmp_path / "bad.onnx").write_bytes(b"junk")
-    assert main(["predict", "--onnx", str(tmp_path / "bad.onnx"), "--input", str(tmp_path), "--out", str(tmp_path / "p")]) == 2
+    assert main(["predict", "--onnx", str(tmp_path / "bad.onnx"), "--input", str(images), "--out", str(tmp_path / "p")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("freespace: error:") and "cannot load" in err and "as an ONNX model" in err
     assert not (tmp_path / "p").exists()

@@ -59,5 +59,5 @@ def test_reproduce_mistakes(data: Path, tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["reproduce", "--dataset", "synth", "--root", str(data), "--models", "fcn", "--out", str(tmp_path)]) == 2
     assert "unknown models" in capsys.readouterr().err
     assert main(["reproduce", "--dataset", "synth", "--root", str(data), "--seeds", "0", "--out", str(tmp_path)]) == 2
-    assert "--seeds must be ≥ 1" in capsys.readouterr().err
+    assert "--seeds must be in 1…1000" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []  # rejected before any work

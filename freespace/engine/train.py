@@ -14,6 +14,7 @@ import csv
 import io as _io
 import logging
 import shutil
+import warnings
 import time
 from pathlib import Path
 from typing import Any
@@ -94,7 +95,9 @@ def _checkpoint_io(run_dir: Path):
 
         def load_checkpoint(self, path, map_location=None, weights_only=None) -> dict[str, Any]:
             try:
-                checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+                with warnings.catch_warnings():  # torch warns about the pickle protocol of crafted files
+                    warnings.simplefilter("ignore")
+                    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
             except Exception as exc:  # pickle, zip and torch errors: the file is not a plain checkpoint
                 raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged "
                                        f"({type(exc).__name__}); it was not loaded") from None
@@ -149,6 +152,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
             raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
                                      f"{run_dir} has none")
         saved = TrainConfig.load(run_dir / "config.yaml")
+        _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
         if config.image_size is None:
             config.image_size = saved.image_size  # "auto" was resolved when the run started
         changed = [k for k, v in saved.to_dict().items()

@@ -58,7 +58,7 @@ def compute_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int
     if num >= gl.shape[1]:
         raise InvalidOptionError(f"the stereo matcher's maximum disparity ({num} px, --max-disparity rounded up to "
                                  f"a multiple of 16) must be smaller than the image width ({gl.shape[1]} px); "
-                                 f"lower --max-disparity or give a disparity file")
+                                 f"lower --max-disparity, or give the disparity with --disparity")
     matcher = cv2.StereoSGBM_create(
         minDisparity=0, numDisparities=num, blockSize=block_size,
         P1=8 * block_size * block_size, P2=32 * block_size * block_size,

@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import json
 import multiprocessing
+import os
 import shutil
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
@@ -75,12 +76,12 @@ def _render_and_write(job: tuple[int, int, SynthConfig, str]) -> dict[str, Any]:
     return _index_row(sample)
 
 
-def _init_worker() -> None:
+def _init_worker(parent: int) -> None:
     import cv2
 
     from freespace.parallel import die_with_parent
 
-    die_with_parent()
+    die_with_parent(parent)
     cv2.setNumThreads(1)
 
 
@@ -146,7 +147,7 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
             rows.append(_render_and_write(job))
             bar.update()
     else:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(os.getpid(),),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
             for row in pool.map(_render_and_write, jobs, chunksize=max(1, min(64, num // (4 * workers)))):
                 rows.append(row)
