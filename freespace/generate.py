@@ -170,8 +170,11 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
 _DATASET: Any = None  # the dataset of this worker process (set by _init_worker)
 
 
-def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> dict[str, Any]:
-    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record)."""
+def _process_frame(index: int, out: Path, report: Path, options: FitOptions,
+                   settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record).
+    ``settings`` (the run's, :func:`_settings`) are kept in the frame's report, so a resumed run redoes a
+    frame made with other settings."""
     t0 = time.perf_counter()
     frame = _DATASET.frames[index]
     record: dict[str, Any] = {"frame": frame.name}
@@ -187,6 +190,8 @@ def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> 
             result.disparity_source = sample.disparity_source
         atomic_write_bytes(out, encode_image(result.image, ".png"))
         record.update(status="done", **result.report())
+        if settings is not None:
+            record["settings"] = settings
         record["seconds"]["total"] = time.perf_counter() - t0
         write_json(report, record)
     except FreespaceError as exc:
@@ -281,10 +286,12 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
             ``report.shard-K-of-N.csv``; the shards of one run share ``out_dir`` (``settings.json`` holds
             no shard). A run without ``shard`` afterwards skips every frame and writes the totals.
 
-    Frames whose image and report already exist are skipped (resumable). A failing frame (missing
+    Frames whose image and report already exist, made with these settings, are skipped (resumable;
+    every report keeps the run's settings). A failing frame (missing
     partner, unreadable file, too little road, ...) is recorded with its reason and does not stop the run.
     The settings (dataset, fit and disparity options) are recorded in ``settings.json``: a folder made
-    with other settings is refused, unless ``overwrite`` replaces what was generated there. ``out_dir``
+    with other settings is refused, unless ``overwrite`` replaces what was generated there (a shard's
+    ``overwrite``: only its own frames). ``out_dir``
     may not lie inside the dataset's root (nor hold it).
 
     Returns:
@@ -314,11 +321,14 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
         report_path = report_dir / f"{frame.name}.json"
         if image_path.is_file() and report_path.is_file():
             try:
-                records[frame.name] = {**json.loads(report_path.read_text()), "status": "skipped"}
-                continue
-            except (OSError, ValueError):
+                report = json.loads(report_path.read_text())
+                if report.get("settings", settings) == settings:  # (reports of older runs have none)
+                    records[frame.name] = {**report, "status": "skipped"}
+                    continue
+                log.info("%s was generated with other settings: generating it again", frame.name)
+            except (OSError, ValueError, AttributeError):
                 pass  # unreadable report: do the frame again
-        jobs.append((i, image_path, report_path, options))
+        jobs.append((i, image_path, report_path, options, settings))
     log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
     from freespace.log import progress_bar
 

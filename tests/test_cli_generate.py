@@ -207,6 +207,14 @@ def test_dataset_shards_are_disjoint_and_cover_every_frame(tmp_path: Path, capsy
     assert main(args + ["--out", str(shared)]) == 0
     summary = json.loads((shared / "summary.json").read_text())
     assert summary["frames"] == summary["skipped"] == 7 and summary["generated"] == 0
+    # with --overwrite a shard replaces only its own frames; the others' are redone by their next run
+    # (every report keeps its settings), never skipped
+    assert main(args + ["--out", str(shared), "--shard", "2/3", "--inlier-threshold", "2", "--overwrite"]) == 0
+    assert json.loads((shared / "summary.shard-2-of-3.json").read_text())["generated"] == 2
+    assert not (shared / "summary.json").exists()                          # the old totals are stale
+    assert main(args + ["--out", str(shared), "--inlier-threshold", "2"]) == 0
+    summary = json.loads((shared / "summary.json").read_text())
+    assert (summary["generated"], summary["skipped"]) == (5, 2)
     assert main(args + ["--out", str(shared), "--shard", "1/0"]) == 2
     assert "K/N with whole numbers" in capsys.readouterr().err
 
