@@ -1,7 +1,8 @@
 """`freespace predict` on videos, folders and globs (checkpoint and ONNX), frame by frame, and `--shard K/N`.
 
-The network is an untrained SegNet (⅛ width) saved as a training checkpoint: these tests check what
-`predict` writes (frame counts, names, sizes, the overlay of the predicted road), not the road it finds.
+The network is an untrained SegNet (⅛ width, batch-norm statistics from the test frames) saved as a
+training checkpoint: these tests check what `predict` writes (frame counts, names, sizes, the overlay of
+the predicted road), not the road it finds.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import json
 import tracemalloc
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -39,6 +41,19 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     base = tmp_path_factory.mktemp("predict_video")
     torch.manual_seed(0)
     net = create_model("segnet", num_classes=2, width=0.125)
+    # an untrained network's road probability is the same everywhere (its activations fade through the
+    # decoder): batch-norm statistics from the frames and a classifier bias at the median make it vary
+    # with the texture, road on about half of each frame (measured 45–50 %)
+    frames = torch.from_numpy(np.stack(_frames(13))).permute(0, 3, 1, 2).float() / 255
+    frames = torch.nn.functional.interpolate(frames, (64, 96))
+    with torch.no_grad():
+        for m in net.modules():
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.momentum = None
+                m.reset_running_stats()
+        net.train()(frames)
+        logits = net.eval()(frames[:1])
+        net.classifier.bias[1] -= (logits[:, 1] - logits[:, 0]).median()
     ckpt = base / "model.ckpt"
     torch.save({"hyper_parameters": {"model": "segnet", "model_options": {"num_classes": 2, "width": 0.125}, "image_size": [64, 96]},
                 "state_dict": {f"net.{k}": v for k, v in net.state_dict().items()}}, ckpt)
@@ -65,15 +80,24 @@ def test_video_round_trip(files: dict[str, Path], tmp_path: Path, capsys: pytest
     assert (result.kind, result.fps, result.size) == ("video", 12.0, SHAPE)
     decoded = list(result)
     assert len(decoded) == len(list(source)) == 13                                 # the same frame count
-    # every output frame is the overlay of the prediction of its input frame (MPEG-4 is lossy: measured
-    # mean difference about 3 grey levels)
+    # every output frame is the overlay of the prediction of its input frame. MPEG-4 blurs the fine mask of
+    # an untrained network, so frames are compared in 8×8-pixel block means: measured 2.2 grey levels from
+    # the expected overlay, 15–17 from the inverted mask's, 25–31 from no overlay, 13–14 from the next frame's
     from freespace.predictor import Predictor
 
+    def blocks(image: np.ndarray) -> np.ndarray:
+        return cv2.resize(image.astype(np.float32), (SHAPE[1] // 8, SHAPE[0] // 8), interpolation=cv2.INTER_AREA)
+
     predictor = Predictor(checkpoint=files["ckpt"])
-    for frame, got in zip(source, decoded):
-        if frame.index % 4 == 0:
-            expected = overlay_road(frame.image, to_confidence(predictor.predict([frame.image])[0]) >= 128)
-            assert np.abs(got.image.astype(int) - expected.astype(int)).mean() < 8
+    frames = list(source)
+    for i in (0, 4, 8, 12):
+        road = to_confidence(predictor.predict([frames[i].image])[0]) >= 128
+        assert 0.2 < road.mean() < 0.8
+        got = blocks(decoded[i].image)
+        err = {name: float(np.abs(got - blocks(image)).mean()) for name, image in (
+            ("expected", overlay_road(frames[i].image, road)), ("inverted", overlay_road(frames[i].image, ~road)),
+            ("none", frames[i].image), ("neighbour", overlay_road(frames[i - 1 if i else 1].image, road)))}
+        assert err["expected"] < 4 and min(v for k, v in err.items() if k != "expected") > 3 * err["expected"], err
     # the ONNX model writes the same video
     onnx = tmp_path / "m.onnx"
     assert main(["export", "--checkpoint", str(files["ckpt"]), "--format", "onnx", "--out", str(onnx)]) == 0
@@ -169,7 +193,7 @@ def test_video_memory_does_not_grow_with_length(tmp_path: Path) -> None:
     shape = (120, 160)
     frame_bytes = shape[0] * shape[1] * 3
     peaks = {}
-    for n in (20, 160):
+    for n in (4, 20, 160):  # the first run (4 frames) imports what predict needs: not measured
         video = tmp_path / f"v{n}.mp4"
         with VideoWriter(video, fps=30) as writer:
             for frame in _frames(n, shape):
@@ -182,6 +206,7 @@ def test_video_memory_does_not_grow_with_length(tmp_path: Path) -> None:
             tracemalloc.stop()
         assert summary["frames"] == n
         peaks[n] = peak
-    # measured: the same peak (a few batches' worth of frames) for 20 and 160 frames
-    assert peaks[160] < 40 * frame_bytes < 160 * frame_bytes
-    assert peaks[160] < 1.5 * peaks[20]
+    # measured: a peak of about 19 frames' size (a few batches of 4 frames and their overlays) for
+    # 20 frames and for 160
+    assert peaks[160] < 30 * frame_bytes < 160 * frame_bytes
+    assert peaks[160] < 1.2 * peaks[20]
