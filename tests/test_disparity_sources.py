@@ -87,7 +87,8 @@ def _h(M: np.ndarray) -> np.ndarray:
     return out
 
 
-def make_scan(disparity: np.ndarray, calib: dict[str, np.ndarray], step: tuple[int, int] = (3, 2)) -> tuple[np.ndarray, np.ndarray]:
+def make_scan(disparity: np.ndarray, calib: dict[str, np.ndarray],
+              step: tuple[int, int] = (3, 2)) -> tuple[np.ndarray, np.ndarray]:
     """A Velodyne scan (N×4) whose points project onto every ``step``-th pixel of ``disparity`` with exactly
     its value, and the bool mask of those pixels. Camera-2 coordinates are X2 = R0·(Tr·p) + t2 with
     P2 = K [I | K⁻¹P2₄]."""
@@ -101,7 +102,8 @@ def make_scan(disparity: np.ndarray, calib: dict[str, np.ndarray], step: tuple[i
     z = fx * baseline / disparity[v, u].astype(np.float64)
     cam = np.stack([(u - K[0, 2]) / fx * z, (v - K[1, 2]) / K[1, 1] * z, z, np.ones_like(z)], axis=1)
     t2 = np.linalg.solve(K, P2[:, 3])
-    cam_from_velo = _h(np.hstack([np.eye(3), t2[:, None]])) @ _h(calib.get("R0_rect", np.eye(3))) @ _h(calib["Tr_velo_to_cam"])
+    cam_from_velo = (_h(np.hstack([np.eye(3), t2[:, None]])) @ _h(calib.get("R0_rect", np.eye(3)))
+                     @ _h(calib["Tr_velo_to_cam"]))
     velo = cam @ np.linalg.inv(cam_from_velo).T
     return np.hstack([velo[:, :3], np.full((len(velo), 1), 0.5)]), sampled
 

@@ -55,7 +55,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         logits = net.eval()(frames[:1])
         net.classifier.bias[1] -= (logits[:, 1] - logits[:, 0]).median()
     ckpt = base / "model.ckpt"
-    torch.save({"hyper_parameters": {"model": "segnet", "model_options": {"num_classes": 2, "width": 0.125}, "image_size": [64, 96]},
+    hyper = {"model": "segnet", "model_options": {"num_classes": 2, "width": 0.125}, "image_size": [64, 96]}
+    torch.save({"hyper_parameters": hyper,
                 "state_dict": {f"net.{k}": v for k, v in net.state_dict().items()}}, ckpt)
     video = base / "in" / "drive.mp4"
     with VideoWriter(video, fps=12.0) as writer:
@@ -142,7 +143,8 @@ def test_predict_shards_cover_every_frame_once(files: dict[str, Path], tmp_path:
         counts.append(len(mine))
     assert counts == [3, 2, 2]
     assert sorted(p.name for p in shared.glob("*.png")) == sorted(p.name for p in whole.glob("*.png"))
-    assert sorted(p.name for p in (shared / "overlays").iterdir()) == sorted(p.name for p in (whole / "overlays").iterdir())
+    overlays = [sorted(p.name for p in (folder / "overlays").iterdir()) for folder in (shared, whole)]
+    assert overlays[0] == overlays[1]
     for path in whole.glob("*.png"):
         assert np.abs(read_image(path).astype(int) - read_image(shared / path.name).astype(int)).max() <= 1
     assert not (shared / "summary.json").exists()

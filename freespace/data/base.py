@@ -124,8 +124,8 @@ class StereoRoadDataset(ABC):
             raise DatasetError(f"{self.name}: frame names are not unique under {self.root}")
         kind = {"depth": "depth", "lidar": "velodyne"}.get(self.disparity_mode)
         if kind is not None and not any(getattr(f, kind) is not None for f in self.frames):
-            raise DatasetError(f"--disparity-source {self.disparity_mode}: no frame of {self.name} split {self.split!r} "
-                               f"under {self.root} has a {'depth map' if kind == 'depth' else 'Velodyne scan'}; "
+            raise DatasetError(f"--disparity-source {self.disparity_mode}: no frame of {self.name} split "
+                               f"{self.split!r} under {self.root} has a {'depth map' if kind == 'depth' else 'Velodyne scan'}; "
                                f"see the layout's tree in the docs")
 
     # --- what a layout provides ---------------------------------------------------------------------

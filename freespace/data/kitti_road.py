@@ -20,8 +20,8 @@ disparity folder (``<frame>.png|.npy|.pfm``, e.g. a learned matcher's KITTI uint
 tree's own ``disparity/``. Depth becomes disparity ``d = f·B/Z`` and a scan is projected through
 ``Tr_velo_to_cam``, ``R0_rect`` and ``P2`` (nearest point per pixel), with f and B from the frame's
 calibration (P2/P3; a virtual right camera 0.54 m to the right when it has no P3:
-:func:`freespace.geometry.depth.rig_from_kitti`). KITTI road has no drive ids, so every frame is its own scenario — unless
-``ROOT/index.csv`` (written by ``freespace synth``) gives a ``scenario`` per ``frame``.
+:func:`freespace.geometry.depth.rig_from_kitti`). KITTI road has no drive ids, so every frame is its own
+scenario — unless ``ROOT/index.csv`` (written by ``freespace synth``) gives a ``scenario`` per ``frame``.
 """
 
 from __future__ import annotations
