@@ -42,6 +42,10 @@ def _open_dataset(args: argparse.Namespace):  # -> StereoRoadDataset (import kep
             raise InvalidOptionError("--disparity-dir is for KITTI road trees; other layouts name their "
                                      "disparity folder in freespace.yaml")
         options["disparity_dir"] = args.disparity_dir
+    if getattr(args, "lidar_densify", None) is not None:
+        if args.dataset not in ("kitti", "synth"):
+            raise InvalidOptionError("--lidar-densify is for KITTI road trees (the only layout with Velodyne scans)")
+        options["lidar_densify"] = args.lidar_densify
     return get_dataset(args.dataset, args.root, args.split, **options)
 
 
@@ -64,8 +68,15 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
     g.add_argument("--disparity-source", dest="disparity_mode", choices=DISPARITY_MODES, default="auto",
-                   help="auto: file, else depth + camera, else cached SGBM (default)")
+                   help="auto: file, else depth + camera, else cached SGBM (default); depth: depth maps only "
+                        "(KITTI: depth_u16/); lidar: Velodyne scans only (KITTI: velodyne/<frame>.bin)")
+    g.add_argument("--lidar-densify", type=float, metavar="PX",
+                   help="--disparity-source lidar: fill holes within PX pixels of a point with its value "
+                        "(default: keep the sparse map, which is all the road fit needs)")
     g.add_argument("--cache-dir", metavar="DIR", help="SGBM disparity cache (default ~/.cache/freespace/sgbm)")
+    g.add_argument("--shard", metavar="K/N", help="only the K-th of N disjoint parts of the frames (K from 1, "
+                                                  "e.g. ${SLURM_ARRAY_TASK_ID}/N); totals go to "
+                                                  "summary.shard-K-of-N.json and report.shard-K-of-N.csv")
     p.add_argument("--workers", type=int, default=1, help="processes, for --dataset (default 1)")
     p.add_argument("--out", required=True, help="output image (one pair) or folder (dataset)")
     p.add_argument("--overwrite", action="store_true",
@@ -90,6 +101,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
         if not all(pair):
             raise InvalidOptionError("give --reference, --target and --road-mask (one pair), or --dataset and "
                                      "--root (a dataset)")
+        if args.shard is not None or args.lidar_densify is not None:
+            raise InvalidOptionError("--shard and --lidar-densify are for --dataset (a whole dataset)")
         from freespace.generate import generate_pair
 
         result = generate_pair(args.reference, args.target, args.road_mask, args.disparity, out=args.out,
@@ -103,13 +116,18 @@ def cmd_generate(args: argparse.Namespace) -> int:
                                  "--disparity/--model-json are for one pair, leave them out")
     if args.root is None:
         raise InvalidOptionError("--dataset needs --root DIR, the dataset's folder")
+    if args.lidar_densify is not None and args.disparity_mode != "lidar":
+        raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
     from freespace.generate import generate_dataset
+    from freespace.shard import parse_shard
 
+    shard = parse_shard(args.shard) if args.shard is not None else None
     dataset = _open_dataset(args)
-    summary = generate_dataset(dataset, args.out, workers=args.workers, options=options, overwrite=args.overwrite)
+    summary = generate_dataset(dataset, args.out, workers=args.workers, options=options, overwrite=args.overwrite,
+                               shard=shard)
     failed = summary["failed"]
     print(f"{summary['generated']} generated, {summary['skipped']} already done, {len(failed)} failed "
-          f"of {summary['frames']} frames → {args.out}")
+          f"of {summary['frames']} frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
     for name, reason in failed.items():
         print(f"  failed {name}: {reason}")
     return 1 if failed else 0
@@ -301,22 +319,43 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--checkpoint", help="a training checkpoint (.ckpt)")
     src.add_argument("--onnx", help="a model exported with `freespace export --format onnx`")
-    p.add_argument("--input", required=True, help="an image or a folder of images")
-    p.add_argument("--batch-size", type=int, default=4)
+    p.add_argument("--input", required=True, help="an image, a folder of images, a quoted glob ('frames/*.png') "
+                                                   "or a video")
+    p.add_argument("--batch-size", type=int, default=4, help="frames per network call (default 4)")
+    p.add_argument("--shard", metavar="K/N", help="only the K-th of N disjoint parts of the images, by file name "
+                                                  "(K from 1); shards share --out")
     p.add_argument("--no-progress", action="store_true")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, help="output folder (PNGs), or OUT.mp4: the overlaid video")
     p.set_defaults(func=cmd_predict)
 
 
 def cmd_predict(args: argparse.Namespace) -> int:
-    """``freespace predict``: road confidence PNGs (KITTI format) and overlays."""
-    from freespace.infer import Predictor, predict_folder
+    """``freespace predict``: road confidence PNGs (KITTI format) and overlays, or the overlaid video."""
+    from freespace.infer import Predictor, predict_folder, predict_video
     from freespace.io import check_outputs
+    from freespace.shard import parse_shard
+    from freespace.video import is_video_path
 
     check_outputs({"--out": args.out}, {"--input": args.input, "--checkpoint": args.checkpoint, "--onnx": args.onnx})
+    shard = parse_shard(args.shard) if args.shard is not None else None
+    video = is_video_path(args.out)
+    if video and shard:
+        raise InvalidOptionError("--shard writes frames into a folder; a video --out is one file: leave out --shard")
+    if args.batch_size < 1:
+        raise InvalidOptionError("--batch-size must be ≥ 1")
     predictor = Predictor(checkpoint=args.checkpoint, onnx=args.onnx)
-    summary = predict_folder(predictor, args.input, args.out, batch_size=args.batch_size, progress=not args.no_progress)
-    print(f"{summary['frames']} images, {summary['seconds_per_frame'] * 1000:.1f} ms per frame → {args.out}")
+    if video:
+        summary = predict_video(predictor, args.input, args.out, batch_size=args.batch_size,
+                                progress=not args.no_progress)
+    else:
+        summary = predict_folder(predictor, args.input, args.out, batch_size=args.batch_size,
+                                 progress=not args.no_progress, shard=shard)
+    if not summary["frames"]:
+        print(f"0 frames in shard {args.shard} → {args.out}")
+        return 0
+    print(f"{summary['frames']} frames, {summary['seconds_per_frame'] * 1000:.1f} ms per frame in the network, "
+          f"{summary['frames_per_second']:.1f} frames per second end to end"
+          + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
     return 0
 
 
@@ -438,10 +477,10 @@ COMMANDS: dict[str, tuple[str, str, Callable[..., None]]] = {
                        "does (256 thresholds, don't-care excluded, counts summed per category, MaxF, 11-point AP, "
                        "PRE/REC/FPR/FNR at MaxF); perspective view, or the benchmark's bird's-eye view with --bev "
                        "--calib.", _evaluate_kitti_parser),
-    "predict": ("road confidence maps (KITTI 8-bit PNG) and overlays for images",
-                "Predict every image of a file or folder with a checkpoint or an ONNX model; writes <name>.png "
-                "(8-bit road confidence, input size; 255 = sure road), overlays/<name>.png and summary.json "
-                "(runtime per frame).", _predict_parser),
+    "predict": ("road confidence maps (KITTI 8-bit PNG) and overlays for images, or an overlaid video",
+                "Predict every frame of an image, a folder, a glob or a video with a checkpoint or an ONNX model; "
+                "writes <name>.png (8-bit road confidence, input size; 255 = sure road), overlays/<name>.png and "
+                "summary.json (runtime per frame), or with --out OUT.mp4 the overlaid video.", _predict_parser),
     "export": ("export a checkpoint to ONNX or TorchScript (validated)",
                "Export a checkpoint to ONNX (dynamic batch, height and width) or TorchScript; the export is "
                "checked against PyTorch and the max abs difference printed.", _export_parser),

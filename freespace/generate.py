@@ -33,6 +33,7 @@ from freespace.io import (
     write_csv,
     write_json,
 )
+from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)
 
@@ -170,8 +171,11 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
 _DATASET: Any = None  # the dataset of this worker process (set by _init_worker)
 
 
-def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> dict[str, Any]:
-    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record)."""
+def _process_frame(index: int, out: Path, report: Path, options: FitOptions,
+                   settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record).
+    ``settings`` (the run's, :func:`_settings`) are kept in the frame's report, so a resumed run redoes a
+    frame made with other settings."""
     t0 = time.perf_counter()
     frame = _DATASET.frames[index]
     record: dict[str, Any] = {"frame": frame.name}
@@ -187,6 +191,8 @@ def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> 
             result.disparity_source = sample.disparity_source
         atomic_write_bytes(out, encode_image(result.image, ".png"))
         record.update(status="done", **result.report())
+        if settings is not None:
+            record["settings"] = settings
         record["seconds"]["total"] = time.perf_counter() - t0
         write_json(report, record)
     except FreespaceError as exc:
@@ -212,16 +218,33 @@ SETTINGS_NAME = "settings.json"
 
 
 def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
-    """What a generated dataset depends on (written to ``OUT/settings.json``)."""
-    return {"dataset": dataset.name, "root": str(Path(dataset.root).resolve()), "split": dataset.split,
-            "robust": options.robust, "inlier_threshold": options.inlier_threshold,
-            "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode}
+    """What a generated dataset depends on (written to ``OUT/settings.json``; never the shard, so that the
+    shards of one run share an output folder)."""
+    settings = {"dataset": dataset.name, "root": str(Path(dataset.root).resolve()), "split": dataset.split,
+                "robust": options.robust, "inlier_threshold": options.inlier_threshold,
+                "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode}
+    if dataset.disparity_mode == "lidar":
+        settings["lidar_densify"] = getattr(dataset, "lidar_densify", 0.0)
+    return settings
 
 
-def _claim_output(out_dir: Path, settings: dict[str, Any], overwrite: bool) -> None:
+def _totals_names(shard: tuple[int, int] | None) -> tuple[str, str]:
+    """``(summary, report)`` file names: ``summary.json``/``report.csv``, or with ``--shard K/N``
+    ``summary.shard-K-of-N.json``/``report.shard-K-of-N.csv`` (shards never overwrite each other's)."""
+    if shard is None:
+        return "summary.json", "report.csv"
+    return f"summary.shard-{shard[0]}-of-{shard[1]}.json", f"report.shard-{shard[0]}-of-{shard[1]}.csv"
+
+
+def _claim_output(out_dir: Path, settings: dict[str, Any], overwrite: bool, frames: set[str] | None = None,
+                  totals: tuple[str, str] = ("summary.json", "report.csv")) -> None:
     """Make ``out_dir`` this run's. A folder generated with other settings is refused unless ``overwrite``,
-    which removes what the earlier run wrote; a non-empty folder that ``generate`` did not write is refused."""
-    if not out_dir.is_dir() or not any(out_dir.iterdir()):
+    which removes what the earlier run wrote; a non-empty folder that ``generate`` did not write is refused.
+
+    A shard (``frames``: its frame names, ``totals``: its summary and report names) removes with
+    ``overwrite`` only its own frames and totals (and the whole-run totals, now stale), so shards running
+    at once never delete each other's work. Hidden files (another shard's writes in progress) are ignored."""
+    if not out_dir.is_dir() or not any(not p.name.startswith(".") for p in out_dir.iterdir()):
         return
     recorded: Any = None
     try:  # summary.json's "options": folders written before settings.json existed
@@ -240,15 +263,16 @@ def _claim_output(out_dir: Path, settings: dict[str, Any], overwrite: bool) -> N
     if overwrite:
         reports = out_dir / "reports"
         for report in sorted(reports.glob("*.json")) if reports.is_dir() else []:
-            (out_dir / f"{report.stem}.png").unlink(missing_ok=True)
-            report.unlink()
-        for name in (SETTINGS_NAME, "summary.json", "report.csv"):
+            if frames is None or report.stem in frames:
+                (out_dir / f"{report.stem}.png").unlink(missing_ok=True)
+                report.unlink(missing_ok=True)
+        for name in {SETTINGS_NAME, "summary.json", "report.csv", *totals}:
             (out_dir / name).unlink(missing_ok=True)
 
 
 def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
                      options: FitOptions = FitOptions(), progress: bool = True,
-                     overwrite: bool = False) -> dict[str, Any]:
+                     overwrite: bool = False, shard: tuple[int, int] | None = None) -> dict[str, Any]:
     """Generate the augmented image of every frame of a dataset and write a report.
 
     Args:
@@ -258,11 +282,17 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
             (model, inliers, residual, seconds), ``report.csv`` (one row per frame) and ``summary.json``.
         workers: processes; 1 runs in this process.
         options: fit options.
+        shard: ``(K, N)``: only the K-th of N disjoint parts of the frames (1-based,
+            :func:`freespace.shard.select_shard`), with its totals in ``summary.shard-K-of-N.json`` and
+            ``report.shard-K-of-N.csv``; the shards of one run share ``out_dir`` (``settings.json`` holds
+            no shard). A run without ``shard`` afterwards skips every frame and writes the totals.
 
-    Frames whose image and report already exist are skipped (resumable). A failing frame (missing
+    Frames whose image and report already exist, made with these settings, are skipped (resumable;
+    every report keeps the run's settings). A failing frame (missing
     partner, unreadable file, too little road, ...) is recorded with its reason and does not stop the run.
     The settings (dataset, fit and disparity options) are recorded in ``settings.json``: a folder made
-    with other settings is refused, unless ``overwrite`` replaces what was generated there. ``out_dir``
+    with other settings is refused, unless ``overwrite`` replaces what was generated there (a shard's
+    ``overwrite``: only its own frames). ``out_dir``
     may not lie inside the dataset's root (nor hold it).
 
     Returns:
@@ -277,7 +307,11 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
         raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the generated dataset")
     check_outputs({"--out": out_dir}, {"--root": dataset.root})
     settings = _settings(dataset, options)
-    _claim_output(out_dir, settings, overwrite)
+    if shard is not None:
+        dataset = dataset.subset(select_shard((f.name for f in dataset.frames), *shard))
+    summary_name, report_name = _totals_names(shard)
+    _claim_output(out_dir, settings, overwrite, None if shard is None else {f.name for f in dataset.frames},
+                  (summary_name, report_name))
     write_json(out_dir / SETTINGS_NAME, settings)
     report_dir = out_dir / "reports"
     frames = dataset.frames
@@ -288,11 +322,14 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
         report_path = report_dir / f"{frame.name}.json"
         if image_path.is_file() and report_path.is_file():
             try:
-                records[frame.name] = {**json.loads(report_path.read_text()), "status": "skipped"}
-                continue
-            except (OSError, ValueError):
+                report = json.loads(report_path.read_text())
+                if report.get("settings", settings) == settings:  # (reports of older runs have none)
+                    records[frame.name] = {**report, "status": "skipped"}
+                    continue
+                log.info("%s was generated with other settings: generating it again", frame.name)
+            except (OSError, ValueError, AttributeError):
                 pass  # unreadable report: do the frame again
-        jobs.append((i, image_path, report_path, options))
+        jobs.append((i, image_path, report_path, options, settings))
     log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
     from freespace.log import progress_bar
 
@@ -322,7 +359,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     for record in ordered:
         if record["status"] == "failed":
             log.warning("frame %s failed: %s", record["frame"], record["reason"])
-    _write_report_csv(out_dir / "report.csv", ordered)
+    _write_report_csv(out_dir / report_name, ordered)
     ok = [r for r in ordered if r["status"] != "failed"]
 
     def mean(key: str) -> float | None:
@@ -332,6 +369,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     summary = {
         "dataset": dataset.name,
         "root": str(dataset.root),
+        **({"shard": f"{shard[0]}/{shard[1]}"} if shard is not None else {}),
         "frames": len(ordered),
         "generated": sum(r["status"] == "done" for r in ordered),
         "skipped": sum(r["status"] == "skipped" for r in ordered),
@@ -344,7 +382,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
         "options": {"robust": options.robust, "inlier_threshold": options.inlier_threshold,
                     "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode},
     }
-    write_json(out_dir / "summary.json", summary)
+    write_json(out_dir / summary_name, summary)
     return summary
 
 

@@ -33,12 +33,11 @@ import cv2
 import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
-from freespace.io import PathLike, read_image
+from freespace.io import IMAGE_SUFFIXES, PathLike, read_image
 
 __all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "iter_frames", "is_video_path",
            "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "DEFAULT_FPS"]
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".ts")
 DEFAULT_FPS = 10.0
 """Frame rate given to folders and globs of images (KITTI's cameras run at 10 Hz)."""
@@ -177,7 +176,7 @@ def _image_source(kind: str, spec: str, paths: list[Path], fps: float) -> FrameS
 def open_frames(source: PathLike, *, fps: float | None = None, default_fps: float = DEFAULT_FPS) -> FrameSource:
     """Open a video file, a folder of images, one image, or a glob of images as a :class:`FrameSource`.
 
-    What ``source`` names, in this order: an existing folder (its images ``*.png|jpg|jpeg|bmp``, in
+    What ``source`` names, in this order: an existing folder (its images, :data:`IMAGE_SUFFIXES`, in
     natural order: ``2.png`` before ``10.png``); an existing image file (one frame); another existing
     file (a video, decoded with FFmpeg); otherwise a glob pattern (``*``, ``?``, ``[``; its image files
     in natural order). The first frame is decoded here, so an unreadable source fails now.

@@ -42,6 +42,7 @@ class FrameRef:
     disparity: Path | None = None
     depth: Path | None = None
     calib: Path | None = None
+    velodyne: Path | None = None
 
 
 @dataclass
@@ -53,7 +54,7 @@ class Sample:
         left: ``H×W×3 uint8`` RGB reference image; right: the target image or None.
         label: road label with don't-care (``valid``), or None (unlabelled split).
         disparity: ``float32 H×W`` left disparity in pixels (NaN invalid), or None.
-        disparity_source: ``file``, ``depth``, ``sgbm`` or ``none``.
+        disparity_source: ``file``, ``depth``, ``lidar``, ``sgbm`` or ``none``.
         calibration: the rig (and road plane when known), or None.
     """
 
@@ -95,8 +96,9 @@ class StereoRoadDataset(ABC):
         split: the layout's on-disk split (``training``/``testing`` for KITTI road; layouts without
             on-disk splits accept only ``all``).
         disparity_mode: where disparities come from: ``auto`` (file, else depth + calibration, else
-            SGBM), ``file`` (file or depth only), ``sgbm`` (always SGBM), ``none``
-            (:func:`~freespace.data.disparity.resolve_disparity`).
+            SGBM), ``file`` (file or depth only), ``depth`` (depth only), ``lidar`` (Velodyne scans
+            only), ``sgbm`` (always SGBM), ``none`` (:func:`~freespace.data.disparity.resolve_disparity`).
+            ``depth`` and ``lidar`` refuse a dataset without any depth map or scan.
         cache_dir: folder of the SGBM cache (see :class:`~freespace.data.disparity.DisparityCache`).
         max_disparity: SGBM search range in pixels.
     """
@@ -120,6 +122,11 @@ class StereoRoadDataset(ABC):
         names = [f.name for f in self.frames]
         if len(set(names)) != len(names):
             raise DatasetError(f"{self.name}: frame names are not unique under {self.root}")
+        kind = {"depth": "depth", "lidar": "velodyne"}.get(self.disparity_mode)
+        if kind is not None and not any(getattr(f, kind) is not None for f in self.frames):
+            raise DatasetError(f"--disparity-source {self.disparity_mode}: no frame of {self.name} split "
+                               f"{self.split!r} under {self.root} has a {'depth map' if kind == 'depth' else 'Velodyne scan'}; "
+                               f"see the layout's tree in the docs")
 
     # --- what a layout provides ---------------------------------------------------------------------
     @abstractmethod
@@ -137,6 +144,11 @@ class StereoRoadDataset(ABC):
     def read_depth(self, frame: FrameRef) -> np.ndarray:
         """Decode the frame's depth map (``float32 H×W`` metres along the optical axis, NaN invalid)."""
         raise DatasetError(f"{self.name} has no depth maps")
+
+    def read_lidar(self, frame: FrameRef, shape: tuple[int, int]) -> np.ndarray:
+        """The frame's Velodyne scan projected into the left image: ``float32 H×W`` disparity in pixels
+        (``shape`` = ``(H, W)``), NaN where no point landed. Layouts with scans override."""
+        raise DatasetError(f"{self.name} has no Velodyne scans")
 
     def orphans(self) -> list[Problem]:
         """Files without a left image (mispaired names); layouts override."""
@@ -205,13 +217,14 @@ class StereoRoadDataset(ABC):
     def _disparity(self, frame: FrameRef, left: np.ndarray, right: np.ndarray | None,
                    calib: StereoCalibration | None) -> tuple[np.ndarray | None, str]:
         return resolve_disparity(frame, left, right, calib, mode=self.disparity_mode, cache=self.cache,
-                                 read_depth=lambda: self.read_depth(frame))
+                                 read_depth=lambda: self.read_depth(frame),
+                                 read_lidar=lambda: self.read_lidar(frame, left.shape[:2]))
 
     def expected_partners(self) -> set[str]:
         """Kinds of file every frame should have, given which folders exist (a missing one is a problem for
         :func:`freespace.data.info.check_dataset`)."""
         kinds = set()
-        for kind in ("right", "label", "disparity", "depth", "calib"):
+        for kind in ("right", "label", "disparity", "depth", "calib", "velodyne"):
             if any(getattr(f, kind) is not None for f in self.frames):
                 kinds.add(kind)
         return kinds

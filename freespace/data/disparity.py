@@ -1,8 +1,13 @@
-"""Where a frame's left disparity comes from (torch-free): a file, depth and the camera, or SGBM, which is
-cached on disk.
+"""Where a frame's left disparity comes from (torch-free): a file, depth and the camera, a LiDAR scan and
+the calibration, or SGBM, which is cached on disk.
 
 The disparity *mode* of a dataset (:data:`DISPARITY_MODES`) says which sources may be used; the *source*
-of a loaded sample (``file``, ``depth``, ``sgbm`` or ``none``) says which one was.
+of a loaded sample (``file``, ``depth``, ``lidar``, ``sgbm`` or ``none``) says which one was.
+
+``auto`` takes the file, else depth + camera, else SGBM; it never takes a LiDAR scan: a scan gives a
+sparse map (about one pixel in twenty, none above the scanner's field of view) whose use should be a
+choice, and a tree that gains a ``velodyne/`` folder must not silently change what ``auto`` generated.
+Ask for it with ``lidar``.
 """
 
 from __future__ import annotations
@@ -18,15 +23,19 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from freespace.errors import InvalidOptionError
+from freespace.errors import DatasetError, InvalidOptionError
 from freespace.geometry import StereoCalibration, compute_disparity
+from freespace.geometry.depth import depth_to_disparity as _depth_to_disparity
 from freespace.io import PathLike, atomic_write_bytes, read_disparity
 
 log = logging.getLogger(__name__)
 
 __all__ = ["DISPARITY_MODES", "check_disparity_mode", "DisparityCache", "depth_to_disparity", "resolve_disparity"]
 
-DISPARITY_MODES = ("auto", "file", "sgbm", "none")
+DISPARITY_MODES = ("auto", "file", "depth", "lidar", "sgbm", "none")
+"""``auto``: file, else depth + camera, else cached SGBM; ``file``: file, else depth + camera; ``depth``:
+depth + camera only; ``lidar``: the frame's Velodyne scan projected with its calibration only; ``sgbm``:
+always SGBM; ``none``: no disparity."""
 
 
 class FrameFiles(Protocol):
@@ -37,6 +46,7 @@ class FrameFiles(Protocol):
     right: Path | None
     disparity: Path | None
     depth: Path | None
+    velodyne: Path | None
 
 
 def check_disparity_mode(mode: str) -> str:
@@ -47,13 +57,10 @@ def check_disparity_mode(mode: str) -> str:
 
 
 def depth_to_disparity(depth: np.ndarray, calib: StereoCalibration) -> np.ndarray:
-    """Disparity ``d = fx·B / Z`` (pixels) from depth along the optical axis ``Z`` (metres); invalid
-    depth (≤ 0, NaN, inf) gives NaN."""
-    depth = np.asarray(depth, np.float32)
-    out = np.full(depth.shape, np.nan, np.float32)
-    ok = np.isfinite(depth) & (depth > 0)
-    out[ok] = np.float32(calib.fx * calib.baseline) / depth[ok]
-    return out
+    """Disparity ``d = fx·B / Z`` (pixels, ``float32 H×W``) from depth along the optical axis ``Z``
+    (metres, ``H×W``); invalid depth (≤ 0, NaN, inf) gives NaN
+    (:func:`freespace.geometry.depth.depth_to_disparity` with the rig's ``fx`` and ``baseline``)."""
+    return _depth_to_disparity(depth, calib.fx, calib.baseline)
 
 
 class DisparityCache:
@@ -92,13 +99,30 @@ class DisparityCache:
 
 def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | None,
                       calib: StereoCalibration | None, *, mode: str, cache: DisparityCache,
-                      read_depth: Callable[[], np.ndarray]) -> tuple[np.ndarray | None, str]:
+                      read_depth: Callable[[], np.ndarray],
+                      read_lidar: Callable[[], np.ndarray] | None = None) -> tuple[np.ndarray | None, str]:
     """The frame's left disparity (``float32 H×W`` pixels, NaN invalid) and its source.
 
     ``mode`` ``auto``: the disparity file, else depth (``read_depth()``, metres) and ``calib``, else
-    cached SGBM of ``left`` and ``right``; ``file``: file or depth only; ``sgbm``: always SGBM; ``none``:
-    nothing. Returns ``(None, "none")`` when no allowed source is there.
+    cached SGBM of ``left`` and ``right``; ``file``: file or depth only; ``depth``: depth only; ``lidar``:
+    ``read_lidar()`` only (the scan's disparity, already in pixels); ``sgbm``: always SGBM; ``none``:
+    nothing. Returns ``(None, "none")`` when no allowed source is there, except for ``depth`` and
+    ``lidar``, which were asked for by name.
+
+    Raises:
+        DatasetError: mode ``depth`` and the frame has no depth file or no camera; mode ``lidar`` and
+            it has no scan or no calibration.
     """
+    if mode == "depth":
+        if frame.depth is None or calib is None:
+            what = "depth map" if frame.depth is None else "camera calibration (f and B for d = f·B/Z)"
+            raise DatasetError(f"{frame.name} has no {what}; --disparity-source depth needs one for every frame")
+        return depth_to_disparity(read_depth(), calib), "depth"
+    if mode == "lidar":
+        if frame.velodyne is None or read_lidar is None:
+            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); --disparity-source lidar "
+                               f"needs one for every frame")
+        return read_lidar(), "lidar"
     if mode in ("auto", "file"):
         if frame.disparity is not None:
             return read_disparity(frame.disparity), "file"

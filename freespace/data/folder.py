@@ -8,7 +8,8 @@ All three pair files by frame stem across folders and decode labels and depth as
     ignore_ids: [0]            # class ids that are don't-care
     label_encoding: class_id   # class_id | kitti (KITTI colours) | mask (non-zero = road)
     label_channel: 0           # channel holding the class id in a colour label, RGB order
-    depth_encoding: png16      # png16 (integer × depth_scale) | carla_rgb | float (.npy/.pfm × depth_scale)
+    depth_encoding: png16      # png16 (integer × depth_scale; 0 and, in 16-bit PNGs, 65535 = none)
+                               # | carla_rgb | float (.npy/.pfm × depth_scale)
     depth_channel: 0
     depth_scale: 0.01          # metres per stored unit
     camera: {fx: 320, fy: 320, cx: 320, cy: 240, baseline: 1.5}   # pixels, metres
@@ -158,7 +159,10 @@ class FolderDataset(StereoRoadDataset):
             metres = (rgb[..., 0] + rgb[..., 1] * 256 + rgb[..., 2] * 65536) / (256 ** 3 - 1) * 1000.0
             depth = metres.astype(np.float32)
         else:
-            depth = _channel(img, spec.depth_channel).astype(np.float32) * np.float32(spec.depth_scale)
+            raw = _channel(img, spec.depth_channel)
+            depth = raw.astype(np.float32) * np.float32(spec.depth_scale)
+            if raw.dtype == np.uint16:
+                depth[raw == 65535] = np.nan  # saturated: "no depth" in SNE-RoadSeg's depth_u16
         depth[depth <= 0] = np.nan
         return depth
 

@@ -11,11 +11,12 @@ from freespace.data.base import Problem, StereoRoadDataset, check_dataset_root
 from freespace.data.registry import get_dataset, get_dataset_class
 from freespace.data.splits import make_splits
 from freespace.errors import DatasetError, FreespaceError, InputFileError
+from freespace.geometry.lidar import read_velodyne
 from freespace.io import PathLike, read_disparity, read_raw
 
 __all__ = ["dataset_info", "format_info", "check_dataset", "scan_dataset", "image_size"]
 
-_KINDS = ("right", "label", "disparity", "depth", "calib")
+_KINDS = ("right", "label", "disparity", "depth", "velodyne", "calib")
 
 
 def image_size(path: PathLike) -> tuple[int, int]:
@@ -43,7 +44,7 @@ def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[li
     expect = dataset.expected_partners()
     for frame in progress_bar(dataset.frames, desc="check", unit="frame", enabled=progress):
         sizes: dict[str, tuple[int, int]] = {}
-        for kind in ("left", "right", "label", "disparity", "depth"):
+        for kind in ("left", "right", "label", "disparity", "depth", "velodyne"):
             path = getattr(frame, kind)
             if path is None:
                 if kind in expect:
@@ -55,6 +56,13 @@ def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[li
                     sizes[kind] = disparity.shape  # type: ignore[assignment]
                     if not np.isfinite(disparity).any():
                         problems.append(Problem(frame.name, f"disparity {path} has no valid value (all 0 or NaN)"))
+                elif kind == "depth":
+                    depth = dataset.read_depth(frame)
+                    sizes[kind] = depth.shape  # type: ignore[assignment]
+                    if not np.isfinite(depth).any():
+                        problems.append(Problem(frame.name, f"depth {path} has no valid value (all 0 or none)"))
+                elif kind == "velodyne":
+                    read_velodyne(path)  # a scan has no image size; its projection needs the calibration
                 elif kind == "label":
                     label = dataset.read_label(frame)
                     sizes[kind] = label.road.shape  # type: ignore[assignment]
