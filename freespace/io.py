@@ -311,6 +311,18 @@ def _read_pfm(path: PathLike, what: str = "disparity") -> np.ndarray:
     return np.flipud(arr[:, :, 0])  # PFM stores rows bottom to top
 
 
+def _read_npy_2d(path: Path, what: str, expected: str) -> np.ndarray:
+    """A real-valued 2-D array from a ``.npy`` file (no pickles), or a one-line error naming ``what``."""
+    _read_bytes(path, what)
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise CorruptFileError(f"cannot decode {what} {path}: {str(exc).splitlines()[0]}") from None
+    if arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+        raise CorruptFileError(f"{what} {path} holds a {arr.dtype} array of shape {arr.shape}; expected {expected}")
+    return arr
+
+
 def read_disparity(path: PathLike) -> np.ndarray:
     """Read a disparity map.
 
@@ -330,15 +342,7 @@ def read_disparity(path: PathLike) -> np.ndarray:
                                    f"KITTI disparity PNG (16-bit, one channel, d = value/256)")
         return _invalid_to_nan(raw.astype(np.float32) / 256.0)
     if suffix == ".npy":
-        _read_bytes(path, "disparity")
-        try:
-            arr = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise CorruptFileError(f"cannot decode disparity {path}: {exc}") from None
-        if arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number):
-            raise CorruptFileError(f"disparity {path} holds a {arr.dtype} array of shape {arr.shape}; "
-                                   f"expected a 2-D float array")
-        return _invalid_to_nan(arr)
+        return _invalid_to_nan(_read_npy_2d(path, "disparity", "a 2-D float array"))
     if suffix == ".pfm":
         return _invalid_to_nan(_read_pfm(path))
     raise InvalidOptionError(f"unknown disparity format {suffix!r} for {path}; use one of "
@@ -416,15 +420,7 @@ def read_depth(path: PathLike, *, png_scale: float = 0.001,
         depth = raw.astype(np.float32) * np.float32(png_scale)
         depth[(raw == 0) | (raw == 65535)] = np.nan
     elif suffix == ".npy":
-        _read_bytes(path, "depth")
-        try:
-            arr = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise CorruptFileError(f"cannot decode depth {path}: {str(exc).splitlines()[0]}") from None
-        if arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
-            raise CorruptFileError(f"depth {path} holds a {arr.dtype} array of shape {arr.shape}; "
-                                   f"expected a 2-D float array in metres")
-        depth = _invalid_to_nan(arr)
+        depth = _invalid_to_nan(_read_npy_2d(path, "depth", "a 2-D float array in metres"))
     elif suffix == ".pfm":
         depth = _invalid_to_nan(_read_pfm(path, "depth"))
     else:
