@@ -136,6 +136,15 @@ def cmd_generate(args: argparse.Namespace) -> int:
 # --- synth ---------------------------------------------------------------------------------------------
 
 
+def _range(text: str) -> tuple[float, float]:
+    """``"MIN,MAX"`` → ``(MIN, MAX)`` (argparse type: a bad value is a one-line usage error)."""
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected MIN,MAX (two numbers), got {text!r}") from None
+    return lo, hi
+
+
 def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--num", type=int, required=True, help="number of frames")
@@ -146,6 +155,12 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--non-planar", action="store_true", help="roads with slopes and camber")
     p.add_argument("--baseline", type=float, help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
     p.add_argument("--max-roll", type=float, default=3.0, help="rig roll range ± degrees (default 3)")
+    p.add_argument("--baselines", type=_range, default=(0.3, 1.6), metavar="MIN,MAX",
+                   help="baseline range in metres, drawn per drive when --baseline is not given (default 0.3,1.6)")
+    p.add_argument("--camera-heights", type=_range, default=(1.4, 2.0), metavar="MIN,MAX",
+                   help="camera height range above the road in metres (default 1.4,2.0)")
+    p.add_argument("--pitches", type=_range, default=(-2.0, 2.0), metavar="MIN,MAX",
+                   help="rig pitch range in degrees, positive = looking up (default -2,2)")
     p.add_argument("--weather", help="comma-separated subset of clear,cloudy,rain,sunset,dusk,fog (default all)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.add_argument("--overwrite", action="store_true",
@@ -160,6 +175,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     weathers = tuple(w.strip() for w in args.weather.split(",")) if args.weather else WEATHERS
     config = SynthConfig(width=args.width, height=args.height, frames_per_scenario=args.frames_per_scenario,
                          planar=not args.non_planar, baseline=args.baseline, max_roll_deg=args.max_roll,
+                         baselines=args.baselines, camera_heights=args.camera_heights, pitches_deg=args.pitches,
                          weathers=weathers)
     rows = write_dataset(args.out, args.num, seed=args.seed, config=config, workers=args.workers,
                          overwrite=args.overwrite)

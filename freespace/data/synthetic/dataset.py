@@ -100,7 +100,8 @@ def _claim_output(out: Path, settings: dict[str, Any], overwrite: bool) -> None:
     if not isinstance(recorded, dict):
         raise InvalidOptionError(f"--out {out} holds files that freespace synth did not write; choose a new or "
                                  f"empty folder")
-    old = {"seed": recorded.get("seed"), **(recorded.get("config") or {})}
+    defaults = json.loads(json.dumps(asdict(SynthConfig())))  # keys added since the folder was written
+    old = {"seed": recorded.get("seed"), **defaults, **(recorded.get("config") or {})}
     new = {"seed": settings["seed"], **settings["config"]}
     differ = [k for k in new if old.get(k) != new[k]]
     if differ and not overwrite:
