@@ -70,7 +70,17 @@ def _fit_options(args: argparse.Namespace):  # -> FitOptions (import kept lazy)
 
 
 def cmd_generate(args: argparse.Namespace) -> int:
-    """``freespace generate``: one pair or a whole dataset."""
+    """``freespace generate``: one pair or a whole dataset (or, with --virtual, one view from another pose)."""
+    if args.virtual:
+        from freespace.generate import generate_virtual_pair
+
+        print(generate_virtual_pair(args.reference, args.road_mask, args.calib, args.disparity, shift=args.shift,
+                                    rotate=args.rotate, out=args.out, label_out=args.label_out,
+                                    model_json=args.model_json, options=_fit_options(args),
+                                    unused={"--target": args.target, "--dataset": args.dataset}).summary())
+        return 0
+    if args.calib or args.shift or args.rotate or args.label_out:
+        raise InvalidOptionError("--calib, --shift, --rotate and --label-out are for --virtual")
     pair = [args.reference, args.target, args.road_mask]
     if args.dataset is None:
         if not all(pair):
@@ -176,7 +186,9 @@ def cmd_train(args: argparse.Namespace) -> int:
                          lr=args.lr, momentum=args.momentum, weight_decay=args.weight_decay, patience=args.patience,
                          image_size=parse_size(args.image_size), seed=args.seed, devices=args.devices, num_nodes=args.num_nodes,
                          strategy=args.strategy, workers=args.workers, splits=args.splits, max_frames=args.max_frames,
-                         disparity=args.disparity_source, cache_dir=args.cache_dir, tensorboard=args.tensorboard)
+                         disparity=args.disparity_source, cache_dir=args.cache_dir, tensorboard=args.tensorboard,
+                         virtual_shift=args.virtual_shift, virtual_rotate=args.virtual_rotate,
+                         virtual_prob=args.virtual_prob)
     config.check()
     metrics = run_training(config, resume=args.resume, progress=not args.no_progress)
     from freespace.engine.data import is_rank_zero
@@ -245,7 +257,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     models = list_models() if args.models == "all" else [m.strip() for m in args.models.split(",") if m.strip()]
     r = reproduce(args.dataset, args.root, args.out, models=models, seeds=args.seeds, epochs=args.epochs,
                   image_size=parse_size(args.image_size), patience=args.patience, batch_size=args.batch_size,
-                  workers=args.workers, max_frames=args.max_frames, progress=not args.no_progress)
+                  workers=args.workers, max_frames=args.max_frames, progress=not args.no_progress,
+                  variants=args.variants)
     print(Path(args.out, "results.md").read_text().rstrip())
     print(f"{len(r['runs'])} runs → {args.out} (results.md, results.csv, figures/, index.json)")
     return 0
@@ -271,6 +284,15 @@ def build_parser() -> argparse.ArgumentParser:
     one.add_argument("--disparity", metavar="D", help="left disparity (KITTI uint16 .png, .npy, .pfm); "
                                                       "default: computed with SGBM")
     one.add_argument("--model-json", metavar="M.json", help="also write the fitted model as JSON")
+    virt = p.add_argument_group("a virtual view (--virtual): the reference image from another camera pose, no "
+                                "right image; camera frame x right, y down, z forward (metres)")
+    virt.add_argument("--virtual", action="store_true", help="warp --reference and --road-mask to the pose "
+                      "--shift/--rotate through the road plane (from --disparity's fit, else Tr_cam_to_road)")
+    virt.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration (P2, P3; Tr_cam_to_road without --disparity)")
+    virt.add_argument("--shift", metavar="DX,DY,DZ", help="camera centre move in metres (+x right, +y down; default 0,0,0)")
+    virt.add_argument("--rotate", metavar="ROLL,PITCH,YAW", help="degrees about z, x, y, R = R_yaw·R_pitch·R_roll "
+                      "(default 0,0,0)")
+    virt.add_argument("--label-out", metavar="VL.png", help="the view's label, KITTI colours (don't care black)")
     _add_dataset_options(p, required=False)
     p.add_argument("--workers", type=int, default=1, help="processes, for --dataset (default 1)")
     p.add_argument("--out", required=True, help="output image (one pair) or folder (dataset)")
@@ -321,7 +343,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_dataset_root(p)
     p.add_argument("--model", default="unet", help="segnet, unet, deeplabv3plus, denseaspp, dupsampling, gscnn")
     p.add_argument("--preset", default="light", help="light (CPU) or paper")
-    p.add_argument("--augment", default="none", help="none or homography (adds the DS-Generator views)")
+    p.add_argument("--augment", default="none", help="none, homography (adds the DS-Generator views), virtual "
+                   "(random road-plane virtual views, no right image needed) or homography,virtual")
+    p.add_argument("--virtual-shift", default="0.5,0.2,0", metavar="DX,DY,DZ",
+                   help="--augment virtual: camera moves drawn in ± these metres (default 0.5,0.2,0)")
+    p.add_argument("--virtual-rotate", default="3,3,3", metavar="ROLL,PITCH,YAW",
+                   help="--augment virtual: rotations drawn in ± these degrees (default 3,3,3)")
+    p.add_argument("--virtual-prob", type=float, default=0.5, help="--augment virtual: share of samples warped (0.5)")
     p.add_argument("--epochs", type=int, default=50)
     p.add_argument("--batch-size", type=int, default=4)
     p.add_argument("--lr", type=float, default=0.001)
@@ -407,6 +435,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_dataset_root(p, split=False)
     p.add_argument("--models", default="all", help="all or a comma-separated list (default all)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
+    p.add_argument("--variants", default="X,HA-X", help="comma-separated arms: X, HA-X (DS-Generator views), HV-X "
+                   "(road-plane virtual views), HAV-X (both) (default X,HA-X)")
     p.add_argument("--epochs", type=int, default=50)
     p.add_argument("--patience", type=int, default=10)
     p.add_argument("--batch-size", type=int, default=4)

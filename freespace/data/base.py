@@ -236,7 +236,7 @@ class StereoRoadDataset(ABC):
         if mode in ("auto", "file"):
             if frame.disparity is not None:
                 return read_disparity(frame.disparity), "file"
-            if frame.depth is not None and calib is not None:
+            if frame.depth is not None and calib is not None and calib.baseline > 0:  # 0: monocular
                 return depth_to_disparity(self.read_depth(frame), calib), "depth"
         if mode in ("auto", "sgbm") and right is not None:
             return self.cache.get(frame, left, right), "sgbm"

@@ -10,9 +10,29 @@ from typing import Any
 from freespace.errors import CorruptFileError, InvalidOptionError
 from freespace.io import PathLike, atomic_write_text
 
-__all__ = ["TrainConfig", "parse_size", "AUGMENTS"]
+__all__ = ["TrainConfig", "parse_size", "parse_augment", "parse_ranges", "AUGMENTS"]
 
-AUGMENTS = ("none", "homography")
+AUGMENTS = ("none", "homography", "virtual")  # --augment takes one, or homography,virtual
+
+
+def parse_augment(text: str) -> tuple[str, ...]:
+    """``"homography,virtual"`` → ``("homography", "virtual")``; ``"none"`` → ``()``. Unknown names raise."""
+    names = [n.strip() for n in str(text).split(",") if n.strip()]
+    bad = [n for n in names if n not in AUGMENTS]
+    if bad or not names or ("none" in names and len(names) > 1) or len(set(names)) != len(names):
+        raise InvalidOptionError(f"--augment must be none, homography, virtual or homography,virtual, got {text!r}")
+    return tuple(n for n in AUGMENTS[1:] if n in names)
+
+
+def parse_ranges(text: str, what: str) -> tuple[float, float, float]:
+    """``"0.5,0.2,0"`` → three half-ranges ``≥ 0`` (the options of ``--augment virtual``)."""
+    try:
+        values = tuple(float(x) for x in str(text).split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(0 <= v < 1e6 for v in values):
+        raise InvalidOptionError(f"{what} must be three numbers ≥ 0 separated by commas, got {text!r}")
+    return values  # type: ignore[return-value]
 
 
 def parse_size(text: str | None) -> tuple[int, int] | None:
@@ -53,6 +73,10 @@ class TrainConfig:
     disparity: str = "auto"
     cache_dir: str | None = None
     tensorboard: bool = False
+    # --augment virtual: half-ranges of the random pose (dx, dy, dz metres; roll, pitch, yaw degrees), probability
+    virtual_shift: str = "0.5,0.2,0"
+    virtual_rotate: str = "3,3,3"
+    virtual_prob: float = 0.5
 
     def check(self) -> None:
         """Reject bad options (one-line errors), before any work."""
@@ -63,8 +87,11 @@ class TrainConfig:
             raise InvalidOptionError(f"unknown dataset {self.dataset!r}; choose one of {', '.join(list_datasets())}")
         if self.model not in list_models():
             raise InvalidOptionError(f"unknown model {self.model!r}; choose one of {', '.join(list_models())}")
-        if self.augment not in AUGMENTS:
-            raise InvalidOptionError(f"--augment must be one of {', '.join(AUGMENTS)}, got {self.augment!r}")
+        parse_augment(self.augment)
+        parse_ranges(self.virtual_shift, "--virtual-shift DX,DY,DZ (metres)")
+        parse_ranges(self.virtual_rotate, "--virtual-rotate ROLL,PITCH,YAW (degrees)")
+        if not 0 <= self.virtual_prob <= 1:
+            raise InvalidOptionError(f"--virtual-prob must be in [0, 1], got {self.virtual_prob}")
         if self.preset not in ("light", "paper"):
             raise InvalidOptionError(f"--preset must be light or paper, got {self.preset!r}")
         if self.disparity not in DISPARITY_MODES:

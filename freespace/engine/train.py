@@ -123,7 +123,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         config.image_size = tuple(data["size"])  # resolved
         config.save(run_dir / "config.yaml")
     ds, size = data["dataset"], tuple(data["size"])
-    train = RoadFrames(ds, data["train"], size, augment=True, seed=config.seed)
+    train = RoadFrames(ds, data["train"], size, augment=True, seed=config.seed, virtual=data["virtual"])
     val = RoadFrames(ds, data["val"], size, augment=False, seed=config.seed)
     test = RoadFrames(ds, data["test"], size, augment=False, seed=config.seed)
 

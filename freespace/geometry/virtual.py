@@ -213,11 +213,17 @@ def virtual_homography(K: np.ndarray, plane: RoadPlane, pose: VirtualPose) -> np
         K: 3×3 intrinsics (pixels), shared by the reference and the virtual camera.
         plane: the road plane in the reference frame. pose: the virtual camera.
 
+    Raises:
+        InvalidOptionError: a bad K, or a virtual camera centre on or under the road plane.
+
     Returns:
         3×3 float64, scaled by a positive factor so that ``H[2, 2] = ±1``: for a road point seen by
         both cameras the homogeneous scale ``(H p̃)[2]`` is positive (it is ``Z_virtual / Z_reference``).
     """
     K = _check_K(K)
+    if not plane.height - float(plane.n @ pose.C) > 1e-6:
+        raise InvalidOptionError(f"the virtual camera at {tuple(pose.shift)} m is on or under the road plane (the "
+                                 f"camera is {plane.height:.3f} m above it); give a smaller --shift")
     H = K @ pose.R @ (np.eye(3) - np.outer(pose.C, plane.n) / plane.height) @ np.linalg.inv(K)
     s = abs(H[2, 2])
     return H / s if s > 1e-12 else H
