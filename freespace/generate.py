@@ -251,9 +251,10 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
         raise InvalidOptionError(f"--virtual needs {', '.join(missing)} (see freespace generate --help)")
     options.check()
     pose = VirtualPose.parse(shift, rotate)
-    if Path(label_out).suffix.lower() not in IMAGE_SUFFIXES or Path(label_out).is_dir():
-        raise InvalidOptionError(f"--label-out {label_out} must be an image file name ending in one of "
-                                 f"{', '.join(IMAGE_SUFFIXES)} (PNG: labels must stay exact)")
+    lossless = tuple(x for x in IMAGE_SUFFIXES if x not in (".jpg", ".jpeg"))
+    if Path(label_out).suffix.lower() not in lossless or Path(label_out).is_dir():
+        raise InvalidOptionError(f"--label-out {label_out} must be a lossless image file name ending in one of "
+                                 f"{', '.join(lossless)} (labels must stay exact)")
     outputs = [check_output_image_path(out), Path(label_out)]
     if model_json is not None:
         outputs.append(Path(model_json))

@@ -18,7 +18,6 @@ from freespace.data.synthetic import SynthConfig, format_kitti_calib, render_fra
 from freespace.errors import InvalidOptionError, ShapeMismatchError
 from freespace.geometry import (
     RoadPlane,
-    StereoCalibration,
     VirtualPose,
     fit_road_model,
     rotation_from_angles,
@@ -400,3 +399,23 @@ def test_resized_intrinsics_keep_the_geometry() -> None:
     ref = cv2.resize(big, (80, 60), interpolation=cv2.INTER_AREA)
     inner = ok & cv2.erode(ok_big.astype(np.uint8), np.ones((5, 5), np.uint8))[::2, ::2].astype(bool)
     assert _psnr(view[inner], ref[inner]) > 30.0
+
+
+# --- reproduce: the variants table ------------------------------------------------------------------------
+
+def test_reproduce_variants_table() -> None:
+    from freespace.experiments.reproduce import _name, _table, parse_variants
+
+    assert parse_variants("X,HA-X") == ("none", "homography")
+    assert parse_variants("HV-X,HAV-X") == ("none", "virtual", "homography,virtual")  # X always, first
+    with pytest.raises(InvalidOptionError, match="unknown variants"):
+        parse_variants("X,HB-X")
+    assert [_name("unet", v, 1) for v in parse_variants("X,HA-X,HV-X,HAV-X")] == \
+        ["unet-orig-s1", "unet-ha-s1", "unet-hv-s1", "unet-hav-s1"]  # the X and HA-X folders as before
+    m = lambda f: {"accuracy": 0.9, "precision": 0.8, "recall": 0.7, "f_score": f, "iou": f - 0.1}  # noqa: E731
+    rows = _table(["unet"], {("unet", "none"): [m(0.80)], ("unet", "virtual"): [m(0.83), m(0.85)],
+                             ("unet", "homography"): [m(0.82)]})
+    assert [r["network"] for r in rows] == ["unet", "HA-unet", "HV-unet"]
+    assert "gain_f_score" not in rows[0]
+    assert rows[1]["gain_f_score"] == pytest.approx(2.0) and rows[2]["gain_f_score"] == pytest.approx(4.0)
+    assert rows[2]["seeds"] == 2 and rows[2]["f_score_std"] == pytest.approx(100 * np.std([0.83, 0.85], ddof=1))
