@@ -8,6 +8,10 @@ from __future__ import annotations
 
 import logging
 import sys
+from collections.abc import Iterable
+from typing import Any, TypeVar
+
+T = TypeVar("T")
 
 
 def setup_logging(verbosity: int = 0) -> None:
@@ -25,3 +29,17 @@ def setup_logging(verbosity: int = 0) -> None:
         handler._freespace = True  # type: ignore[attr-defined]
         logger.addHandler(handler)
     logger.propagate = False
+
+
+def progress_bar(iterable: Iterable[T] | None = None, *, enabled: bool = True, **kwargs: Any) -> Any:
+    """A ``tqdm`` progress bar on a terminal; none off a terminal (a log file gets the stage's lines, not
+    carriage-return frames). ``enabled=False`` (``--no-progress``) turns it off everywhere; ``kwargs`` go
+    to ``tqdm`` (``total``, ``desc``, ``unit``, ...)."""
+    from tqdm import tqdm
+
+    return tqdm(iterable, disable=not (enabled and sys.stderr.isatty()), **kwargs)
+
+
+def on_terminal() -> bool:
+    """Whether stderr (where progress bars go) is a terminal."""
+    return sys.stderr.isatty()

@@ -26,7 +26,7 @@ from freespace.geometry import (
 )
 from freespace.io import RoadLabel, read_image, read_road_label, road_label_to_kitti, write_disparity, write_image
 
-from conftest import textured_image
+from helpers import textured_image
 
 SMALL = SynthConfig(width=320, height=240)
 FRAMES = (0, 13, 27)  # seed 0: sunset, cloudy, cloudy; baselines 1.33, 1.07, 0.37 m
@@ -325,7 +325,7 @@ def test_generate_virtual_never_imports_torch(files: dict[str, Path]) -> None:
 # --- a generic monocular layout: the plane from the camera height and pitch in freespace.yaml -----------
 
 def test_generic_yaml_camera_height_and_pitch(tmp_path: Path) -> None:
-    from freespace.data.base import get_dataset
+    from freespace.data import get_dataset
 
     write_image(tmp_path / "left" / "a.png", textured_image((48, 64)))
     (tmp_path / "freespace.yaml").write_text("left: left\ncamera: {fx: 60, cx: 31.5, cy: 23.5, height: 1.6, pitch: 2}\n")
@@ -348,8 +348,9 @@ def test_generic_yaml_camera_height_and_pitch(tmp_path: Path) -> None:
 def test_augment_virtual_is_deterministic_and_needs_no_right_image(frames, tmp_path: Path) -> None:
     pytest.importorskip("torch")
     from freespace.data.synthetic import write_sample
+    from freespace.data.torch_dataset import RoadSegmentationDataset
     from freespace.engine.config import TrainConfig
-    from freespace.engine.data import RoadFrames, prepare_data
+    from freespace.engine.data import prepare_data
 
     root = tmp_path / "kitti"
     for _, s in frames:
@@ -357,12 +358,12 @@ def test_augment_virtual_is_deterministic_and_needs_no_right_image(frames, tmp_p
     for p in (root / "data_road_right").rglob("*.png"):
         p.unlink()  # monocular: the plane comes from Tr_cam_to_road
     config = TrainConfig(dataset="kitti", root=str(root), out=str(tmp_path / "run"), augment="virtual",
-                         image_size=(96, 128), virtual_prob=1.0, disparity="none")
+                         image_size=(96, 128), virtual_prob=1.0, disparity_mode="none")
     config.check()
     data = prepare_data(config, tmp_path / "run")
     assert data["virtual"] is not None and len(data["virtual"].planes) == len(data["train"]) >= 1
-    make = lambda seed: RoadFrames(data["dataset"], data["train"], (96, 128), augment=True, seed=seed,  # noqa: E731
-                                   virtual=data["virtual"])
+    make = lambda seed: RoadSegmentationDataset(data["dataset"], data["train"], size=(96, 128),  # noqa: E731
+                                                augment=True, seed=seed, virtual=data["virtual"])
     a, b = make(0), make(0)
     x0, x0b, x1, y0 = a[(0, 0)], b[(0, 0)], a[(1, 0)], make(1)[(0, 0)]
     assert (x0["image"] == x0b["image"]).all() and (x0["label"] == x0b["label"]).all()  # (seed, epoch, i) only
@@ -374,7 +375,7 @@ def test_augment_virtual_is_deterministic_and_needs_no_right_image(frames, tmp_p
     assert np.abs(shifts).max(0).tolist() <= [0.5, 0.2, 0.0] and np.abs(shifts[:, 0]).max() > 0.45
     assert np.abs(angles).max() <= 3.0 and np.abs(angles).max() > 2.8
     # with a pose, the sample is the virtual view of the resized frame (then the conventional augmentation)
-    plain = RoadFrames(data["dataset"], data["train"], (96, 128), augment=False, seed=0)
+    plain = RoadSegmentationDataset(data["dataset"], data["train"], size=(96, 128), augment=False, seed=0)
     assert not (plain[0]["image"] == x0["image"]).all()
     assert set(np.unique(x0["label"].numpy())) <= {0, 1, 255}
     with pytest.raises(InvalidOptionError):
@@ -388,14 +389,14 @@ def test_resized_intrinsics_keep_the_geometry() -> None:
     pytest.importorskip("torch")
     import cv2
 
-    from freespace.engine.data import _resized_K
+    from freespace.data.torch_dataset import resized_intrinsics
 
     img = textured_image((120, 160))
     K = np.array([[150.0, 0, 79.5], [0, 150.0, 59.5], [0, 0, 1]])
     plane, pose = RoadPlane.from_camera(1.5, 3.0), VirtualPose(shift=(0.3, 0.1, 0), yaw=2)
     big, _, ok_big = virtual_view(img, None, K, plane, pose)
     small = cv2.resize(img, (80, 60), interpolation=cv2.INTER_AREA)
-    view, _, ok = virtual_view(small, None, _resized_K(K, (120, 160), (60, 80)), plane, pose)
+    view, _, ok = virtual_view(small, None, resized_intrinsics(K, (120, 160), (60, 80)), plane, pose)
     ref = cv2.resize(big, (80, 60), interpolation=cv2.INTER_AREA)
     inner = ok & cv2.erode(ok_big.astype(np.uint8), np.ones((5, 5), np.uint8))[::2, ::2].astype(bool)
     assert _psnr(view[inner], ref[inner]) > 30.0

@@ -2,17 +2,16 @@
 
 Every chosen network is trained on the original training set (X) and on the set augmented with the
 DS-Generator views (HA-X) — or any variants of :data:`VARIANTS` (HV-X: road-plane virtual views, HAV-X:
-both) — with the same seeds, splits, budget and early stopping, and tested on the test split. ``OUT`` receives ``runs/<model>-<variant>-s<seed>/`` (training run folders), ``results.md`` and
-``results.csv`` (one row per network and variant: accuracy, precision, recall, F-score, IoU as mean ± std
-over seeds in %, and each variant's gain over X), ``figures/<model>.png`` (a few test frames: each
-variant's predictions coloured TP green / FN red / FP blue) and ``index.json`` (every run, its status and metrics).
+both) — with the same seeds, splits, budget and early stopping, and tested on the test split. ``OUT``
+receives ``runs/<model>-<variant>-s<seed>/`` (training run folders), ``results.md`` and ``results.csv``
+(one row per network and variant: accuracy, precision, recall, F-score, IoU as mean ± std over seeds in
+%, and each variant's gain over X), ``figures/<model>.png`` (a few test frames: each variant's predictions
+coloured TP green / FN red / FP blue) and ``index.json`` (every run, its status and metrics).
 Finished runs are skipped when the command is run again; interrupted ones resume.
 """
 
 from __future__ import annotations
 
-import csv
-import io as _io
 import json
 import logging
 from dataclasses import dataclass
@@ -23,11 +22,11 @@ import numpy as np
 
 from freespace.engine.config import TrainConfig
 from freespace.errors import InvalidOptionError
-from freespace.io import PathLike, atomic_write_text, write_image, write_json
+from freespace.io import PathLike, atomic_write_text, write_csv, write_image, write_json
 
 log = logging.getLogger(__name__)
 
-__all__ = ["reproduce", "tables_from_index", "parse_variants", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "METRICS"]
+__all__ = ["reproduce", "parse_variants", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "METRICS"]
 
 @dataclass(frozen=True)
 class Variant:
@@ -70,6 +69,10 @@ def parse_variants(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
     return tuple(VARIANTS[n].augment for n in names)
 
 
+#: more seeds than this is a typo, not an experiment (each seed trains every network and variant)
+MAX_SEEDS = 1000
+
+
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str], seeds: int = 3, epochs: int = 50,
               image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4, workers: int = 0,
               max_frames: int | None = None, figures: int = 3, progress: bool = True,
@@ -84,8 +87,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     unknown = [m for m in models if m not in list_models()]
     if unknown or not models:
         raise InvalidOptionError(f"unknown models {unknown}; choose from {', '.join(list_models())} or all")
-    if seeds < 1:
-        raise InvalidOptionError("--seeds must be ≥ 1")
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
     chosen = parse_variants(variants)
     out = Path(out)
     index: list[dict[str, Any]] = []
@@ -153,27 +156,24 @@ def _write_tables(out: Path, rows: list[dict[str, Any]], dataset: str, seeds: in
         gains = [f"{r['gain_f_score']:+.2f}", f"{r['gain_iou']:+.2f}"] if "gain_f_score" in r else ["", ""]
         md.append(f"| {r['network']} | {r['seeds']} | " + " | ".join(cells + gains) + " |")
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
-    buf = _io.StringIO()
     fields = ["network", "seeds"] + [x for k in METRICS for x in (k, f"{k}_std")] + ["gain_f_score", "gain_iou"]
-    writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows([{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
-    atomic_write_text(out / "results.csv", buf.getvalue())
+    write_csv(out / "results.csv", fields,
+              [{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
 
 
 def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int,
             variants: tuple[str, ...] = ("none", "homography")) -> None:
     """``figures/<model>.png``: test frames of seed 0 — image, then each variant's prediction (TP/FN/FP)."""
-    from freespace.data.base import get_dataset
+    from freespace.data.registry import get_dataset
     from freespace.data.splits import read_splits
-    from freespace.infer import Predictor
+    from freespace.predictor import Predictor
     from freespace.viz import caption, grid, overlay_errors
 
     runs = {v: out / "runs" / _name(model, v, 0) for v in variants}
     ckpts = {v: r / "checkpoints" / "best.ckpt" for v, r in runs.items()}
     if not all(c.is_file() for c in ckpts.values()) or frames < 1:
         return
-    ds = get_dataset(dataset, root, disparity="none")
+    ds = get_dataset(dataset, root, disparity_mode="none")
     names = read_splits(runs["none"] / "splits")["test"][:frames]
     predictors = {v: Predictor(checkpoint=c) for v, c in ckpts.items()}
     rows = []
@@ -186,15 +186,3 @@ def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int,
         rows.append(row)
     write_image(out / "figures" / f"{model}.png", grid(rows, width=min(480, rows[0][0].shape[1])))
 
-
-def tables_from_index(out: PathLike, dataset: str, seeds: int) -> list[dict[str, Any]]:
-    """Rebuild ``results.md``/``results.csv`` from ``OUT/index.json`` (e.g. of an interrupted run)."""
-    out = Path(out)
-    index = json.loads((out / "index.json").read_text())
-    models = list(dict.fromkeys(e["model"] for e in index))
-    results: dict[tuple[str, str], list[dict[str, float]]] = {}
-    for e in index:
-        results.setdefault((e["model"], e["variant"]), []).append(e["metrics"])
-    table = _table(models, results)
-    _write_tables(out, table, dataset, seeds)
-    return table

@@ -189,7 +189,8 @@ class RoadPlane:
 
     def in_view(self, pose: VirtualPose) -> RoadPlane:
         """The same plane in the frame of the camera at ``pose``: ``n' = R·n``, ``h' = h − n·C``."""
-        return RoadPlane(tuple(float(x) for x in pose.R @ self.n), self.height - float(self.n @ pose.C))  # type: ignore[arg-type]
+        normal = tuple(float(x) for x in pose.R @ self.n)
+        return RoadPlane(normal, self.height - float(self.n @ pose.C))  # type: ignore[arg-type]
 
     def road_model(self, fx: float, baseline: float, cx: float, cy: float, fy: float | None = None) -> RoadModel:
         """The disparity plane this road gives on a rig (the inverse of :meth:`from_road_model`)."""

@@ -18,11 +18,11 @@ import torch.nn.functional as F
 from torch import nn
 
 from freespace.errors import FreespaceError, InvalidOptionError
+from freespace.io import IGNORE_INDEX
 
 __all__ = ["SegmentationModel", "register_model", "create_model", "list_models", "main_logits", "IGNORE_INDEX",
            "load_smp_encoder"]
 
-IGNORE_INDEX = 255
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 

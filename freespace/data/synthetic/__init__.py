@@ -17,4 +17,5 @@ from freespace.data.synthetic.render import (
 from freespace.data.synthetic.scene import CATEGORIES, WEATHERS, SynthConfig, sample_frame, sample_scenario
 
 __all__ = ["CATEGORIES", "WEATHERS", "StereoSample", "SynthConfig", "kitti_calibration", "render_frame",
-           "render_sample", "render_view", "ViewRender", "sample_frame", "sample_scenario", "format_kitti_calib", "write_dataset", "write_sample"]
+           "render_sample", "render_view", "ViewRender", "sample_frame", "sample_scenario", "format_kitti_calib",
+           "write_dataset", "write_sample"]
