@@ -14,6 +14,18 @@ from typing import Any, TypeVar
 T = TypeVar("T")
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is at the time of each record (it may be replaced after set-up)."""
+
+    @property  # type: ignore[override]
+    def stream(self):  # noqa: D401
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:  # logging.StreamHandler.__init__ assigns it
+        pass
+
+
 def setup_logging(verbosity: int = 0) -> None:
     """Install a stderr handler on the ``freespace`` logger.
 
@@ -24,7 +36,7 @@ def setup_logging(verbosity: int = 0) -> None:
     logger = logging.getLogger("freespace")
     logger.setLevel(level)
     if not any(getattr(h, "_freespace", False) for h in logger.handlers):
-        handler = logging.StreamHandler(sys.stderr)
+        handler = _StderrHandler()
         handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
         handler._freespace = True  # type: ignore[attr-defined]
         logger.addHandler(handler)
