@@ -64,6 +64,17 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
     one.add_argument("--disparity", metavar="D", help="left disparity (KITTI uint16 .png, .npy, .pfm); "
                                                       "default: computed with SGBM")
     one.add_argument("--model-json", metavar="M.json", help="also write the fitted model as JSON")
+    virt = p.add_argument_group("a virtual view (--virtual): the reference image from another camera pose, no "
+                                "right image; camera frame x right, y down, z forward (metres)")
+    virt.add_argument("--virtual", action="store_true", help="warp --reference and --road-mask to the pose "
+                      "--shift/--rotate through the road plane (from --disparity's fit, else Tr_cam_to_road)")
+    virt.add_argument("--calib", metavar="CALIB.txt",
+                      help="KITTI calibration (P2, P3; Tr_cam_to_road without --disparity)")
+    virt.add_argument("--shift", metavar="DX,DY,DZ",
+                      help="camera centre move in metres (+x right, +y down; default 0,0,0)")
+    virt.add_argument("--rotate", metavar="ROLL,PITCH,YAW", help="degrees about z, x, y, R = R_yaw·R_pitch·R_roll "
+                      "(default 0,0,0)")
+    virt.add_argument("--label-out", metavar="VL.png", help="the view's label, KITTI colours (don't care black)")
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
@@ -92,10 +103,22 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_generate(args: argparse.Namespace) -> int:
-    """``freespace generate``: one pair or a whole dataset."""
+    """``freespace generate``: one pair or a whole dataset (or, with --virtual, one view from another pose)."""
     from freespace.generate import FitOptions
 
     options = FitOptions(robust=args.robust, inlier_threshold=args.inlier_threshold, max_disparity=args.max_disparity)
+    if args.virtual:
+        from freespace.generate import generate_virtual_pair
+
+        print(generate_virtual_pair(args.reference, args.road_mask, args.calib, args.disparity, shift=args.shift,
+                                    rotate=args.rotate, out=args.out, label_out=args.label_out,
+                                    model_json=args.model_json, options=options,
+                                    unused={"--target": args.target, "--dataset": args.dataset,
+                                            "--disparity-dir": args.disparity_dir, "--shard": args.shard,
+                                            "--lidar-densify": args.lidar_densify is not None}).summary())
+        return 0
+    if args.calib or args.shift or args.rotate or args.label_out:
+        raise InvalidOptionError("--calib, --shift, --rotate and --label-out are for --virtual")
     pair = [args.reference, args.target, args.road_mask]
     if args.dataset is None:
         if not all(pair):
@@ -420,6 +443,8 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p, REPRODUCE_OPTIONS)
     p.add_argument("--models", default="all", help="all or a comma-separated list (default all)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
+    p.add_argument("--variants", default="X,HA-X", help="comma-separated arms: X, HA-X (DS-Generator views), HV-X "
+                   "(road-plane virtual views), HAV-X (both) (default X,HA-X)")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--out", required=True, metavar="DIR")
     p.set_defaults(func=cmd_reproduce)
@@ -434,7 +459,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     models = list_models() if args.models == "all" else [m.strip() for m in args.models.split(",") if m.strip()]
     options = config_from_args(args, REPRODUCE_OPTIONS)
     r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=models, seeds=args.seeds,
-                  progress=not args.no_progress, **options)
+                  progress=not args.no_progress, variants=args.variants, **options)
     print(Path(args.out, "results.md").read_text().rstrip())
     print(f"{len(r['runs'])} runs → {args.out} (results.md, results.csv, figures/, index.json)")
     return 0
@@ -475,12 +500,13 @@ COMMANDS: dict[str, tuple[str, str, Callable[..., None]]] = {
     "generate": ("fit the road model and write the DS-Generator image(s)",
                  "Fit the road disparity model to the road pixels of a stereo pair and warp the target (right) "
                  "image into the reference (left) view with the road homography; for one pair or every labelled "
-                 "frame of a dataset.", _generate_parser),
+                 "frame of a dataset. With --virtual: the reference image and its label from another camera pose, "
+                 "through the road plane (no right image).", _generate_parser),
     "synth": ("render the built-in stereo road dataset (KITTI road layout)",
               "Render stereo road scenes (left, right, exact disparity, road label, calibration) as a KITTI road "
               "tree. Frame i depends only on the seed and i.", _synth_parser),
     "datasets": ("inspect datasets", "Inspect and check datasets.", _datasets_parser),
-    "train": ("train a network (optionally with the homography augmentation)",
+    "train": ("train a network (optionally with the homography or virtual-view augmentation)",
               "Train a segmentation network on a dataset's train split, validate each epoch, stop early on the "
               "validation F-score and test the best checkpoint. The run folder holds config.yaml, splits/, "
               "metrics.csv, checkpoints/ and metrics.json.", _train_parser),
@@ -506,7 +532,8 @@ COMMANDS: dict[str, tuple[str, str, Callable[..., None]]] = {
                      "submission.zip.", _kitti_submit_parser),
     "reproduce": ("the paper's experiments: every network with and without HA; tables, figures",
                   "Train every chosen network on the original and on the augmented training set (same seeds, "
-                  "budget, early stopping), test them, and write results.md/.csv (mean ± std over seeds, HA gain), "
+                  "budget, early stopping; --variants adds the virtual-view arms HV-X and HAV-X), test them, and "
+                  "write results.md/.csv (mean ± std over seeds, each variant's gain over X), "
                   "figures and an index of the runs. Finished runs are skipped when run again.", _reproduce_parser),
     "demo": ("run the built-in demo end to end",
              "Render stereo road scenes, run the DS-Generator on them and write the results.", _demo_parser),

@@ -1,4 +1,5 @@
-"""The DS-Generator over files: one stereo pair, or every labelled frame of a dataset.
+"""The DS-Generator over files: one stereo pair, or every labelled frame of a dataset; and one reference
+image seen from a virtual camera pose (``generate --virtual``).
 
 This is what ``freespace generate`` runs. It imports NumPy and OpenCV only (never torch), reads and
 checks every input before it writes anything, and writes every output atomically.
@@ -19,17 +20,38 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import DatasetError, FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError
-from freespace.geometry import SGBM_MAX_DISPARITY, RoadModel, compute_disparity, fit_road_model, generate_view
+from freespace.errors import (
+    CorruptFileError,
+    DatasetError,
+    FreespaceError,
+    InvalidOptionError,
+    RoadFitError,
+    ShapeMismatchError,
+)
+from freespace.geometry import (
+    SGBM_MAX_DISPARITY,
+    RoadModel,
+    RoadPlane,
+    StereoCalibration,
+    VirtualPose,
+    compute_disparity,
+    fit_road_model,
+    generate_view,
+    virtual_homography,
+    virtual_view,
+)
 from freespace.io import (
     IMAGE_SUFFIXES,
     PathLike,
     check_outputs,
     encode_image,
     atomic_write_bytes,
+    RoadLabel,
     read_disparity,
     read_image,
+    read_kitti_calib,
     read_road_label,
+    road_label_to_kitti,
     write_csv,
     write_json,
 )
@@ -37,7 +59,8 @@ from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FitOptions", "GenerateResult", "generate_pair", "generate_dataset"]
+__all__ = ["FitOptions", "GenerateResult", "VirtualResult", "generate_pair", "generate_virtual_pair",
+           "generate_dataset"]
 
 
 @dataclass(frozen=True)
@@ -161,6 +184,129 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
             if out is not None:
                 Path(out).unlink(missing_ok=True)  # all or nothing
             raise
+    return result
+
+
+# ---------------------------------------------------------------------------------------------------
+# one reference image from another camera pose (``generate --virtual``)
+
+
+@dataclass
+class VirtualResult:
+    """What ``generate --virtual`` made: the view, its label, the plane and where it came from."""
+
+    image: np.ndarray
+    label: RoadLabel
+    valid: np.ndarray
+    plane: RoadPlane
+    plane_source: str  # "calibration" (Tr_cam_to_road) or "fit" (the disparity's road fit + P2/P3)
+    pose: VirtualPose
+    homography: np.ndarray
+    model: RoadModel | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def report(self) -> dict[str, Any]:
+        """JSON-ready pose, plane, homography (reference → virtual pixels), valid fraction, fit."""
+        out: dict[str, Any] = {"pose": self.pose.to_dict(), "plane_source": self.plane_source,
+                               "plane": {"normal": list(self.plane.normal), "height_m": self.plane.height},
+                               "homography": self.homography.tolist(), "valid_fraction": float(self.valid.mean()),
+                               "seconds": {k: round(v, 6) for k, v in self.timings.items()}}
+        if self.model is not None:
+            out["road_model"] = self.model.to_dict()
+        return out
+
+    def summary(self) -> str:
+        """One line for the command's output."""
+        p = self.pose
+        return (f"shift ({p.shift[0]:+.3f}, {p.shift[1]:+.3f}, {p.shift[2]:+.3f}) m  roll/pitch/yaw "
+                f"({p.roll:+.2f}, {p.pitch:+.2f}, {p.yaw:+.2f})°  plane from {self.plane_source}: camera "
+                f"{self.plane.height:.3f} m above the road  valid {100 * self.valid.mean():.1f}%")
+
+
+def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathLike, disparity: PathLike | None = None,
+                          *, shift: str | None = None, rotate: str | None = None, out: PathLike, label_out: PathLike,
+                          model_json: PathLike | None = None, options: FitOptions = FitOptions(),
+                          unused: dict[str, Any] | None = None) -> VirtualResult:
+    """The reference image and its road label seen from a virtual camera pose (``generate --virtual``).
+
+    The road plane comes from the road fit of ``disparity`` (on the road pixels of ``road_mask``) and the
+    calibration's ``P2``/``P3`` (:meth:`RoadPlane.from_road_model`) when a disparity is given, else from
+    the calibration's ``Tr_cam_to_road``. The pose follows :mod:`freespace.geometry.virtual`.
+
+    Args:
+        reference, road_mask, calib, disparity: input files (left image, its label, KITTI calibration,
+            optional left disparity: KITTI uint16 .png, .npy, .pfm).
+        shift: ``"DX,DY,DZ"`` (metres), rotate: ``"ROLL,PITCH,YAW"`` (degrees); None = 0.
+        out: the virtual image. label_out: its label in KITTI colours (road magenta, non-road red,
+            don't care black: outside the reference image or don't care there).
+        model_json: optional JSON report (:meth:`VirtualResult.report`).
+        unused: options of other modes that must not be given (name → value), e.g. ``{"--target": ...}``.
+
+    Every input is read and every check made before anything is written; outputs are written
+    atomically, all or nothing, and may not be any input file.
+    """
+    given = [name for name, value in (unused or {}).items() if value]
+    if given:
+        raise InvalidOptionError(f"--virtual makes one view of the reference image; leave out {', '.join(given)}")
+    missing = [n for n, v in (("--reference", reference), ("--road-mask", road_mask), ("--calib", calib),
+                              ("--label-out", label_out)) if not v]
+    if missing:
+        raise InvalidOptionError(f"--virtual needs {', '.join(missing)} (see freespace generate --help)")
+    options.check()
+    pose = VirtualPose.parse(shift, rotate)
+    lossless = tuple(x for x in IMAGE_SUFFIXES if x not in (".jpg", ".jpeg"))
+    if Path(label_out).suffix.lower() not in lossless or Path(label_out).is_dir():
+        raise InvalidOptionError(f"--label-out {label_out} must be a lossless image file name ending in one of "
+                                 f"{', '.join(lossless)} (labels must stay exact)")
+    check_output_image_path(out)
+    check_outputs({"--out": out, "--label-out": label_out, "--model-json": model_json},
+                  {"--reference": reference, "--road-mask": road_mask, "--calib": calib, "--disparity": disparity})
+    t_start = time.perf_counter()
+    image = read_image(reference, what="reference image")
+    label = read_road_label(road_mask)
+    if label.shape != image.shape[:2]:
+        raise ShapeMismatchError(f"road mask is {_size(label.shape)} but the image is {_size(image.shape)}; give the "
+                                 f"label of the reference image")
+    try:
+        rig = StereoCalibration.from_kitti(read_kitti_calib(calib))
+    except KeyError as exc:
+        raise CorruptFileError(f"calibration file {calib} has no {exc.args[0]}; it needs P2 and P3 (KITTI)") from None
+    model = None
+    if disparity is not None:
+        disp = read_disparity(disparity)
+        if disp.shape != image.shape[:2]:
+            raise ShapeMismatchError(f"disparity is {_size(disp.shape)} but the image is {_size(image.shape)}; give "
+                                     f"the disparity of the reference image")
+        road = label.road & label.valid
+        if not road.any():
+            raise RoadFitError("the road mask marks no road pixel to fit the road plane to; give a label with road")
+        t0 = time.perf_counter()
+        model = fit_road_model(disp, road, robust=options.robust, inlier_threshold=options.inlier_threshold)
+        plane = RoadPlane.from_road_model(model, rig.fx, rig.baseline, rig.cx, rig.cy, fy=rig.fy)
+        timings = {"fit": time.perf_counter() - t0}
+        source = "fit"
+    else:
+        plane = RoadPlane.from_calibration(rig)
+        timings = {}
+        source = "calibration"
+    t0 = time.perf_counter()
+    view, view_label, valid = virtual_view(image, label, rig.K, plane, pose)
+    timings["warp"] = time.perf_counter() - t0
+    result = VirtualResult(image=view, label=view_label, valid=valid, plane=plane, plane_source=source, pose=pose,
+                           homography=virtual_homography(rig.K, plane, pose), model=model, timings=timings)
+    data = [encode_image(view, Path(out).suffix.lower()), encode_image(road_label_to_kitti(view_label),
+                                                                          Path(label_out).suffix.lower())]
+    result.timings["total"] = time.perf_counter() - t_start
+    written: list[Path] = []
+    try:
+        written.append(atomic_write_bytes(out, data[0]))
+        written.append(atomic_write_bytes(label_out, data[1]))
+        if model_json is not None:
+            written.append(write_json(model_json, result.report()))
+    except FreespaceError:
+        for path in written:
+            path.unlink(missing_ok=True)  # all or nothing
+        raise
     return result
 
 

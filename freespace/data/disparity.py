@@ -103,19 +103,22 @@ def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | N
                       read_lidar: Callable[[], np.ndarray] | None = None) -> tuple[np.ndarray | None, str]:
     """The frame's left disparity (``float32 H×W`` pixels, NaN invalid) and its source.
 
-    ``mode`` ``auto``: the disparity file, else depth (``read_depth()``, metres) and ``calib``, else
+    ``mode`` ``auto``: the disparity file, else depth (``read_depth()``, metres) and ``calib`` (with a
+    baseline > 0; a monocular camera, baseline 0, gives no disparity from depth), else
     cached SGBM of ``left`` and ``right``; ``file``: file or depth only; ``depth``: depth only; ``lidar``:
     ``read_lidar()`` only (the scan's disparity, already in pixels); ``sgbm``: always SGBM; ``none``:
     nothing. Returns ``(None, "none")`` when no allowed source is there, except for ``depth`` and
     ``lidar``, which were asked for by name.
 
     Raises:
-        DatasetError: mode ``depth`` and the frame has no depth file or no camera; mode ``lidar`` and
+        DatasetError: mode ``depth`` and the frame has no depth file or no camera (or a monocular one,
+            baseline 0); mode ``lidar`` and
             it has no scan or no calibration.
     """
     if mode == "depth":
-        if frame.depth is None or calib is None:
-            what = "depth map" if frame.depth is None else "camera calibration (f and B for d = f·B/Z)"
+        if frame.depth is None or calib is None or not calib.baseline > 0:
+            what = ("depth map" if frame.depth is None else "camera calibration (f and B for d = f·B/Z)"
+                    if calib is None else "baseline (a monocular camera: give `baseline` for d = f·B/Z)")
             raise DatasetError(f"{frame.name} has no {what}; --disparity-source depth needs one for every frame")
         return depth_to_disparity(read_depth(), calib), "depth"
     if mode == "lidar":
@@ -126,7 +129,7 @@ def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | N
     if mode in ("auto", "file"):
         if frame.disparity is not None:
             return read_disparity(frame.disparity), "file"
-        if frame.depth is not None and calib is not None:
+        if frame.depth is not None and calib is not None and calib.baseline > 0:  # 0: monocular, no disparity
             return depth_to_disparity(read_depth(), calib), "depth"
     if mode in ("auto", "sgbm") and right is not None:
         return cache.get(frame, left, right), "sgbm"

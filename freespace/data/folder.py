@@ -13,10 +13,18 @@ All three pair files by frame stem across folders and decode labels and depth as
     depth_channel: 0
     depth_scale: 0.01          # metres per stored unit
     camera: {fx: 320, fy: 320, cx: 320, cy: 240, baseline: 1.5}   # pixels, metres
+
+The camera may also give the road plane, for ``--augment virtual`` on datasets without a right image or
+disparity: ``height`` (metres of the camera centre above a flat road, > 0), ``pitch`` (degrees, positive
+= the camera looks down at the road) and ``roll`` (degrees, about the optical axis), both default 0, as
+in :meth:`freespace.geometry.RoadPlane.from_camera`. With ``height`` the ``baseline`` may be left out
+(a monocular camera: no disparity from depth then), e.g.
+``camera: {fx: 720, cx: 640, cy: 360, height: 1.6, pitch: 2.5}``.
 """
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -27,7 +35,7 @@ import numpy as np
 from freespace.data.base import FrameRef, Problem, StereoRoadDataset
 from freespace.data.registry import register_dataset
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
-from freespace.geometry import StereoCalibration
+from freespace.geometry import RoadPlane, StereoCalibration
 from freespace.io import (
     DISPARITY_SUFFIXES,
     IMAGE_SUFFIXES,
@@ -101,8 +109,8 @@ class FolderSpec:
                 raise InvalidOptionError(f"{path}: {key} must be a string, got {data[key]!r}")
         if "camera" in data and (not isinstance(data["camera"], dict) or not all(
                 isinstance(v, (int, float)) and not isinstance(v, bool) for v in data["camera"].values())):
-            raise InvalidOptionError(f"{path}: camera must be a mapping of numbers (fx, cx, cy, baseline), "
-                                     f"got {data['camera']!r}")
+            raise InvalidOptionError(f"{path}: camera must be a mapping of numbers (fx, fy, cx, cy, baseline, "
+                                     f"height, pitch, roll), got {data['camera']!r}")
         spec = replace(self, folders=folders, **data)
         spec.check(path)
         return spec
@@ -118,9 +126,24 @@ class FolderSpec:
             except re.error as exc:
                 raise InvalidOptionError(f"{where}: scenario_pattern is not a regular expression ({exc})") from None
         if self.camera is not None:
-            missing = {"fx", "cx", "cy", "baseline"} - set(self.camera)
+            if not isinstance(self.camera, dict):
+                raise InvalidOptionError(f"{where}: camera must be a mapping (fx, fy, cx, cy, baseline, height, "
+                                         f"pitch, roll)")
+            missing = ({"fx", "cx", "cy"} | ({"baseline"} if "height" not in self.camera else set())) - set(self.camera)
             if missing:
-                raise InvalidOptionError(f"{where}: camera needs fx, cx, cy, baseline (missing {sorted(missing)})")
+                raise InvalidOptionError(f"{where}: camera needs fx, cx, cy and baseline (or height, for a monocular "
+                                         f"camera) (missing {sorted(missing)})")
+            for key in ("fx", "fy", "cx", "cy", "baseline", "height", "pitch", "roll"):
+                value = self.camera.get(key)
+                if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                          or not math.isfinite(value)):
+                    raise InvalidOptionError(f"{where}: camera {key} must be a number, got {value!r}")
+            if "height" in self.camera and not self.camera["height"] > 0:
+                raise InvalidOptionError(f"{where}: camera height must be > 0 metres above the road, got "
+                                         f"{self.camera['height']}")
+            if "pitch" in self.camera and not abs(self.camera["pitch"]) < 90:
+                raise InvalidOptionError(f"{where}: camera pitch must be within ±90 degrees, got "
+                                         f"{self.camera['pitch']}")
 
 
 def _channel(img: np.ndarray, channel: int) -> np.ndarray:
@@ -170,8 +193,14 @@ class FolderDataset(StereoRoadDataset):
         cam = self._camera(frame)
         if cam is None:
             return None
+        normal = distance = None
+        if cam.get("height") is not None:  # the road plane of a camera height and pitch (and roll)
+            plane = RoadPlane.from_camera(float(cam["height"]), float(cam.get("pitch", 0.0)),
+                                          float(cam.get("roll", 0.0)))
+            normal, distance = tuple(-x for x in plane.normal), plane.height  # StereoCalibration: n towards the camera
         return StereoCalibration(fx=float(cam["fx"]), fy=float(cam.get("fy", cam["fx"])), cx=float(cam["cx"]),
-                                 cy=float(cam["cy"]), baseline=float(cam["baseline"]))
+                                 cy=float(cam["cy"]), baseline=float(cam.get("baseline", 0.0)),
+                                 road_normal=normal, road_distance=distance)  # type: ignore[arg-type]
 
     def _camera(self, frame: FrameRef) -> dict[str, float] | None:
         return self.spec.camera

@@ -11,6 +11,9 @@ Samples are dicts: ``image`` float32 ``3×H×W`` in [0, 1] (normalisation belong
   image and label together; label borders become don't care). Keys may be ``(epoch, i)`` pairs (see
   :class:`freespace.engine.data.EpochSampler`): the augmentation of sample i in an epoch depends only on
   (``seed``, epoch, i), so a resumed run sees exactly the same data;
+* ``virtual=VirtualAugment(...)`` (with ``augment``): road-plane virtual views (``--augment virtual``),
+  drawn from (``seed``, epoch, i) like the conventional augmentation and applied before it, with the
+  torch-free :func:`freespace.geometry.virtual_view`;
 * ``transform(image, label) -> (image, label)``: a user function on the NumPy arrays (``H×W×3 uint8``,
   ``H×W uint8``), applied last, before the conversion to tensors.
 """
@@ -29,7 +32,7 @@ from freespace.data.base import StereoRoadDataset
 from freespace.errors import DatasetError
 from freespace.io import IGNORE_INDEX, read_image
 
-__all__ = ["RoadSegmentationDataset", "Item", "IGNORE_INDEX", "label_to_index"]
+__all__ = ["RoadSegmentationDataset", "Item", "VirtualAugment", "IGNORE_INDEX", "label_to_index", "resized_intrinsics"]
 
 
 def label_to_index(road: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -47,6 +50,42 @@ class Item:
     index: int
     name: str
     image: str | None = None
+
+
+@dataclass(frozen=True)
+class VirtualAugment:
+    """``--augment virtual``: each sample, each epoch, with probability ``prob``, becomes its road-plane
+    virtual view (:func:`freespace.geometry.virtual_view`) from a pose drawn uniformly in ±``shift``
+    (dx, dy, dz metres) and ±``rotate`` (roll, pitch, yaw degrees), from (seed, epoch, i) only.
+
+    ``planes`` maps a dataset frame index to its intrinsics (3×3, pixels of the frame's own size) and
+    road plane (:class:`freespace.geometry.RoadPlane`); frames without one are never warped.
+    """
+
+    planes: dict[int, tuple[np.ndarray, Any]]
+    shift: tuple[float, float, float] = (0.5, 0.2, 0.0)
+    rotate: tuple[float, float, float] = (3.0, 3.0, 3.0)
+    prob: float = 0.5
+
+    def pose(self, seed: int, epoch: int, i: int):  # -> VirtualPose | None
+        """The pose of sample ``i`` in ``epoch`` (None: keep the sample as it is)."""
+        from freespace.geometry import VirtualPose
+
+        rng = np.random.default_rng([seed, epoch, i, 29])
+        if rng.random() >= self.prob:
+            return None
+        s = rng.uniform(-1, 1, 3) * np.asarray(self.shift)
+        r = rng.uniform(-1, 1, 3) * np.asarray(self.rotate)
+        return VirtualPose(shift=(float(s[0]), float(s[1]), float(s[2])), roll=float(r[0]), pitch=float(r[1]),
+                           yaw=float(r[2]))
+
+
+def resized_intrinsics(K: np.ndarray, src: tuple[int, int], dst: tuple[int, int]) -> np.ndarray:
+    """Intrinsics (3×3, pixels) after resizing an image from ``src`` to ``dst`` (H, W), pixel centres kept
+    (as cv2.resize: source pixel centre ``u`` lands on ``(u + 0.5)·sx − 0.5``)."""
+    sx, sy = dst[1] / src[1], dst[0] / src[0]
+    S = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
+    return S @ K
 
 
 def _augmenter():
@@ -68,6 +107,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         augment: the conventional augmentation, drawn from (``seed``, epoch, i).
         seed: the augmentation's seed.
         cache: keep decoded frames in memory.
+        virtual: road-plane virtual views (only with ``augment``), before the conventional augmentation.
 
     Raises:
         DatasetError: a requested frame is unknown or has no label.
@@ -76,7 +116,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
     def __init__(self, dataset: StereoRoadDataset, names: Sequence[str | Item] | None = None,
                  transform: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None, *,
                  size: tuple[int, int] | None = None, augment: bool = False, seed: int = 0,
-                 cache: bool = False) -> None:
+                 cache: bool = False, virtual: VirtualAugment | None = None) -> None:
         self.dataset = dataset
         wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
         self.items = [n if isinstance(n, Item) else Item(dataset.index(n), n) for n in wanted]
@@ -87,6 +127,8 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         self.transform, self.size, self.augment, self.seed, self.cache = transform, size, augment, seed, cache
         self._cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._aug = _augmenter() if augment else None
+        self.virtual = virtual if augment else None
+        self._K: dict[int, np.ndarray] = {}  # intrinsics at the decoded size of items with a road plane
 
     def __len__(self) -> int:
         return len(self.items)
@@ -100,6 +142,9 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         sample = self.dataset.load(item.index, right=False, disparity=False)
         image = read_image(item.image) if item.image else sample.left
         label = label_to_index(sample.label.road, sample.label.valid)  # type: ignore[union-attr]
+        if self.virtual is not None and item.index in self.virtual.planes:
+            self._K[i] = resized_intrinsics(self.virtual.planes[item.index][0], image.shape[:2],
+                                            tuple(self.size) if self.size is not None else image.shape[:2])
         if self.size is not None and image.shape[:2] != tuple(self.size):
             h, w = self.size
             image = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
@@ -111,6 +156,13 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
     def __getitem__(self, key: int | tuple[int, int]) -> dict[str, Any]:
         epoch, i = key if isinstance(key, tuple) else (0, key)
         image, label = self.decoded(i)
+        if self.virtual is not None and i in self._K:
+            pose = self.virtual.pose(self.seed, epoch, i)
+            if pose is not None:
+                from freespace.geometry import virtual_view
+
+                plane = self.virtual.planes[self.items[i].index][1]
+                image, label, _ = virtual_view(image, label, self._K[i], plane, pose, ignore=IGNORE_INDEX)
         if self._aug is not None:
             self._aug.set_random_seed(int(np.random.default_rng([self.seed, epoch, i]).integers(2**31)))
             out = self._aug(image=image, mask=label)

@@ -16,15 +16,44 @@ from typing import Any, Union, get_args, get_origin, get_type_hints
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, check_seed
 from freespace.io import MAX_IMAGE_SIDE, PathLike, atomic_write_text
 
-__all__ = ["TrainConfig", "parse_size", "AUGMENTS", "PRESETS", "STRATEGIES", "add_config_arguments",
-           "config_from_args", "read_config_yaml"]
+__all__ = ["TrainConfig", "parse_size", "parse_augment", "parse_ranges", "AUGMENTS", "PRESETS", "STRATEGIES",
+           "add_config_arguments", "config_from_args", "read_config_yaml"]
 
-AUGMENTS = ("none", "homography")
+AUGMENTS = ("none", "homography", "virtual", "homography,virtual")  # virtual,homography is read as homography,virtual
 PRESETS = ("light", "paper")
 STRATEGIES = ("auto", "ddp")
 
 # config.yaml keys of runs made before the names said which split and which disparity they mean
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_mode"}
+
+
+def parse_augment(text: str) -> tuple[str, ...]:
+    """``"homography,virtual"`` → ``("homography", "virtual")``; ``"none"`` → ``()``. Unknown names raise."""
+    names = [n.strip() for n in str(text).split(",") if n.strip()]
+    bad = [n for n in names if n not in AUGMENTS[1:3] and n != "none"]
+    if bad or not names or ("none" in names and len(names) > 1) or len(set(names)) != len(names):
+        raise InvalidOptionError(f"--augment must be one of {', '.join(AUGMENTS)}, got {text!r}")
+    return tuple(n for n in AUGMENTS[1:3] if n in names)
+
+
+def _augment_text(text: str) -> str:
+    """The ``--augment`` text in its one spelling (``"virtual, homography"`` → ``"homography,virtual"``); text
+    that is no augmentation is kept, for :meth:`TrainConfig.check` to refuse with the choices."""
+    try:
+        return ",".join(parse_augment(text)) or "none"
+    except InvalidOptionError:
+        return text
+
+
+def parse_ranges(text: str, what: str) -> tuple[float, float, float]:
+    """``"0.5,0.2,0"`` → three half-ranges ``≥ 0`` (the options of ``--augment virtual``)."""
+    try:
+        values = tuple(float(x) for x in str(text).split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(0 <= v < 1e6 for v in values):
+        raise InvalidOptionError(f"{what} must be three numbers ≥ 0 separated by commas, got {text!r}")
+    return values  # type: ignore[return-value]
 
 
 def parse_size(text: str | None) -> tuple[int, int] | None:
@@ -79,7 +108,9 @@ class TrainConfig:
     model: str = _option("network", "unet", choices=_models)
     preset: str = _option("network size: light (CPU) or paper", "light", choices=PRESETS)
     split: str | None = _option("on-disk split (KITTI: training or testing; default: the layout's first)", None)
-    augment: str = _option("homography adds the DS-Generator view of every training frame", "none", choices=AUGMENTS)
+    augment: str = _option("homography adds the DS-Generator view of every training frame; virtual draws a road-plane "
+                           "virtual view of a sample (each epoch, from --virtual-shift/--virtual-rotate; no right "
+                           "image needed); homography,virtual both", "none", choices=AUGMENTS, parse=_augment_text)
     epochs: int = _option("most epochs", 50)
     batch_size: int = _option("training batch size", 4)
     lr: float = _option("SGD learning rate", 0.001)
@@ -100,6 +131,12 @@ class TrainConfig:
                                   "SGBM", "auto", choices=_disparity_modes, flag="--disparity-source")
     cache_dir: str | None = _option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
     tensorboard: bool = _option("also write TensorBoard logs (needs tensorboard)", False)
+    # --augment virtual: half-ranges of the random pose (dx, dy, dz metres; roll, pitch, yaw degrees), probability
+    virtual_shift: str = _option("--augment virtual: camera moves drawn in ± these metres (x right, y down, "
+                                 "z forward)", "0.5,0.2,0", metavar="DX,DY,DZ")
+    virtual_rotate: str = _option("--augment virtual: rotations drawn in ± these degrees", "3,3,3",
+                                  metavar="ROLL,PITCH,YAW")
+    virtual_prob: float = _option("--augment virtual: share of samples warped, each epoch", 0.5, metavar="P")
 
     def check(self) -> None:
         """Reject bad options (one-line errors), before any work."""
@@ -112,6 +149,10 @@ class TrainConfig:
             if choices is not None and value not in choices:
                 raise InvalidOptionError(f"unknown {f.name.replace('_', ' ')} {value!r} ({_flag(f)}); "
                                          f"choose one of {', '.join(choices)}")
+        parse_ranges(self.virtual_shift, "--virtual-shift DX,DY,DZ (metres)")
+        parse_ranges(self.virtual_rotate, "--virtual-rotate ROLL,PITCH,YAW (degrees)")
+        if not 0 <= self.virtual_prob <= 1:
+            raise InvalidOptionError(f"--virtual-prob must be in [0, 1], got {self.virtual_prob}")
         for name in ("epochs", "batch_size", "patience", "devices", "num_nodes"):
             if getattr(self, name) < 1:
                 raise InvalidOptionError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(self, name)}")

@@ -1,5 +1,6 @@
-"""Training data: splits, the DS-Generator views (``--augment homography``) and an epoch-seeded sampler
-(exact resumes, DDP sharding). The samples themselves (resizing, paired conventional augmentation,
+"""Training data: splits, the DS-Generator views (``--augment homography``), the road planes of the
+road-plane virtual views (``--augment virtual``) and an epoch-seeded sampler (exact resumes, DDP sharding).
+The samples themselves (resizing, paired conventional augmentation, the virtual views drawn on the fly,
 decoded-image caching) are :class:`freespace.data.torch_dataset.RoadSegmentationDataset`."""
 
 from __future__ import annotations
@@ -15,8 +16,8 @@ import torch
 from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import make_splits, read_splits, write_splits
-from freespace.data.torch_dataset import Item
-from freespace.engine.config import TrainConfig
+from freespace.data.torch_dataset import Item, VirtualAugment
+from freespace.engine.config import TrainConfig, parse_augment, parse_ranges
 from freespace.errors import DatasetError
 
 log = logging.getLogger(__name__)
@@ -59,7 +60,10 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     """Open the dataset, decide the splits (list files in ``run_dir/splits``) and, with
     ``--augment homography``, make the DS-Generator views of the training frames (``run_dir/generated``).
 
-    Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`) and ``"size"`` (H, W).
+    With ``--augment virtual`` it finds the road plane of every training frame (:class:`VirtualAugment`).
+
+    Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`), ``"size"`` (H, W) and
+    ``"virtual"`` (a :class:`VirtualAugment`, or None).
     """
     ds = get_dataset(config.dataset, config.root, config.split, disparity_mode=config.disparity_mode,
                      cache_dir=config.cache_dir)
@@ -83,10 +87,56 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
                            f"frames or scenarios, or give --splits")
     index = {f.name: ds.index(f.name) for f in labelled}
     items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
-    if config.augment == "homography":
+    augments = parse_augment(config.augment)
+    if "homography" in augments:
         items["train"] += _generated_views(ds, [index[n] for n in splits["train"]], run_dir / "generated")
+    virtual = None
+    if "virtual" in augments:
+        virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]]),
+                                 shift=parse_ranges(config.virtual_shift, "--virtual-shift"),
+                                 rotate=parse_ranges(config.virtual_rotate, "--virtual-rotate"),
+                                 prob=config.virtual_prob)
     size = config.image_size or tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
-    return {"dataset": ds, **items, "size": size}
+    return {"dataset": ds, **items, "size": size, "virtual": virtual}
+
+
+def _road_planes(ds: StereoRoadDataset, indices: list[int]) -> dict[int, tuple[np.ndarray, Any]]:
+    """Intrinsics and road plane of each frame, for ``--augment virtual``: the calibration's plane (KITTI
+    ``Tr_cam_to_road``, or the camera height and pitch of ``freespace.yaml``), else the road fit of the
+    frame's disparity (file, depth, LiDAR or SGBM, as ``--disparity-source`` allows) with the rig's focal
+    length and baseline."""
+    from freespace.errors import FreespaceError
+    from freespace.geometry import RoadPlane, fit_road_model
+
+    planes: dict[int, tuple[np.ndarray, Any]] = {}
+    reasons: dict[str, str] = {}
+    for i in indices:
+        frame = ds.frames[i]
+        try:
+            calib = ds.calibration(frame)
+            if calib is None:
+                raise DatasetError("no camera (calibration file or `camera:` in freespace.yaml)")
+            if calib.road_normal is not None:
+                plane = RoadPlane.from_calibration(calib)
+            else:
+                sample = ds.load(i)
+                if sample.disparity is None or sample.label is None or not calib.baseline > 0:
+                    raise DatasetError("no road plane in the calibration and no disparity (and baseline) to fit one")
+                model = fit_road_model(sample.disparity, sample.label.road & sample.label.valid)
+                plane = RoadPlane.from_road_model(model, calib.fx, calib.baseline, calib.cx, calib.cy, fy=calib.fy)
+            planes[i] = (calib.K, plane)
+        except FreespaceError as exc:
+            reasons[frame.name] = str(exc)
+    if not planes:
+        first = next(iter(reasons.items()), ("", ""))
+        raise DatasetError(f"--augment virtual needs each frame's camera and road plane; none of the {len(indices)} "
+                           f"training frames has one ({first[0]}: {first[1]}); give a KITTI calibration with "
+                           f"Tr_cam_to_road, `camera: {{height: .., pitch: ..}}` in freespace.yaml, or disparities")
+    if reasons:
+        log.warning("%d of %d training frames have no road plane and get no virtual views: %s", len(reasons),
+                    len(indices), "; ".join(f"{k}: {v}" for k, v in list(reasons.items())[:3]))
+    log.info("virtual views: road planes of %d training frames", len(planes))
+    return planes
 
 
 def _generated_views(ds: StereoRoadDataset, indices: list[int], folder: Path) -> list[Item]:

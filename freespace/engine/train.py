@@ -178,7 +178,8 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         config.save(run_dir / "config.yaml")
     ds, size = data["dataset"], tuple(data["size"])
     train, val, test = (RoadSegmentationDataset(ds, data[k], size=size, augment=k == "train", seed=config.seed,
-                                                cache=True) for k in ("train", "val", "test"))
+                                                cache=True, virtual=data["virtual"] if k == "train" else None)
+                        for k in ("train", "val", "test"))
 
     def loader(frames: RoadSegmentationDataset, shuffle: bool) -> torch.utils.data.DataLoader:
         return torch.utils.data.DataLoader(frames, batch_size=config.batch_size if shuffle else 1,

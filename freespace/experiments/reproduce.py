@@ -1,11 +1,12 @@
 """`freespace reproduce`: the paper's protocol on one dataset.
 
 Every chosen network is trained on the original training set (X) and on the set augmented with the
-DS-Generator views (HA-X), with the same seeds, splits, budget and early stopping, and tested on the test
-split. ``OUT`` receives ``runs/<model>-<variant>-s<seed>/`` (training run folders), ``results.md`` and
-``results.csv`` (one row per network and variant: accuracy, precision, recall, F-score, IoU as mean ± std
-over seeds in %, and the HA gain), ``figures/<model>.png`` (a few test frames: original vs HA
-predictions coloured TP green / FN red / FP blue) and ``index.json`` (every run, its status and metrics).
+DS-Generator views (HA-X) — or any variants of :data:`VARIANTS` (HV-X: road-plane virtual views, HAV-X:
+both) — with the same seeds, splits, budget and early stopping, and tested on the test split. ``OUT``
+receives ``runs/<model>-<variant>-s<seed>/`` (training run folders), ``results.md`` and ``results.csv``
+(one row per network and variant: accuracy, precision, recall, F-score, IoU as mean ± std over seeds in
+%, and each variant's gain over X), ``figures/<model>.png`` (a few test frames: each variant's predictions
+coloured TP green / FN red / FP blue) and ``index.json`` (every run, its status and metrics).
 Finished runs are skipped when the command is run again; interrupted ones resume.
 """
 
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,15 +26,47 @@ from freespace.io import PathLike, atomic_write_text, write_csv, write_image, wr
 
 log = logging.getLogger(__name__)
 
-__all__ = ["reproduce", "VARIANTS", "METRICS"]
+__all__ = ["reproduce", "parse_variants", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "METRICS"]
 
-VARIANTS = ("none", "homography")
+@dataclass(frozen=True)
+class Variant:
+    """One arm of the protocol: its table name (``X`` stands for the network), the training ``--augment``
+    and the tag of its run folders (``runs/<model>-<tag>-s<seed>``)."""
+
+    name: str
+    augment: str
+    tag: str
+
+    def label(self, model: str) -> str:
+        """The table row of ``model``: ``X`` replaced by the network's name (``HA-X`` → ``HA-unet``)."""
+        return self.name.replace("X", model)
+
+
+# the arms, by table name; ``variant`` in index.json is the augment string (as before this table existed)
+VARIANTS: dict[str, Variant] = {v.name: v for v in (
+    Variant("X", "none", "orig"),                      # conventional augmentation only
+    Variant("HA-X", "homography", "ha"),               # + the DS-Generator views (the paper)
+    Variant("HV-X", "virtual", "hv"),                  # + road-plane virtual views (no right image)
+    Variant("HAV-X", "homography,virtual", "hav"),     # + both
+)}
+DEFAULT_VARIANTS = ("X", "HA-X")
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
-PAPER_GAINS = "the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points"
+PAPER_GAINS = "HA gain in the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points"
+_BY_AUGMENT = {v.augment: v for v in VARIANTS.values()}
 
 
 def _name(model: str, variant: str, seed: int) -> str:
-    return f"{model}-{'ha' if variant == 'homography' else 'orig'}-s{seed}"
+    return f"{model}-{_BY_AUGMENT[variant].tag}-s{seed}"
+
+
+def parse_variants(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
+    """``"X,HA-X,HV-X"`` → the variants' augment strings, in the given order; ``X`` always comes first."""
+    names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
+    bad = [n for n in names if n not in VARIANTS]
+    if bad or not names:
+        raise InvalidOptionError(f"unknown variants {bad}; choose from {', '.join(VARIANTS)} (comma-separated)")
+    names = ["X"] + [n for n in dict.fromkeys(names) if n != "X"]  # the gains are measured against X
+    return tuple(VARIANTS[n].augment for n in names)
 
 
 #: more seeds than this is a typo, not an experiment (each seed trains every network and variant)
@@ -41,8 +75,12 @@ MAX_SEEDS = 1000
 
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str], seeds: int = 3, epochs: int = 50,
               image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4, workers: int = 0,
-              max_frames: int | None = None, figures: int = 3, progress: bool = True) -> dict[str, Any]:
-    """Run the protocol (see the module docstring) and return ``{"table": rows, "runs": index}``."""
+              max_frames: int | None = None, figures: int = 3, progress: bool = True,
+              variants: str | tuple[str, ...] = DEFAULT_VARIANTS) -> dict[str, Any]:
+    """Run the protocol (see the module docstring) and return ``{"table": rows, "runs": index}``.
+
+    ``variants``: table names from :data:`VARIANTS` (``X`` is always run: gains are against it).
+    """
     from freespace.engine.train import run_training
     from freespace.models import list_models
 
@@ -51,11 +89,12 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
         raise InvalidOptionError(f"unknown models {unknown}; choose from {', '.join(list_models())} or all")
     if not 1 <= seeds <= MAX_SEEDS:
         raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
+    chosen = parse_variants(variants)
     out = Path(out)
     index: list[dict[str, Any]] = []
     results: dict[tuple[str, str], list[dict[str, float]]] = {}
     for model in models:
-        for variant in VARIANTS:
+        for variant in chosen:
             for seed in range(seeds):
                 run_dir = out / "runs" / _name(model, variant, seed)
                 config = TrainConfig(dataset=dataset, root=str(root), out=str(run_dir), model=model, augment=variant,
@@ -78,29 +117,30 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
                 _write_tables(out, _table(models, results), dataset, seeds)  # the table so far, after every run
     table = _table(models, results)
     for model in models:
-        _figure(out, model, dataset, root, figures)
+        _figure(out, model, dataset, root, figures, chosen)
     return {"table": table, "runs": index}
 
 
 def _table(models: list[str], results: dict[tuple[str, str], list[dict[str, float]]]) -> list[dict[str, Any]]:
-    """Rows X and HA-X per network (mean ± std over the finished seeds); the gain once both exist."""
+    """One row per network and variant (mean ± std over the finished seeds), in :data:`VARIANTS` order;
+    each variant's gain over X once both exist."""
     rows = []
     for model in models:
         means = {}
-        for variant in VARIANTS:
-            runs = results.get((model, variant))
+        for v in VARIANTS.values():
+            runs = results.get((model, v.augment))
             if not runs:
                 continue
-            row: dict[str, Any] = {"network": ("HA-" if variant == "homography" else "") + model, "seeds": len(runs)}
+            row: dict[str, Any] = {"network": v.label(model), "seeds": len(runs)}
             for k in METRICS:
                 vals = 100 * np.array([r[k] for r in runs])
                 row[k] = float(vals.mean())
                 row[f"{k}_std"] = float(vals.std(ddof=1)) if len(vals) > 1 else 0.0
-            means[variant] = row
+            means[v.augment] = row
             rows.append(row)
-        if len(means) == 2:
-            rows[-1]["gain_f_score"] = means["homography"]["f_score"] - means["none"]["f_score"]
-            rows[-1]["gain_iou"] = means["homography"]["iou"] - means["none"]["iou"]
+            if v.augment != "none" and "none" in means:
+                row["gain_f_score"] = row["f_score"] - means["none"]["f_score"]
+                row["gain_iou"] = row["iou"] - means["none"]["iou"]
     return rows
 
 
@@ -108,8 +148,8 @@ def _write_tables(out: Path, rows: list[dict[str, Any]], dataset: str, seeds: in
     names = {"accuracy": "Accuracy", "precision": "Precision", "recall": "Recall", "f_score": "F-score", "iou": "IoU"}
     md = [f"Results on `{dataset}` (test split, %, mean ± std over up to {seeds} seed{'s' if seeds > 1 else ''}, "
           f"column `n` = seeds finished); "
-          f"HA gain = HA-X − X in points ({PAPER_GAINS}).", "",
-          "| Network | n | " + " | ".join(names.values()) + " | HA gain F | HA gain IoU |",
+          f"gain = variant − X in points ({PAPER_GAINS}).", "",
+          "| Network | n | " + " | ".join(names.values()) + " | gain F | gain IoU |",
           "|---|---:|" + "---:|" * (len(names) + 2)]
     for r in rows:
         cells = [f"{r[k]:.2f} ± {r[k + '_std']:.2f}" for k in names]
@@ -121,14 +161,15 @@ def _write_tables(out: Path, rows: list[dict[str, Any]], dataset: str, seeds: in
               [{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
 
 
-def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int) -> None:
-    """``figures/<model>.png``: test frames of seed 0 — image, X prediction, HA-X prediction (TP/FN/FP)."""
+def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int,
+            variants: tuple[str, ...] = ("none", "homography")) -> None:
+    """``figures/<model>.png``: test frames of seed 0 — image, then each variant's prediction (TP/FN/FP)."""
     from freespace.data.registry import get_dataset
     from freespace.data.splits import read_splits
     from freespace.predictor import Predictor
     from freespace.viz import caption, grid, overlay_errors
 
-    runs = {v: out / "runs" / _name(model, v, 0) for v in VARIANTS}
+    runs = {v: out / "runs" / _name(model, v, 0) for v in variants}
     ckpts = {v: r / "checkpoints" / "best.ckpt" for v, r in runs.items()}
     if not all(c.is_file() for c in ckpts.values()) or frames < 1:
         return
@@ -139,9 +180,9 @@ def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int) ->
     for name in names:
         s = ds.load(ds.index(name), right=False, disparity=False)
         row = [caption(s.left, name)]
-        for v, label in (("none", model), ("homography", f"HA-{model}")):
+        for v in variants:
             pred = predictors[v].predict([s.left])[0] >= 0.5
-            row.append(caption(overlay_errors(s.left, pred, s.label.road, s.label.valid), label))
+            row.append(caption(overlay_errors(s.left, pred, s.label.road, s.label.valid), _BY_AUGMENT[v].label(model)))
         rows.append(row)
     write_image(out / "figures" / f"{model}.png", grid(rows, width=min(480, rows[0][0].shape[1])))
 

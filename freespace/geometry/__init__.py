@@ -1,5 +1,5 @@
-"""Road geometry: the road disparity model, its robust fit, homographies, the DS-Generator warp and
-stereo matching. NumPy + OpenCV only — this package never imports torch.
+"""Road geometry: the road disparity model, its robust fit, homographies, the DS-Generator warp,
+road-plane virtual views and stereo matching. NumPy + OpenCV only — this package never imports torch.
 
 Conventions: pixels are 0-based, ``u`` = column (right), ``v`` = row (down), pixel centres at
 integers; ``H_tr`` maps reference (left) pixels to target (right) pixels; images are ``H×W×3 uint8``
@@ -15,12 +15,15 @@ from freespace.geometry.road_model import (
     road_pixels,
 )
 from freespace.geometry.stereo import SGBM_MAX_DISPARITY, compute_disparity
+from freespace.geometry.virtual import RoadPlane, VirtualPose, rotation_from_angles, virtual_homography, virtual_view
 from freespace.geometry.warp import generate_view, valid_column_ranges
 
 __all__ = [
     "SGBM_MAX_DISPARITY",
     "RoadModel",
+    "RoadPlane",
     "StereoCalibration",
+    "VirtualPose",
     "compute_disparity",
     "fit_road_model",
     "fit_road_model_closed_form",
@@ -28,5 +31,8 @@ __all__ = [
     "homography_from_pose",
     "road_energy",
     "road_pixels",
+    "rotation_from_angles",
     "valid_column_ranges",
+    "virtual_homography",
+    "virtual_view",
 ]

@@ -65,7 +65,8 @@ class StereoCalibration:
 
     Attributes:
         fx, fy: focal lengths in pixels. cx, cy: principal point in pixels (0-based).
-        baseline: distance between the camera centres in metres (> 0, target to the right).
+        baseline: distance between the camera centres in metres (> 0, target to the right; 0 for a
+            monocular camera, which has no disparity).
         road_normal: unit road normal in the reference frame pointing to the camera, or None.
         road_distance: reference camera centre to road plane in metres, or None.
     """

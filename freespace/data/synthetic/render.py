@@ -22,9 +22,10 @@ from freespace.data.synthetic.scene import (
     Box, Frame, Scenario, Sphere, SynthConfig, sample_frame,
 )
 from freespace.geometry.homography import StereoCalibration
+from freespace.geometry.virtual import VirtualPose
 from freespace.io import RoadLabel
 
-__all__ = ["StereoSample", "render_frame", "render_sample", "kitti_calibration"]
+__all__ = ["StereoSample", "ViewRender", "render_frame", "render_sample", "render_view", "kitti_calibration"]
 
 F32 = np.float32
 FAR = 400.0
@@ -525,6 +526,58 @@ def kitti_calibration(frame: Frame) -> dict[str, np.ndarray]:
             "Tr_velo_to_cam": velo, "Tr_cam_to_road": road}
 
 
+def _render(frame: Frame, o: tuple[float, float, float], R: np.ndarray, d: np.ndarray, tile: np.ndarray,
+            shadows: _ShadowMap, pal: _Palette, sun: np.ndarray, rng: np.random.Generator,
+            shape: tuple[int, int]) -> tuple[_Hits, np.ndarray]:
+    """Cast and shade one view from centre ``o`` with rotation ``R`` (camera → world): hits and uint8 image."""
+    sc = frame.scenario
+    hits = _Hits.empty(shape[0] * shape[1])
+    lateral = _ground(hits, sc, o, d, pal, sun)
+    _facades(hits, sc, o, d, frame.z_cam, lateral, pal, sun)
+    _objects(hits, sc.static_objects + frame.objects, sc, o, d, R, shape[1], pal, sun)
+    return hits, _camera(_shade(hits, frame, o, d, tile, shadows, pal.array(), shape), rng, sc.weather)
+
+
+@dataclass
+class ViewRender:
+    """One view of a frame rendered from a moved left camera (:func:`render_view`).
+
+    Attributes:
+        image: ``H×W×3 uint8`` RGB, with the left camera's response (gain, bias, vignetting, noise draw).
+        label: road label of this view (every pixel valid).
+        depth: ``float32 H×W`` depth along this camera's optical axis in metres, NaN where nothing is hit.
+    """
+
+    image: np.ndarray
+    label: RoadLabel
+    depth: np.ndarray
+
+
+def render_view(frame: Frame, config: SynthConfig, pose: VirtualPose) -> ViewRender:
+    """Render the frame from the left camera moved to ``pose`` (the ground truth of a virtual view).
+
+    ``pose`` follows :mod:`freespace.geometry.virtual`: in the left camera's frame (x right, y down,
+    z forward, metres) the camera centre moves to ``C = pose.shift`` and a point X is ``R·(X − C)`` in
+    the moved camera's frame, ``R = R_yaw·R_pitch·R_roll``. The same scene, light, shadow map and camera
+    response as the left image: ``VirtualPose()`` gives the left image exactly, and ``shift = (B, 0, 0)``
+    the right camera's geometry.
+    """
+    sc = frame.scenario
+    h, w = config.height, config.width
+    R_left = frame.rotation()
+    R = R_left @ pose.R.T  # camera → world of the moved camera
+    o_left = np.asarray(frame.camera_centre())
+    o = tuple(float(x) for x in o_left + R_left @ pose.C)
+    rng = np.random.default_rng([*frame.seed, 3])  # the left camera's response: it is drawn first
+    hits, image = _render(frame, o, R, _directions(sc, R, h, w), _noise_tile((frame.seed[0], sc.index)),
+                          _ShadowMap(frame, o_left), _Palette(sc), _sun(sc), rng, (h, w))
+    mat = hits.mat.reshape(h, w)
+    road = (mat == ROAD) | (mat == MARKING)
+    depth = hits.t.reshape(h, w).astype(F32)
+    depth[~np.isfinite(depth)] = np.nan
+    return ViewRender(image=image, label=RoadLabel(road=road, valid=np.ones_like(road)), depth=depth)
+
+
 def render_frame(frame: Frame, config: SynthConfig) -> StereoSample:
     """Render a sampled :class:`~freespace.data.synthetic.scene.Frame` from both cameras."""
     sc = frame.scenario
@@ -535,18 +588,14 @@ def render_frame(frame: Frame, config: SynthConfig) -> StereoSample:
     o_right = tuple(float(x) for x in np.asarray(o_left) + R @ np.array([sc.baseline, 0.0, 0.0]))
     tile = _noise_tile((frame.seed[0], sc.index))
     shadows = _ShadowMap(frame, np.asarray(o_left))
-    objects = sc.static_objects + frame.objects
     rng = np.random.default_rng([*frame.seed, 3])
     pal = _Palette(sc)
     sun = _sun(sc)
     views, images = [], []
     for o in (o_left, o_right):
-        hits = _Hits.empty(h * w)
-        lateral = _ground(hits, sc, o, d, pal, sun)
-        _facades(hits, sc, o, d, frame.z_cam, lateral, pal, sun)
-        _objects(hits, objects, sc, o, d, R, w, pal, sun)
+        hits, image = _render(frame, o, R, d, tile, shadows, pal, sun, rng, (h, w))
         views.append(hits)
-        images.append(_camera(_shade(hits, frame, o, d, tile, shadows, pal.array(), (h, w)), rng, sc.weather))
+        images.append(image)
     t_left, t_right = views[0].t.reshape(h, w), views[1].t.reshape(h, w)
     seen = np.isfinite(t_left)
     disparity = np.full((h, w), np.nan, F32)
