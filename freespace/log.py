@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import sys
+import warnings
 from collections.abc import Iterable
 from typing import Any, TypeVar
 
@@ -55,3 +56,19 @@ def progress_bar(iterable: Iterable[T] | None = None, *, enabled: bool = True, *
 def on_terminal() -> bool:
     """Whether stderr (where progress bars go) is a terminal."""
     return sys.stderr.isatty()
+
+
+def quiet_lightning() -> None:
+    """Route Lightning's loggers through ``freespace``'s handler and keep its start-up chatter (accelerator
+    and device lines, tips) out of the output unless ``-v`` asked for debug messages. Lightning installs
+    handlers bound to the ``sys.stderr`` of import time; a replaced stream would make them fail."""
+    debug = logging.getLogger("freespace").isEnabledFor(logging.DEBUG)
+    if not debug:  # Lightning's own deprecation inside its pytree helper, raised on every fit and test
+        warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)")
+    for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
+        logger = logging.getLogger(name)
+        logger.handlers = [h for h in logger.handlers if not isinstance(h, logging.StreamHandler)]
+        logger.addHandler(_StderrHandler())
+        logger.handlers[-1].setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+        logger.propagate = False
+        logger.setLevel(logging.DEBUG if debug else logging.WARNING)

@@ -26,7 +26,7 @@ from freespace.data.torch_dataset import RoadSegmentationDataset
 from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
 from freespace.errors import CorruptFileError, InvalidOptionError
 from freespace.io import atomic_write_bytes, write_csv, write_json
-from freespace.log import on_terminal
+from freespace.log import on_terminal, quiet_lightning
 
 log = logging.getLogger(__name__)
 
@@ -139,6 +139,8 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
 
 def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     import lightning.pytorch as pl
+
+    quiet_lightning()
 
     from freespace.engine.module import RoadModule
 
