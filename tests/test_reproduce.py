@@ -87,6 +87,7 @@ def test_duplicate_matches_homography_training_list(data: Path, tmp_path: Path) 
         assert lists["none"][k] == lists["homography"][k] == lists["duplicate"][k]
 
 
+@pytest.mark.slow  # with its fixture: six short runs, about 1½ minutes on an idle 2-core machine
 def test_reproduce(experiment, shifted: Path, capsys: pytest.CaptureFixture) -> None:
     out, args, weights = experiment
     # runs in order X s0, X s1, HA-X s0, HA-X s1, X-dup s0, X-dup s1: one seed → one set of initial weights
@@ -146,6 +147,7 @@ def test_reproduce(experiment, shifted: Path, capsys: pytest.CaptureFixture) -> 
     assert list(csv.DictReader((out / "gains.csv").open())) == gains
 
 
+@pytest.mark.slow
 def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """--only runs one cell into its run folder only (the same result as in the whole run); --tables
     collects whatever cells are finished."""
