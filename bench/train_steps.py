@@ -128,7 +128,7 @@ Command: `.venv/bin/python bench/train_steps.py --model {args.model} --size {arg
 | **sum of augmentation, collation, forward, backward** | **{1000 * total:.1f}** |
 
 `freespace train` on the same frames: the fastest epoch after the first of {args.epochs} took {epoch:.2f} s for {steps} training
-steps and the validation of {val} frames, i.e. {1000 * epoch / steps:.0f} ms per step including the validation's share.
+steps, the validation of {val} frames and the two checkpoint writes (best.ckpt, last.ckpt).
 """
     print(body)
     write_section(f"Where a training step's time goes (bench/train_steps.py){args.label}", body)
