@@ -440,28 +440,47 @@ REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "batch_size", "ima
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:
     from freespace.engine.config import add_config_arguments
 
-    add_config_arguments(p, REPRODUCE_OPTIONS)
+    add_config_arguments(p, REPRODUCE_OPTIONS, defaults={"dataset": None, "root": None})  # not with --tables
     p.add_argument("--models", default="all", help="all or a comma-separated list (default all)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
-    p.add_argument("--variants", default="X,HA-X", help="comma-separated arms: X, HA-X (DS-Generator views), HV-X "
-                   "(road-plane virtual views), HAV-X (both) (default X,HA-X)")
+    p.add_argument("--variants", default="X,HA-X,X-dup", help="comma-separated arms: X, HA-X (DS-Generator views), "
+                   "X-dup (the control: X with HA-X's number of steps), HV-X (road-plane virtual views), HAV-X "
+                   "(both) (default X,HA-X,X-dup)")
+    p.add_argument("--test-root", metavar="DIR", help="also test every run on all labelled frames of this dataset "
+                   "(same --dataset layout; e.g. other rigs): rows with test_set = shifted")
+    p.add_argument("--only", metavar="NETWORK,VARIANT,SEED", help="run one cell of the protocol (e.g. unet,HA-X,0; "
+                   "seed in 0…--seeds−1), writing only its run folder (cluster array jobs); collect with --tables")
+    p.add_argument("--tables", action="store_true", help="train nothing: rebuild index.json, the tables and the "
+                   "figures from the run folders in --out")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--out", required=True, metavar="DIR")
     p.set_defaults(func=cmd_reproduce)
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    """``freespace reproduce``: every network with and without the augmentation; tables and figures."""
+    """``freespace reproduce``: every network with and without the augmentation (and the control); tables,
+    paired gains and figures; one cell with ``--only``, the tables alone with ``--tables``."""
     from freespace.engine.config import config_from_args
-    from freespace.experiments.reproduce import reproduce
+    from freespace.experiments.reproduce import reproduce, write_tables
     from freespace.models import list_models
 
-    models = list_models() if args.models == "all" else [m.strip() for m in args.models.split(",") if m.strip()]
-    options = config_from_args(args, REPRODUCE_OPTIONS)
-    r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=models, seeds=args.seeds,
-                  progress=not args.no_progress, variants=args.variants, **options)
+    if args.tables:
+        if args.only:
+            raise InvalidOptionError("--tables collects the finished cells; it takes no --only")
+        r = write_tables(args.out)
+    else:
+        if args.dataset is None or args.root is None:
+            raise InvalidOptionError("reproduce needs --dataset and --root (only --tables does without)")
+        models = list_models() if args.models == "all" else [m.strip() for m in args.models.split(",") if m.strip()]
+        options = config_from_args(args, REPRODUCE_OPTIONS)
+        r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=models, seeds=args.seeds,
+                      progress=not args.no_progress, variants=args.variants, test_root=args.test_root,
+                      only=args.only, **options)
+        if args.only:
+            print(f"{r['runs'][0]['run']}: {r['runs'][0]['status']} (collect the cells with --tables)")
+            return 0
     print(Path(args.out, "results.md").read_text().rstrip())
-    print(f"{len(r['runs'])} runs → {args.out} (results.md, results.csv, figures/, index.json)")
+    print(f"{len(r['runs'])} runs → {args.out} (results.md, results.csv, gains.csv, figures/, index.json)")
     return 0
 
 

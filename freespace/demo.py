@@ -107,7 +107,8 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
         log.info("training %s with and without the augmentation", "all six networks" if full else "U-Net")
         epochs = epochs if epochs is not None else 30 if full else 12
         experiment = reproduce("synth", out / "dataset", out / "experiment", models=list_models() if full else ["unet"],
-                               seeds=3 if full else 1, epochs=epochs, patience=5, batch_size=8, figures=3)
+                               seeds=3 if full else 1, epochs=epochs, patience=5, batch_size=8, figures=3,
+                               variants=("X", "HA-X"))
         result["results"] = experiment["table"]
         result["results_md"] = str(out / "experiment" / "results.md")
     result["seconds"] = round(time.perf_counter() - t0, 2)

@@ -32,7 +32,7 @@ def test_demo_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """The whole `freespace demo` (about 2 minutes here): DS-Generator, U-Net with and without HA, table."""
     assert main(["demo", "--out", str(tmp_path), "--num", "24", "--epochs", "2"]) == 0
     out = capsys.readouterr().out
-    assert "generated view differs" in out and "| HA-unet |" in out and "figures:" in out
+    assert "generated view differs" in out and "| unet | HA-X | test |" in out and "figures:" in out
     summary = json.loads((tmp_path / "demo_summary.json").read_text())
     # the DS-Generator part: the exact-disparity fit recovers the rendered roll, the generated view is
     # closer to the left image on the road than the raw right image
@@ -41,12 +41,12 @@ def test_demo_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert len(list((tmp_path / "figures").glob("*.jpg"))) == 4
     # the training part: both variants trained and tested, the table and its CSV agree
     rows = list(csv.DictReader((tmp_path / "experiment" / "results.csv").open()))
-    assert [r["network"] for r in rows] == ["unet", "HA-unet"] and all(r["seeds"] == "1" for r in rows)
-    assert [r["network"] for r in summary["results"]] == ["unet", "HA-unet"]
+    assert [r["variant"] for r in rows] == ["X", "HA-X"] and all(r["n"] == "1" for r in rows)
+    assert [r["variant"] for r in summary["results"]] == ["X", "HA-X"]
     for row, result in zip(rows, summary["results"]):
-        assert float(row["f_score"]) == pytest.approx(result["f_score"], abs=1e-4)
-        assert 20 < result["f_score"] <= 100 and 0 < result["iou"] <= result["f_score"]  # %, not a dead network
-    assert f"| HA-unet | 1 | {float(rows[1]['accuracy']):.2f} ± 0.00 |" in out
+        assert float(row["f_score_mean"]) == pytest.approx(result["f_score_mean"], abs=1e-4)
+        assert 20 < result["f_score_mean"] <= 100 and 0 < result["iou_mean"] <= result["f_score_mean"]  # %, alive
+    assert f"| unet | HA-X | test | 1 | {float(rows[1]['accuracy_mean']):.2f} ± 0.00 |" in out
     assert read_image(tmp_path / "experiment" / "figures" / "unet.png").shape[0] == 3 * 128
 
 

@@ -1,17 +1,24 @@
-"""`freespace reproduce`: every run, the table (mean ± std, HA gain), figures, index; reruns skip."""
+"""`freespace reproduce`: X, HA-X and the X-dup control with shared splits and initial weights; the tables
+(mean ± std per network × variant × test set), paired gains with t-intervals, a shifted test set, figures,
+index; reruns skip; one cell at a time (--only) and the tables from the run folders (--tables)."""
 
 from __future__ import annotations
 
 import csv
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from freespace.cli import main
-from freespace.io import read_image
 from freespace.data.synthetic import SynthConfig, write_dataset
+from freespace.experiments.stats import paired_gain
+from freespace.io import read_image
+
+METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
 
 
 @pytest.fixture(scope="module")
@@ -21,43 +28,175 @@ def data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def test_reproduce(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    out = tmp_path / "exp"
+@pytest.fixture(scope="module")
+def shifted(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Other rigs: wider roll, other heights, pitches and baselines (the README's recipe, smaller)."""
+    root = tmp_path_factory.mktemp("shifted")
+    write_dataset(root, 4, seed=11, config=SynthConfig(width=128, height=96, frames_per_scenario=2, max_roll_deg=6,
+                                                       camera_heights=(1.0, 2.6), pitches_deg=(-5, 5),
+                                                       baselines=(0.2, 2.0)), progress=False)
+    return root
+
+
+@pytest.fixture(scope="module")
+def experiment(data: Path, shifted: Path, tmp_path_factory: pytest.TempPathFactory):
+    """One protocol run (segnet, X / HA-X / X-dup, 2 seeds, 1 epoch, with a shifted test set), with the
+    initial weights of every run as the engine made them (seen when the optimiser is made)."""
+    import freespace.engine.module as module
+
+    out = tmp_path_factory.mktemp("exp") / "exp"
     args = ["reproduce", "--dataset", "synth", "--root", str(data), "--models", "segnet", "--seeds", "2",
-            "--epochs", "1", "--batch-size", "4", "--no-progress", "--out", str(out)]
-    assert main(args) == 0
-    printed = capsys.readouterr().out
-    assert "| HA-segnet |" in printed and "HA gain" in printed
-    rows = list(csv.DictReader((out / "results.csv").open()))
-    assert [r["network"] for r in rows] == ["segnet", "HA-segnet"] and all(r["seeds"] == "2" for r in rows)
-    assert rows[0]["gain_f_score"] == "" and rows[1]["gain_f_score"] != ""
+            "--variants", "X,HA-X,X-dup", "--test-root", str(shifted), "--epochs", "1", "--batch-size", "4",
+            "--image-size", "64x96",
+            "--no-progress", "--out", str(out)]
+    weights = []
+    configure = module.RoadModule.configure_optimizers
+
+    def recording(self):  # at the start of fit, before the first step: the initial weights
+        weights.append({k: v.detach().clone() for k, v in self.state_dict().items()})
+        return configure(self)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(module.RoadModule, "configure_optimizers", recording)
+        assert main(args) == 0
+    return out, args, weights
+
+
+def _same(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> bool:
+    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_duplicate_matches_homography_training_list(data: Path, tmp_path: Path) -> None:
+    """X-dup trains on exactly HA-X's frames and labels (the frames with a generated view, unchanged)."""
+    from freespace.engine.config import TrainConfig
+    from freespace.engine.data import prepare_data
+
+    lists = {}
+    for augment in ("none", "homography", "duplicate"):
+        config = TrainConfig(dataset="synth", root=str(data), out=str(tmp_path / augment), model="segnet",
+                             augment=augment, seed=1)
+        config.check()
+        lists[augment] = prepare_data(config, tmp_path / augment)
+    x, ha, dup = (lists[a]["train"] for a in ("none", "homography", "duplicate"))
+    n = len(x)
+    assert n >= 8 and len(ha) == len(dup) == 2 * n  # every training frame has a view here (exact disparities)
+    assert [(it.index, it.name) for it in ha] == [(it.index, it.name) for it in dup]  # same frames → same labels
+    assert [it.image for it in dup] == [None] * 2 * n and all(it.image for it in ha[n:])  # own images vs views
+    assert [(it.index, it.name) for it in dup[:n]] == [(it.index, it.name) for it in x]
+    for k in ("val", "test"):  # one split per seed
+        assert lists["none"][k] == lists["homography"][k] == lists["duplicate"][k]
+
+
+@pytest.mark.slow  # with its fixture: six short runs, about 1½ minutes on an idle 2-core machine
+def test_reproduce(experiment, shifted: Path, capsys: pytest.CaptureFixture) -> None:
+    out, args, weights = experiment
+    # runs in order X s0, X s1, HA-X s0, HA-X s1, X-dup s0, X-dup s1: one seed → one set of initial weights
+    assert len(weights) == 6
+    assert _same(weights[0], weights[2]) and _same(weights[0], weights[4])
+    assert _same(weights[1], weights[3]) and _same(weights[1], weights[5]) and not _same(weights[0], weights[1])
+    for seed in (0, 1):  # ... and one split
+        tests = {(out / f"runs/segnet-{t}-s{seed}/splits/test.txt").read_text() for t in ("orig", "ha", "dup")}
+        assert len(tests) == 1
     index = json.loads((out / "index.json").read_text())
-    assert [(r["variant"], r["seed"]) for r in index] == [("none", 0), ("none", 1), ("homography", 0), ("homography", 1)]
+    assert [(r["variant"], r["seed"]) for r in index] == [(v, s) for v in ("X", "HA-X", "X-dup") for s in (0, 1)]
+    frames = {r["variant"]: json.loads((out / r["run"] / "metrics.json").read_text())["frames"] for r in index}
+    assert frames["HA-X"]["train"] == frames["X-dup"]["train"] == 2 * frames["X"]["train"] > 0
     for entry in index:  # the index holds each run's own test metrics, from one set of counts
         m = json.loads((out / entry["run"] / "metrics.json").read_text())
         assert entry["status"] == "done" and entry["metrics"] == {k: m[k] for k in entry["metrics"]}
         assert m["iou"] == pytest.approx(m["f_score"] / (2 - m["f_score"]), abs=1e-12)  # IoU = F/(2−F)
         assert 0.2 < m["f_score"] <= 1 and 0 < m["precision"] <= 1 and 0 < m["recall"] <= 1
-    for row, variant in zip(rows, ("none", "homography")):  # mean ± std (in %) over the seeds of the index
-        for k in ("accuracy", "f_score", "iou"):
-            values = 100 * np.array([e["metrics"][k] for e in index if e["variant"] == variant])
-            assert float(row[k]) == pytest.approx(values.mean(), abs=1e-4)
+        s = json.loads((out / entry["run"] / "shifted" / "metrics.json").read_text())
+        assert s["frames"] == 4 and s["root"] == str(shifted.resolve()) and entry["shifted"]["f_score"] == s["f_score"]
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert list(rows[0])[:5] == ["network", "variant", "test_set", "n", "accuracy_mean"]
+    assert [(r["network"], r["variant"], r["test_set"], r["n"]) for r in rows] == \
+        [("segnet", v, t, "2") for t in ("test", "shifted") for v in ("X", "HA-X", "X-dup")]
+    for row in rows:  # mean ± std (in %) over the seeds of the index
+        key = "metrics" if row["test_set"] == "test" else "shifted"
+        for k in METRICS:
+            values = 100 * np.array([e[key][k] for e in index if e["variant"] == row["variant"]])
+            assert float(row[f"{k}_mean"]) == pytest.approx(values.mean(), abs=1e-4)
             assert float(row[f"{k}_std"]) == pytest.approx(values.std(ddof=1), abs=1e-4)
+    gains = list(csv.DictReader((out / "gains.csv").open()))
+    assert list(gains[0]) == ["network", "versus", "metric", "test_set", "mean", "ci_low", "ci_high", "n",
+                              "excludes_zero"]
+    assert {(g["versus"], g["test_set"]) for g in gains} == \
+        {(v, t) for v in ("HA-X - X", "HA-X - X-dup", "X-dup - X") for t in ("test", "shifted")}
+    for g in gains:  # the paired t-interval of the per-seed differences, in points
+        a, b = g["versus"].split(" - ")
+        key = "metrics" if g["test_set"] == "test" else "shifted"
+        va = [100 * e[key][g["metric"]] for e in index if e["variant"] == a]
+        vb = [100 * e[key][g["metric"]] for e in index if e["variant"] == b]
+        ref = paired_gain(va, vb)
+        assert g["n"] == "2" and float(g["mean"]) == pytest.approx(ref.mean, abs=1e-4)
+        assert float(g["ci_low"]) == pytest.approx(ref.ci_low, abs=1e-4) and float(g["ci_low"]) <= float(g["mean"])
+        assert float(g["ci_high"]) == pytest.approx(ref.ci_high, abs=1e-4)
+        assert g["excludes_zero"] == str(ref.excludes_zero).lower()
     md = (out / "results.md").read_text()
-    assert f"| HA-segnet | 2 | {float(rows[1]['accuracy']):.2f} ± {float(rows[1]['accuracy_std']):.2f} |" in md
-    # three test frames of seed 0: image, X, HA-X side by side at the data's size (96×128)
-    assert read_image(out / "figures" / "segnet.png").shape == (3 * 96, 3 * 128, 3)
-    gain = float(rows[1]["f_score"]) - float(rows[0]["f_score"])
-    assert float(rows[1]["gain_f_score"]) == pytest.approx(gain, abs=1e-3)
-    # both variants of a seed share the split
-    assert (out / "runs/segnet-orig-s0/splits/test.txt").read_text() == (out / "runs/segnet-ha-s0/splits/test.txt").read_text()
-    assert main(args) == 0  # finished runs are skipped
+    r = rows[1]
+    assert f"| segnet | HA-X | test | 2 | {float(r['accuracy_mean']):.2f} ± {float(r['accuracy_std']):.2f} |" in md
+    assert "t-interval" in md and "| segnet | HA-X − X-dup | F-score | shifted | 2 |" in md
+    # three test frames of seed 0: image, X, HA-X, X-dup side by side at the data's size (96×128)
+    assert read_image(out / "figures" / "segnet.png").shape == (3 * 96, 4 * 128, 3)
+    assert read_image(out / "figures" / "gains_segnet.png").shape[2] == 3
+    capsys.readouterr()
+    assert main(args) == 0  # finished runs (and their shifted tests) are skipped
+    assert "| segnet | HA-X | test | 2 |" in capsys.readouterr().out
     assert all(r["status"] == "done (skipped)" for r in json.loads((out / "index.json").read_text()))
+    assert list(csv.DictReader((out / "gains.csv").open())) == gains
 
 
-def test_reproduce_mistakes(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    assert main(["reproduce", "--dataset", "synth", "--root", str(data), "--models", "fcn", "--out", str(tmp_path)]) == 2
-    assert "unknown models" in capsys.readouterr().err
-    assert main(["reproduce", "--dataset", "synth", "--root", str(data), "--seeds", "0", "--out", str(tmp_path)]) == 2
-    assert "--seeds must be in 1…1000" in capsys.readouterr().err
-    assert list(tmp_path.iterdir()) == []  # rejected before any work
+@pytest.mark.slow
+def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """--only runs one cell into its run folder only (the same result as in the whole run); --tables
+    collects whatever cells are finished."""
+    out, _, _ = experiment
+    cells = tmp_path / "cells"
+    base = ["reproduce", "--dataset", "synth", "--root", str(data), "--seeds", "2", "--epochs", "1", "--image-size", "64x96",
+            "--batch-size", "4", "--no-progress", "--out", str(cells)]
+    assert main(base + ["--only", "segnet,X,1"]) == 0
+    assert "runs/segnet-orig-s1: done" in capsys.readouterr().out
+    assert [p.relative_to(cells).as_posix() for p in cells.iterdir()] == ["runs"]  # nothing shared written
+    ours = json.loads((cells / "runs/segnet-orig-s1/metrics.json").read_text())
+    theirs = json.loads((out / "runs/segnet-orig-s1/metrics.json").read_text())
+    assert {k: ours[k] for k in METRICS} == {k: theirs[k] for k in METRICS}  # deterministic on a CPU
+    shutil.copytree(out / "runs/segnet-ha-s1", cells / "runs/segnet-ha-s1")  # another cell, finished elsewhere
+    assert main(["reproduce", "--tables", "--out", str(cells)]) == 0
+    assert "| segnet | HA-X − X | F-score | test | 1 |" in capsys.readouterr().out
+    rows = list(csv.DictReader((cells / "results.csv").open()))
+    assert [(r["variant"], r["test_set"], r["n"]) for r in rows] == [("X", "test", "1"), ("HA-X", "test", "1"),
+                                                                     ("HA-X", "shifted", "1")]
+    assert rows[0]["f_score_std"] == "0.0000"
+    gains = list(csv.DictReader((cells / "gains.csv").open()))
+    assert [(g["versus"], g["metric"], g["n"], g["ci_low"], g["excludes_zero"]) for g in gains] == \
+        [("HA-X - X", "f_score", "1", "", "false"), ("HA-X - X", "iou", "1", "", "false")]  # no interval of one
+    index = json.loads((cells / "index.json").read_text())
+    assert [(e["run"], e["status"]) for e in index] == [("runs/segnet-orig-s1", "done"), ("runs/segnet-ha-s1", "done")]
+    assert not (cells / "figures" / "segnet.png").exists()  # the figure shows seed 0
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--models", "fcn"], "unknown models"),
+    (["--seeds", "0"], "--seeds must be in 1…1000"),
+    (["--only", "fcn,X,0"], "--only: unknown network 'fcn'"),
+    (["--only", "unet,HB-X,0"], "--only: unknown variant 'HB-X'"),
+    (["--only", "unet,X,3"], "--only: the seed must be an integer in 0…2"),
+    (["--only", "unet,X"], "--only must be NETWORK,VARIANT,SEED"),
+    (["--test-root", "/nonexistent/shifted"], "/nonexistent/shifted"),
+    (["--tables", "--only", "unet,X,0"], "--tables collects the finished cells"),
+])
+def test_reproduce_mistakes(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture, extra: list[str],
+                            message: str) -> None:
+    assert main(["reproduce", "--dataset", "synth", "--root", str(data), "--out", str(tmp_path / "o")] + extra) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()  # rejected before any work
+
+
+def test_reproduce_tables_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["reproduce", "--tables", "--out", str(tmp_path)]) == 2
+    assert "holds no run folders" in capsys.readouterr().err
+    assert main(["reproduce", "--out", str(tmp_path)]) == 2
+    assert "needs --dataset and --root" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

@@ -409,14 +409,16 @@ def test_reproduce_variants_table() -> None:
 
     assert parse_variants("X,HA-X") == ("none", "homography")
     assert parse_variants("HV-X,HAV-X") == ("none", "virtual", "homography,virtual")  # X always, first
+    assert parse_variants("X-dup,HA-X") == ("none", "duplicate", "homography")
     with pytest.raises(InvalidOptionError, match="unknown variants"):
         parse_variants("X,HB-X")
-    assert [_name("unet", v, 1) for v in parse_variants("X,HA-X,HV-X,HAV-X")] == \
-        ["unet-orig-s1", "unet-ha-s1", "unet-hv-s1", "unet-hav-s1"]  # the X and HA-X folders as before
+    assert [_name("unet", v, 1) for v in parse_variants("X,HA-X,HV-X,HAV-X,X-dup")] == \
+        ["unet-orig-s1", "unet-ha-s1", "unet-hv-s1", "unet-hav-s1", "unet-dup-s1"]  # X and HA-X folders as before
     m = lambda f: {"accuracy": 0.9, "precision": 0.8, "recall": 0.7, "f_score": f, "iou": f - 0.1}  # noqa: E731
-    rows = _table(["unet"], {("unet", "none"): [m(0.80)], ("unet", "virtual"): [m(0.83), m(0.85)],
-                             ("unet", "homography"): [m(0.82)]})
-    assert [r["network"] for r in rows] == ["unet", "HA-unet", "HV-unet"]
-    assert "gain_f_score" not in rows[0]
-    assert rows[1]["gain_f_score"] == pytest.approx(2.0) and rows[2]["gain_f_score"] == pytest.approx(4.0)
-    assert rows[2]["seeds"] == 2 and rows[2]["f_score_std"] == pytest.approx(100 * np.std([0.83, 0.85], ddof=1))
+    entries = [{"model": "unet", "variant": v, "seed": s, "metrics": m(f)}
+               for v, s, f in (("X", 0, 0.80), ("HV-X", 0, 0.83), ("HV-X", 1, 0.85), ("HA-X", 0, 0.82))]
+    rows = _table(entries)
+    assert [(r["network"], r["variant"], r["test_set"]) for r in rows] == \
+        [("unet", "X", "test"), ("unet", "HA-X", "test"), ("unet", "HV-X", "test")]
+    assert rows[1]["f_score_mean"] == pytest.approx(82.0) and rows[2]["f_score_mean"] == pytest.approx(84.0)
+    assert rows[2]["n"] == 2 and rows[2]["f_score_std"] == pytest.approx(100 * np.std([0.83, 0.85], ddof=1))

@@ -125,10 +125,10 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
             raise DatasetError(f"{len(unlabelled)} frames have no road label (first: {unlabelled[0]}); "
                                f"train on a labelled split")
         self.transform, self.size, self.augment, self.seed, self.cache = transform, size, augment, seed, cache
-        self._cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._cache: dict[tuple[int, str | None], tuple[np.ndarray, np.ndarray]] = {}
         self._aug = _augmenter() if augment else None
         self.virtual = virtual if augment else None
-        self._K: dict[int, np.ndarray] = {}  # intrinsics at the decoded size of items with a road plane
+        self._K: dict[tuple[int, str | None], np.ndarray] = {}  # intrinsics at the decoded size, by frame and image
 
     def __len__(self) -> int:
         return len(self.items)
@@ -136,33 +136,35 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
     def decoded(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Image (``uint8 H×W×3``) and class map (``uint8 H×W``) of sample i, resized to ``size`` if set
         (before augmentation and ``transform``)."""
-        if i in self._cache:
-            return self._cache[i]
         item = self.items[i]
+        key = (item.index, item.image)  # a frame listed twice (``--augment duplicate``) is decoded once
+        if key in self._cache:
+            return self._cache[key]
         sample = self.dataset.load(item.index, right=False, disparity=False)
         image = read_image(item.image) if item.image else sample.left
         label = label_to_index(sample.label.road, sample.label.valid)  # type: ignore[union-attr]
         if self.virtual is not None and item.index in self.virtual.planes:
-            self._K[i] = resized_intrinsics(self.virtual.planes[item.index][0], image.shape[:2],
+            self._K[key] = resized_intrinsics(self.virtual.planes[item.index][0], image.shape[:2],
                                             tuple(self.size) if self.size is not None else image.shape[:2])
         if self.size is not None and image.shape[:2] != tuple(self.size):
             h, w = self.size
             image = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
             label = cv2.resize(label, (w, h), interpolation=cv2.INTER_NEAREST)  # labels: never bilinear
         if self.cache:
-            self._cache[i] = (image, label)
+            self._cache[key] = (image, label)
         return image, label
 
     def __getitem__(self, key: int | tuple[int, int]) -> dict[str, Any]:
         epoch, i = key if isinstance(key, tuple) else (0, key)
         image, label = self.decoded(i)
-        if self.virtual is not None and i in self._K:
+        k = (self.items[i].index, self.items[i].image)
+        if self.virtual is not None and k in self._K:
             pose = self.virtual.pose(self.seed, epoch, i)
             if pose is not None:
                 from freespace.geometry import virtual_view
 
                 plane = self.virtual.planes[self.items[i].index][1]
-                image, label, _ = virtual_view(image, label, self._K[i], plane, pose, ignore=IGNORE_INDEX)
+                image, label, _ = virtual_view(image, label, self._K[k], plane, pose, ignore=IGNORE_INDEX)
         if self._aug is not None:
             self._aug.set_random_seed(int(np.random.default_rng([self.seed, epoch, i]).integers(2**31)))
             out = self._aug(image=image, mask=label)

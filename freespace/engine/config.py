@@ -19,7 +19,9 @@ from freespace.io import MAX_IMAGE_SIDE, PathLike, atomic_write_text
 __all__ = ["TrainConfig", "parse_size", "parse_augment", "parse_ranges", "AUGMENTS", "PRESETS", "STRATEGIES",
            "add_config_arguments", "config_from_args", "read_config_yaml"]
 
-AUGMENTS = ("none", "homography", "virtual", "homography,virtual")  # virtual,homography is read as homography,virtual
+AUGMENTS = ("none", "homography", "virtual", "homography,virtual", "duplicate")  # virtual,homography: homography,virtual
+#: the tokens an ``--augment`` text combines, in their one order (duplicate: the control of homography)
+_AUGMENT_TOKENS = ("homography", "virtual", "duplicate")
 PRESETS = ("light", "paper")
 STRATEGIES = ("auto", "ddp")
 
@@ -28,12 +30,14 @@ _RENAMED = {"splits": "splits_dir", "disparity": "disparity_mode"}
 
 
 def parse_augment(text: str) -> tuple[str, ...]:
-    """``"homography,virtual"`` → ``("homography", "virtual")``; ``"none"`` → ``()``. Unknown names raise."""
+    """``"homography,virtual"`` → ``("homography", "virtual")``; ``"none"`` → ``()``. Unknown names, and
+    ``duplicate`` (the step-count control of ``homography``) together with ``homography``, raise."""
     names = [n.strip() for n in str(text).split(",") if n.strip()]
-    bad = [n for n in names if n not in AUGMENTS[1:3] and n != "none"]
-    if bad or not names or ("none" in names and len(names) > 1) or len(set(names)) != len(names):
+    bad = [n for n in names if n not in _AUGMENT_TOKENS and n != "none"]
+    if (bad or not names or ("none" in names and len(names) > 1) or len(set(names)) != len(names)
+            or {"homography", "duplicate"} <= set(names)):
         raise InvalidOptionError(f"--augment must be one of {', '.join(AUGMENTS)}, got {text!r}")
-    return tuple(n for n in AUGMENTS[1:3] if n in names)
+    return tuple(n for n in _AUGMENT_TOKENS if n in names)
 
 
 def _augment_text(text: str) -> str:
@@ -110,7 +114,9 @@ class TrainConfig:
     split: str | None = _option("on-disk split (KITTI: training or testing; default: the layout's first)", None)
     augment: str = _option("homography adds the DS-Generator view of every training frame; virtual draws a road-plane "
                            "virtual view of a sample (each epoch, from --virtual-shift/--virtual-rotate; no right "
-                           "image needed); homography,virtual both", "none", choices=AUGMENTS, parse=_augment_text)
+                           "image needed); homography,virtual both; duplicate (the control of homography) adds "
+                           "every training frame that has a DS-Generator view once more, unchanged, so that it takes "
+                           "as many steps per epoch", "none", choices=AUGMENTS, parse=_augment_text)
     epochs: int = _option("most epochs", 50)
     batch_size: int = _option("training batch size", 4)
     lr: float = _option("SGD learning rate", 0.001)

@@ -59,6 +59,9 @@ class EpochSampler(torch.utils.data.Sampler):
 def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     """Open the dataset, decide the splits (list files in ``run_dir/splits``) and, with
     ``--augment homography``, make the DS-Generator views of the training frames (``run_dir/generated``).
+    ``--augment duplicate`` (the control of ``homography``) makes them too, only to know which frames have
+    one, and adds those frames once more with their own left images: the same frames, labels and number of
+    training samples (so of steps per epoch) as ``homography``, without the views' content.
 
     With ``--augment virtual`` it finds the road plane of every training frame (:class:`VirtualAugment`).
 
@@ -90,6 +93,9 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     augments = parse_augment(config.augment)
     if "homography" in augments:
         items["train"] += _generated_views(ds, [index[n] for n in splits["train"]], run_dir / "generated")
+    elif "duplicate" in augments:  # the control: the same frames again, their own left images
+        views = _generated_views(ds, [index[n] for n in splits["train"]], run_dir / "generated")
+        items["train"] += [Item(it.index, it.name) for it in views]
     virtual = None
     if "virtual" in augments:
         virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]]),

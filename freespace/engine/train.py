@@ -188,6 +188,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                                            sampler=EpochSampler(len(frames), config.seed, shuffle),
                                            num_workers=config.workers, persistent_workers=config.workers > 0)
 
+    torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
     module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay,
                         image_size=list(size))
     if config.model == "dupsampling" and not resume:

@@ -1,32 +1,51 @@
-"""`freespace reproduce`: the paper's protocol on one dataset.
+"""`freespace reproduce`: the paper's protocol on one dataset, with a control and paired statistics.
 
-Every chosen network is trained on the original training set (X) and on the set augmented with the
-DS-Generator views (HA-X) — or any variants of :data:`VARIANTS` (HV-X: road-plane virtual views, HAV-X:
-both) — with the same seeds, splits, budget and early stopping, and tested on the test split. ``OUT``
-receives ``runs/<model>-<variant>-s<seed>/`` (training run folders), ``results.md`` and ``results.csv``
-(one row per network and variant: accuracy, precision, recall, F-score, IoU as mean ± std over seeds in
-%, and each variant's gain over X), ``figures/<model>.png`` (a few test frames: each variant's predictions
-coloured TP green / FN red / FP blue) and ``index.json`` (every run, its status and metrics).
-Finished runs are skipped when the command is run again; interrupted ones resume.
+Every chosen network is trained on the original training set (X), on the set augmented with the
+DS-Generator views (HA-X) and on the control X-dup (X with every frame that has a DS-Generator view once
+more, unchanged: as many optimiser steps per epoch as HA-X under the same early stopping, without the
+views' content) — or any variants of :data:`VARIANTS` (HV-X: road-plane virtual views, HAV-X: both) —
+with the same seeds and budget, and tested on the test split (``test_set = test``) and, with
+``test_root``, on every labelled frame of a second dataset (``test_set = shifted``, e.g. other rigs).
+For one network and seed all variants share the split and the initial weights; HA-X and X-dup also share
+the data order and the conventional augmentation's draws (same number of samples).
+
+``OUT`` receives ``runs/<model>-<tag>-s<seed>/`` (training run folders; ``shifted/metrics.json`` in each
+with ``test_root``) and, built from the run folders on disk (:func:`write_tables`, ``reproduce --tables``):
+
+* ``results.csv``: one row per network × variant × test set: ``n`` seeds and each metric's mean and std
+  over them (%);
+* ``gains.csv``: per network the paired gains (one difference per seed) HA-X − X, HA-X − X-dup, X-dup − X,
+  HV-X − X, HAV-X − X in F-score and IoU points: mean, 95 % Student t-interval over the seeds, n and
+  whether the interval excludes 0 (:func:`freespace.experiments.stats.paired_gain`);
+* ``results.md`` (both tables), ``figures/gains_<model>.png`` (the gains with their intervals),
+  ``figures/<model>.png`` (a few test frames: each variant's predictions coloured TP green / FN red /
+  FP blue) and ``index.json`` (every run, its status and metrics).
+
+Finished runs are skipped when the command is run again; interrupted ones resume. One cell
+(:func:`run_cell`, ``reproduce --only NETWORK,VARIANT,SEED``) writes only its run folder, so cells can run
+concurrently on a cluster and ``reproduce --tables`` collects them.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from freespace.engine.config import TrainConfig
-from freespace.errors import InvalidOptionError
-from freespace.io import PathLike, atomic_write_text, write_csv, write_image, write_json
+from freespace.engine.config import TrainConfig, read_config_yaml
+from freespace.errors import DatasetError, FreespaceError, InvalidOptionError
+from freespace.experiments.stats import paired_gain
+from freespace.io import PathLike, atomic_write_bytes, atomic_write_text, write_csv, write_image, write_json
 
 log = logging.getLogger(__name__)
 
-__all__ = ["reproduce", "parse_variants", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "METRICS"]
+__all__ = ["reproduce", "run_cell", "write_tables", "parse_variants", "parse_cell", "Variant", "VARIANTS",
+           "DEFAULT_VARIANTS", "METRICS", "GAINS"]
 
 @dataclass(frozen=True)
 class Variant:
@@ -48,8 +67,13 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in (
     Variant("HA-X", "homography", "ha"),               # + the DS-Generator views (the paper)
     Variant("HV-X", "virtual", "hv"),                  # + road-plane virtual views (no right image)
     Variant("HAV-X", "homography,virtual", "hav"),     # + both
+    Variant("X-dup", "duplicate", "dup"),              # control: HA-X's step count, the frames' own images
 )}
-DEFAULT_VARIANTS = ("X", "HA-X")
+DEFAULT_VARIANTS = ("X", "HA-X", "X-dup")
+#: the paired gains reported (variant, versus), when both were run
+GAINS = (("HA-X", "X"), ("HA-X", "X-dup"), ("X-dup", "X"), ("HV-X", "X"), ("HAV-X", "X"))
+GAIN_METRICS = ("f_score", "iou")
+TEST_SETS = ("test", "shifted")
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
 PAPER_GAINS = "HA gain in the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points"
 _BY_AUGMENT = {v.augment: v for v in VARIANTS.values()}
@@ -73,116 +97,360 @@ def parse_variants(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
 MAX_SEEDS = 1000
 
 
+def parse_cell(text: str, seeds: int) -> tuple[str, str, int]:
+    """``"unet,HA-X,2"`` (``--only``) → ``("unet", "homography", 2)``: network, augment string, seed.
+
+    Raises:
+        InvalidOptionError: not three comma-separated fields, an unknown network or variant, or a seed
+        outside ``0 … seeds − 1``.
+    """
+    from freespace.models import list_models
+
+    parts = [p.strip() for p in str(text).split(",")]
+    if len(parts) != 3:
+        raise InvalidOptionError(f"--only must be NETWORK,VARIANT,SEED (e.g. unet,HA-X,0), got {text!r}")
+    model, name, seed_text = parts
+    if model not in list_models():
+        raise InvalidOptionError(f"--only: unknown network {model!r}; choose from {', '.join(list_models())}")
+    if name not in VARIANTS:
+        raise InvalidOptionError(f"--only: unknown variant {name!r}; choose from {', '.join(VARIANTS)}")
+    if not seed_text.isdigit() or not 0 <= int(seed_text) < seeds:
+        raise InvalidOptionError(f"--only: the seed must be an integer in 0…{seeds - 1} (--seeds {seeds}), "
+                                 f"got {seed_text!r}")
+    return model, VARIANTS[name].augment, int(seed_text)
+
+
+def _check_test_root(dataset: str, test_root: PathLike | None) -> None:
+    """Refuse a ``--test-root`` that is not a ``dataset`` tree with labelled frames, before any work."""
+    if test_root is None:
+        return
+    from freespace.data.base import check_dataset_root
+    from freespace.data.registry import get_dataset, get_dataset_class
+
+    check_dataset_root(test_root, get_dataset_class(dataset).name)
+    if not get_dataset(dataset, test_root, disparity_mode="none").labelled().frames:
+        raise DatasetError(f"--test-root {test_root} has no labelled frames to test on")
+
+
+def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, seed: int,
+            options: dict[str, Any]) -> TrainConfig:
+    config = TrainConfig(dataset=dataset, root=str(root), out=str(out / "runs" / _name(model, variant, seed)),
+                         model=model, augment=variant, seed=seed, **options)
+    config.check()
+    return config
+
+
+def run_cell(config: TrainConfig, *, test_root: PathLike | None = None, progress: bool = True) -> str:
+    """Train and test one cell of the protocol (one network, variant and seed) in ``config.out`` — unless
+    its ``metrics.json`` is there — and, with ``test_root``, test it on every labelled frame of that
+    dataset (``RUN/shifted/metrics.json``). Writes nothing outside the run folder.
+
+    Returns the status: ``"done"`` or ``"done (skipped)"``.
+    """
+    from freespace.engine.train import run_training
+
+    run_dir = Path(config.out)
+    if (run_dir / "metrics.json").is_file():
+        status = "done (skipped)"
+    else:
+        resume = (run_dir / "checkpoints" / "last.ckpt").is_file()
+        log.info("training %s (%s)", run_dir.name, "resuming" if resume else "new")
+        run_training(config, resume=resume, progress=progress)
+        status = "done"
+    if test_root is not None:
+        evaluate_shifted(run_dir, config.dataset, test_root)
+    return status
+
+
+def evaluate_shifted(run_dir: PathLike, dataset: str, test_root: PathLike) -> dict[str, Any]:
+    """Test a finished run's checkpoint on every labelled frame of ``test_root`` (a ``dataset`` tree):
+    ``RUN/shifted/metrics.json`` (accuracy, precision, recall, f_score, iou at p ≥ 0.5, max_f, ap as
+    fractions; frames; the resolved root). Skipped when that file exists for the same root."""
+    from freespace.data.registry import get_dataset
+    from freespace.metrics import RoadEvaluator
+    from freespace.predictor import Predictor
+
+    run_dir = Path(run_dir)
+    path = run_dir / "shifted" / "metrics.json"
+    root = str(Path(test_root).resolve())
+    if path.is_file():
+        done = json.loads(path.read_text())
+        if done.get("root") == root:
+            return done
+    checkpoint = run_dir / json.loads((run_dir / "metrics.json").read_text())["checkpoint"]
+    predictor = Predictor(checkpoint=checkpoint)
+    ds = get_dataset(dataset, test_root, disparity_mode="none")
+    names = [f.name for f in ds.labelled().frames]
+    if not names:
+        raise DatasetError(f"--test-root {test_root} has no labelled frames to test on")
+    evaluator = RoadEvaluator()
+    for name in names:
+        sample = ds.load(ds.index(name), right=False, disparity=False)
+        evaluator.process(predictor.predict([sample.left])[0], sample.label.road, sample.label.valid)
+    scores = evaluator.evaluate()
+    metrics = {**{k: scores[k] for k in (*METRICS, "max_f", "ap")}, "frames": len(names), "dataset": dataset,
+               "root": root, "checkpoint": checkpoint.relative_to(run_dir).as_posix()}
+    write_json(path, metrics)
+    log.info("%s on the shifted set (%d frames): F %.4f  IoU %.4f", run_dir.name, len(names), metrics["f_score"],
+             metrics["iou"])
+    return metrics
+
+
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str], seeds: int = 3, epochs: int = 50,
               image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4, workers: int = 0,
               max_frames: int | None = None, figures: int = 3, progress: bool = True,
-              variants: str | tuple[str, ...] = DEFAULT_VARIANTS) -> dict[str, Any]:
-    """Run the protocol (see the module docstring) and return ``{"table": rows, "runs": index}``.
+              variants: str | tuple[str, ...] = DEFAULT_VARIANTS, test_root: PathLike | None = None,
+              only: str | None = None) -> dict[str, Any]:
+    """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
+    "runs": index}``.
 
     ``variants``: table names from :data:`VARIANTS` (``X`` is always run: gains are against it).
+    ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell (``models`` and ``variants`` are then not used)
+    and writes only its run folder; the returned table and gains are then empty (collect the cells with
+    :func:`write_tables`).
     """
-    from freespace.engine.train import run_training
     from freespace.models import list_models
 
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
+    options = dict(epochs=epochs, batch_size=batch_size, patience=patience, image_size=image_size, workers=workers,
+                   max_frames=max_frames)
+    out = Path(out)
+    if only is not None:
+        model, variant, seed = parse_cell(only, seeds)
+        config = _config(dataset, root, out, model, variant, seed, options)
+        _check_test_root(dataset, test_root)
+        status = run_cell(config, test_root=test_root, progress=progress)
+        entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": _BY_AUGMENT[variant].name,
+                 "augment": variant, "seed": seed, "status": status}
+        return {"table": [], "gains": [], "runs": [entry]}
     unknown = [m for m in models if m not in list_models()]
     if unknown or not models:
         raise InvalidOptionError(f"unknown models {unknown}; choose from {', '.join(list_models())} or all")
-    if not 1 <= seeds <= MAX_SEEDS:
-        raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
     chosen = parse_variants(variants)
-    out = Path(out)
-    index: list[dict[str, Any]] = []
-    results: dict[tuple[str, str], list[dict[str, float]]] = {}
-    for model in models:
-        for variant in chosen:
-            for seed in range(seeds):
-                run_dir = out / "runs" / _name(model, variant, seed)
-                config = TrainConfig(dataset=dataset, root=str(root), out=str(run_dir), model=model, augment=variant,
-                                     epochs=epochs, batch_size=batch_size, patience=patience, image_size=image_size,
-                                     seed=seed, workers=workers, max_frames=max_frames)
-                config.check()
-                entry = {"run": str(run_dir.relative_to(out)), "model": model, "variant": variant, "seed": seed}
-                if (run_dir / "metrics.json").is_file():
-                    metrics = json.loads((run_dir / "metrics.json").read_text())
-                    entry["status"] = "done (skipped)"
-                else:
-                    resume = (run_dir / "checkpoints" / "last.ckpt").is_file()
-                    log.info("training %s (%s)", run_dir.name, "resuming" if resume else "new")
-                    metrics = run_training(config, resume=resume, progress=progress)
-                    entry["status"] = "done"
-                entry["metrics"] = {k: metrics[k] for k in (*METRICS, "max_f", "ap")}
-                index.append(entry)
-                results.setdefault((model, variant), []).append(entry["metrics"])
-                write_json(out / "index.json", index)
-                _write_tables(out, _table(models, results), dataset, seeds)  # the table so far, after every run
-    table = _table(models, results)
-    for model in models:
-        _figure(out, model, dataset, root, figures, chosen)
-    return {"table": table, "runs": index}
+    configs = [_config(dataset, root, out, model, variant, seed, options)  # every option checked before any work
+               for model in models for variant in chosen for seed in range(seeds)]
+    _check_test_root(dataset, test_root)
+    statuses: dict[str, str] = {}
+    for config in configs:
+        statuses[Path(config.out).name] = run_cell(config, test_root=test_root, progress=progress)
+        write_tables(out, figures=0, statuses=statuses)  # the tables so far, after every run
+    return write_tables(out, figures=figures, statuses=statuses)
 
 
-def _table(models: list[str], results: dict[tuple[str, str], list[dict[str, float]]]) -> list[dict[str, Any]]:
-    """One row per network and variant (mean ± std over the finished seeds), in :data:`VARIANTS` order;
-    each variant's gain over X once both exist."""
+# --- collecting the run folders ------------------------------------------------------------------------
+
+def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[dict[str, Any]], list[str]]:
+    """Every run folder under ``OUT/runs`` (its config.yaml names the network, variant and seed), in
+    network, :data:`VARIANTS` and seed order, with its test (and shifted) metrics when finished; and the
+    settings that differ between the runs (a table should compare like with like)."""
+    from freespace.models import list_models
+
+    entries, settings = [], {}
+    for run_dir in sorted((out / "runs").glob("*/config.yaml")):
+        run_dir = run_dir.parent
+        try:
+            config = read_config_yaml(run_dir / "config.yaml")
+        except FreespaceError as exc:
+            log.warning("%s skipped: %s", run_dir, exc)
+            continue
+        variant = _BY_AUGMENT.get(str(config.get("augment", "none")))
+        if variant is None or "model" not in config:
+            log.warning("%s skipped: augment %r is no variant of the protocol", run_dir, config.get("augment"))
+            continue
+        entry: dict[str, Any] = {"run": str(run_dir.relative_to(out)), "model": config["model"],
+                                 "variant": variant.name, "augment": variant.augment, "seed": int(config.get("seed", 0)),
+                                 "status": "unfinished"}
+        if (run_dir / "metrics.json").is_file():
+            metrics = json.loads((run_dir / "metrics.json").read_text())
+            entry["status"] = (statuses or {}).get(run_dir.name, "done")
+            entry["metrics"] = {k: metrics[k] for k in (*METRICS, "max_f", "ap")}
+            shifted = run_dir / "shifted" / "metrics.json"
+            if shifted.is_file():
+                entry["shifted"] = {k: v for k, v in json.loads(shifted.read_text()).items()
+                                    if k in (*METRICS, "max_f", "ap")}
+        for key in ("dataset", "root", "epochs", "patience", "batch_size", "image_size", "max_frames", "preset"):
+            settings.setdefault(key, set()).add(json.dumps(config.get(key)))
+        entries.append(entry)
+    order = {m: i for i, m in enumerate(list_models())}
+    names = list(VARIANTS)
+    entries.sort(key=lambda e: (order.get(e["model"], len(order)), e["model"], names.index(e["variant"]), e["seed"]))
+    differ = [f"{k}: {', '.join(sorted(v))}" for k, v in settings.items() if len(v) > 1]
+    return entries, differ
+
+
+def _values(entries: list[dict[str, Any]], model: str, variant: str, test_set: str) -> dict[int, dict[str, float]]:
+    key = "metrics" if test_set == "test" else "shifted"
+    return {e["seed"]: e[key] for e in entries if e["model"] == model and e["variant"] == variant and key in e}
+
+
+def _models(entries: list[dict[str, Any]]) -> list[str]:
+    return list(dict.fromkeys(e["model"] for e in entries))
+
+
+def _table(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``results.csv`` rows: per network, variant (:data:`VARIANTS` order) and test set, ``n`` finished
+    seeds and each metric's mean and std (ddof 1; 0 with one seed) in %."""
     rows = []
-    for model in models:
-        means = {}
-        for v in VARIANTS.values():
-            runs = results.get((model, v.augment))
-            if not runs:
-                continue
-            row: dict[str, Any] = {"network": v.label(model), "seeds": len(runs)}
-            for k in METRICS:
-                vals = 100 * np.array([r[k] for r in runs])
-                row[k] = float(vals.mean())
-                row[f"{k}_std"] = float(vals.std(ddof=1)) if len(vals) > 1 else 0.0
-            means[v.augment] = row
-            rows.append(row)
-            if v.augment != "none" and "none" in means:
-                row["gain_f_score"] = row["f_score"] - means["none"]["f_score"]
-                row["gain_iou"] = row["iou"] - means["none"]["iou"]
+    for model in _models(entries):
+        for test_set in TEST_SETS:
+            for name in VARIANTS:
+                runs = list(_values(entries, model, name, test_set).values())
+                if not runs:
+                    continue
+                row: dict[str, Any] = {"network": model, "variant": name, "test_set": test_set, "n": len(runs)}
+                for k in METRICS:
+                    vals = 100 * np.array([r[k] for r in runs])
+                    row[f"{k}_mean"] = float(vals.mean())
+                    row[f"{k}_std"] = float(vals.std(ddof=1)) if len(vals) > 1 else 0.0
+                rows.append(row)
     return rows
 
 
-def _write_tables(out: Path, rows: list[dict[str, Any]], dataset: str, seeds: int) -> None:
-    names = {"accuracy": "Accuracy", "precision": "Precision", "recall": "Recall", "f_score": "F-score", "iou": "IoU"}
-    md = [f"Results on `{dataset}` (test split, %, mean ± std over up to {seeds} seed{'s' if seeds > 1 else ''}, "
-          f"column `n` = seeds finished); "
-          f"gain = variant − X in points ({PAPER_GAINS}).", "",
-          "| Network | n | " + " | ".join(names.values()) + " | gain F | gain IoU |",
-          "|---|---:|" + "---:|" * (len(names) + 2)]
-    for r in rows:
-        cells = [f"{r[k]:.2f} ± {r[k + '_std']:.2f}" for k in names]
-        gains = [f"{r['gain_f_score']:+.2f}", f"{r['gain_iou']:+.2f}"] if "gain_f_score" in r else ["", ""]
-        md.append(f"| {r['network']} | {r['seeds']} | " + " | ".join(cells + gains) + " |")
+def _gains(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``gains.csv`` rows: the paired gains of :data:`GAINS` in points, over the seeds both variants finished."""
+    rows = []
+    for model in _models(entries):
+        for test_set in TEST_SETS:
+            for a, b in GAINS:
+                va, vb = _values(entries, model, a, test_set), _values(entries, model, b, test_set)
+                seeds = sorted(set(va) & set(vb))
+                if not seeds:
+                    continue
+                for k in GAIN_METRICS:
+                    g = paired_gain([100 * va[s][k] for s in seeds], [100 * vb[s][k] for s in seeds])
+                    rows.append({"network": model, "versus": f"{a} - {b}", "metric": k, "test_set": test_set,
+                                 "mean": g.mean, "ci_low": g.ci_low, "ci_high": g.ci_high, "n": g.n,
+                                 "excludes_zero": g.excludes_zero})
+    return rows
+
+
+def _cell(v: Any) -> Any:
+    """A CSV cell: floats with 4 decimals, NaN (an interval of one seed) empty."""
+    if isinstance(v, bool):
+        return str(v).lower()
+    if isinstance(v, float):
+        return "" if math.isnan(v) else f"{v:.4f}"
+    return v
+
+
+def write_tables(out: PathLike, *, figures: int = 3, statuses: dict[str, str] | None = None) -> dict[str, Any]:
+    """Rebuild ``index.json``, ``results.csv``, ``gains.csv``, ``results.md`` and (``figures`` > 0: test
+    frames per figure) the figures from the run folders under ``OUT/runs`` (``reproduce --tables``).
+
+    Returns ``{"table", "gains", "runs"}`` as :func:`reproduce`.
+
+    Raises:
+        InvalidOptionError: ``OUT/runs`` holds no run folder.
+    """
+    out = Path(out)
+    entries, differ = _collect(out, statuses)
+    if not entries:
+        raise InvalidOptionError(f"{out / 'runs'} holds no run folders of `freespace reproduce`; nothing to collect")
+    if differ:
+        log.warning("the runs differ in %s", "; ".join(differ))
+    table, gains = _table(entries), _gains(entries)
+    write_json(out / "index.json", entries)
+    fields = ["network", "variant", "test_set", "n"] + [f"{k}_{s}" for k in METRICS for s in ("mean", "std")]
+    write_csv(out / "results.csv", fields, [{k: _cell(v) for k, v in r.items()} for r in table])
+    write_csv(out / "gains.csv", ["network", "versus", "metric", "test_set", "mean", "ci_low", "ci_high", "n",
+                                  "excludes_zero"], [{k: _cell(v) for k, v in r.items()} for r in gains])
+    _write_markdown(out, entries, table, gains, differ)
+    if figures > 0:
+        for model in _models(entries):
+            _gain_figure(out, model, [g for g in gains if g["network"] == model])
+            _figure(out, model, entries, figures)
+    return {"table": table, "gains": gains, "runs": entries}
+
+
+_NAMES = {"accuracy": "Accuracy", "precision": "Precision", "recall": "Recall", "f_score": "F-score", "iou": "IoU"}
+
+
+def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[str, Any]],
+                    gains: list[dict[str, Any]], differ: list[str]) -> None:
+    finished = sum("metrics" in e for e in entries)
+    md = [f"Results of {finished} finished run{'s' if finished != 1 else ''} ({len(entries) - finished} unfinished): "
+          f"test set `test` = the dataset's test split, `shifted` = every labelled frame of `--test-root`; "
+          f"%, mean ± std over the `n` seeds finished.", ""]
+    if differ:
+        md += [f"**Warning: the runs differ in {'; '.join(differ)}.**", ""]
+    md += ["| Network | Variant | Test set | n | " + " | ".join(_NAMES.values()) + " |",
+           "|---|---|---|---:|" + "---:|" * len(_NAMES)]
+    for r in table:
+        cells = [f"{r[k + '_mean']:.2f} ± {r[k + '_std']:.2f}" for k in _NAMES]
+        md.append(f"| {r['network']} | {r['variant']} | {r['test_set']} | {r['n']} | " + " | ".join(cells) + " |")
+    md += ["", f"Paired gains in points (one difference per seed: the variants of a seed share the split and the "
+           f"initial weights), mean and 95 % Student t-interval over the `n` seeds (no interval with one seed); "
+           f"{PAPER_GAINS} (HA-X − X).", "",
+           "| Network | Gain | Metric | Test set | n | mean | 95 % t-interval | excludes 0 |",
+           "|---|---|---|---|---:|---:|---:|:---:|"]
+    for g in gains:
+        ci = "—" if math.isnan(g["ci_low"]) else f"[{g['ci_low']:+.2f}, {g['ci_high']:+.2f}]"
+        md.append(f"| {g['network']} | {g['versus'].replace(' - ', ' − ')} | {_NAMES[g['metric']]} | {g['test_set']} "
+                  f"| {g['n']} | {g['mean']:+.2f} | {ci} | {'yes' if g['excludes_zero'] else 'no'} |")
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
-    fields = ["network", "seeds"] + [x for k in METRICS for x in (k, f"{k}_std")] + ["gain_f_score", "gain_iou"]
-    write_csv(out / "results.csv", fields,
-              [{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
 
 
-def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int,
-            variants: tuple[str, ...] = ("none", "homography")) -> None:
-    """``figures/<model>.png``: test frames of seed 0 — image, then each variant's prediction (TP/FN/FP)."""
+def _gain_figure(out: Path, model: str, gains: list[dict[str, Any]]) -> None:
+    """``figures/gains_<model>.png``: each paired gain (points) with its 95 % t-interval, F-score and IoU side
+    by side, one row per comparison and test set; written atomically."""
+    if not gains:
+        return
+    import io as _io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels = list(dict.fromkeys(f"{g['versus'].replace(' - ', ' − ')} ({g['test_set']})" for g in gains))
+    fig, axes = plt.subplots(1, len(GAIN_METRICS), figsize=(4 * len(GAIN_METRICS), 0.5 * len(labels) + 1.2),
+                             dpi=100, sharey=True, squeeze=False)
+    for ax, k in zip(axes[0], GAIN_METRICS):
+        for g in (g for g in gains if g["metric"] == k):
+            y = labels.index(f"{g['versus'].replace(' - ', ' − ')} ({g['test_set']})")
+            colour = "tab:green" if g["excludes_zero"] and g["mean"] > 0 else \
+                "tab:red" if g["excludes_zero"] else "tab:grey"
+            if not math.isnan(g["ci_low"]):
+                ax.plot([g["ci_low"], g["ci_high"]], [y, y], color=colour, linewidth=2)
+            ax.plot([g["mean"]], [y], "o", color=colour)
+            ax.annotate(f"n={g['n']}", (g["mean"], y), textcoords="offset points", xytext=(0, 5), ha="center",
+                        fontsize=7)
+        ax.axvline(0, color="black", linewidth=0.8)
+        ax.set_xlabel(f"{_NAMES[k]} gain (points)")
+        ax.grid(True, axis="x", alpha=0.3)
+    axes[0][0].set_yticks(range(len(labels)), labels)
+    axes[0][0].invert_yaxis()
+    fig.suptitle(f"{model}: paired gains, mean and 95 % t-interval over seeds", fontsize=10)
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_bytes(out / "figures" / f"gains_{model}.png", buf.getvalue())
+
+
+def _figure(out: Path, model: str, entries: list[dict[str, Any]], frames: int) -> None:
+    """``figures/<model>.png``: test frames of seed 0 — image, then each finished variant's prediction
+    (TP/FN/FP), X first."""
     from freespace.data.registry import get_dataset
     from freespace.data.splits import read_splits
     from freespace.predictor import Predictor
     from freespace.viz import caption, grid, overlay_errors
 
-    runs = {v: out / "runs" / _name(model, v, 0) for v in variants}
-    ckpts = {v: r / "checkpoints" / "best.ckpt" for v, r in runs.items()}
-    if not all(c.is_file() for c in ckpts.values()) or frames < 1:
+    runs = {e["variant"]: out / e["run"] for e in entries
+            if e["model"] == model and e["seed"] == 0 and (out / e["run"] / "checkpoints" / "best.ckpt").is_file()
+            and "metrics" in e}
+    if "X" not in runs or len(runs) < 2 or frames < 1:
         return
-    ds = get_dataset(dataset, root, disparity_mode="none")
-    names = read_splits(runs["none"] / "splits")["test"][:frames]
-    predictors = {v: Predictor(checkpoint=c) for v, c in ckpts.items()}
+    config = read_config_yaml(runs["X"] / "config.yaml")
+    ds = get_dataset(config["dataset"], config["root"], config.get("split"), disparity_mode="none")
+    names = read_splits(runs["X"] / "splits")["test"][:frames]
+    predictors = {v: Predictor(checkpoint=r / "checkpoints" / "best.ckpt") for v, r in runs.items()}
     rows = []
     for name in names:
         s = ds.load(ds.index(name), right=False, disparity=False)
         row = [caption(s.left, name)]
-        for v in variants:
-            pred = predictors[v].predict([s.left])[0] >= 0.5
-            row.append(caption(overlay_errors(s.left, pred, s.label.road, s.label.valid), _BY_AUGMENT[v].label(model)))
+        for v, predictor in predictors.items():
+            pred = predictor.predict([s.left])[0] >= 0.5
+            row.append(caption(overlay_errors(s.left, pred, s.label.road, s.label.valid), VARIANTS[v].label(model)))
         rows.append(row)
     write_image(out / "figures" / f"{model}.png", grid(rows, width=min(480, rows[0][0].shape[1])))
-
