@@ -40,3 +40,7 @@ class DatasetError(FreespaceError, ValueError):
 
 class OutputError(FreespaceError, OSError):
     """An output file or folder cannot be written (permissions, a file where a folder should be, ...)."""
+
+
+class PretrainedWeightsError(FreespaceError, RuntimeError):
+    """Pretrained weights cannot be loaded (no network to download them, or none exist for that configuration)."""
