@@ -2,7 +2,8 @@
 
 A DenseNet backbone at output stride 8 (no pooling in the 2nd and 3rd transitions; dense blocks 3 and
 4 dilated by 2 and 4) ending, as the official network does, in *transition4* (BN-ReLU-1×1 convolution
-to half the channels, no pooling) and the final batch norm; then densely connected atrous convolutions with rates 3, 6, 12, 18, 24: each
+to half the channels, no pooling) and the final batch norm; then densely connected atrous convolutions
+with rates 3, 6, 12, 18, 24: each
 unit (BN-ReLU-1×1 conv to ``d_feature0``, BN-ReLU-3×3 atrous conv to ``d_feature1``, dropout) sees the
 backbone features and every earlier unit's output. A 1×1 classifier on the concatenation, upsampled ×8.
 Feature sizes follow the official configurations: DenseNet-121 128/64, -169 336/168, -161 512/128.

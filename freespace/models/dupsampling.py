@@ -137,7 +137,8 @@ class DUpsampling(SegmentationModel):
         z = self.head(torch.cat([last, low], 1))  # whitened coefficients
         basis = self.reconstruction * self.coef_std[None, :]
         patches = F.conv2d(z, basis[:, :, None, None]) + self.patch_mean[None, :, None, None]
-        logits = F.pixel_shuffle(patches, self.ratio) / self.log_temperature.exp() + self.class_bias[None, :, None, None]
+        logits = F.pixel_shuffle(patches, self.ratio) / self.log_temperature.exp()
+        logits = logits + self.class_bias[None, :, None, None]
         return {"logits": logits, "compressed": z} if self.training else logits
 
     def loss(self, outputs: Outputs, target: torch.Tensor, ignore_index: int = IGNORE_INDEX) -> dict[str, torch.Tensor]:

@@ -71,8 +71,8 @@ def _build(arch: str, num_classes: int, encoder_weights: str | None, **options: 
 
 
 @register_model("unet", PRESETS["unet"], geometry=lambda o: (32, 1))
-def unet(num_classes: int = 2, encoder_name: str = "resnet18", decoder_channels: tuple[int, ...] = (128, 64, 32, 16, 16),
-         encoder_weights: str | None = None) -> SmpModel:
+def unet(num_classes: int = 2, encoder_name: str = "resnet18",
+         decoder_channels: tuple[int, ...] = (128, 64, 32, 16, 16), encoder_weights: str | None = None) -> SmpModel:
     """U-Net (smp). ``light``: ResNet-18 encoder, narrow decoder; ``paper``: ResNet-34, 256–16 decoder."""
     return _build("unet", num_classes, encoder_weights, encoder_name=encoder_name, decoder_channels=decoder_channels)
 
