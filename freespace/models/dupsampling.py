@@ -28,6 +28,7 @@ label's whitened projection.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Iterable
 
@@ -41,6 +42,8 @@ from freespace.models.blocks import ConvBNReLU
 from freespace.models.registry import register_model
 
 __all__ = ["DUpsampling", "label_patches"]
+
+log = logging.getLogger(__name__)
 
 
 def label_patches(target: torch.Tensor, num_classes: int, ratio: int,
@@ -87,11 +90,9 @@ class DUpsampling(SegmentationModel):
 
     def prepare(self, train_labels: Iterable[torch.Tensor]) -> None:
         """Fit the reconstruction from the training labels (:meth:`fit_reconstruction`)."""
-        import logging
-
         kept = self.fit_reconstruction(train_labels)
-        logging.getLogger(__name__).info("DUpsampling reconstruction fitted (%.1f%% of the label patches' variance "
-                                         "kept by %d components)", 100 * kept, self.reconstruction.shape[1])
+        log.info("DUpsampling reconstruction fitted (%.1f%% of the label patches' variance kept by %d components)",
+                 100 * kept, self.reconstruction.shape[1])
 
     @torch.no_grad()
     def fit_reconstruction(self, targets: Iterable[torch.Tensor], max_patches: int = 200_000) -> float:

@@ -73,7 +73,8 @@ class SegNet(SegmentationModel):
             raise InvalidOptionError(f"class_balance must be one of {', '.join(map(str, CLASS_BALANCE))}, "
                                      f"got {class_balance!r}")
         self.class_balance = class_balance
-        self.register_buffer("class_weights", torch.ones(num_classes))
+        # saved only when used: checkpoints of unbalanced SegNets keep their keys
+        self.register_buffer("class_weights", torch.ones(num_classes), persistent=class_balance is not None)
         if encoder_weights is not None and width != 1.0:
             raise InvalidOptionError("pretrained VGG16-BN weights need the full-width encoder (preset='paper')")
         chans = [max(8, int(round(c * width))) for c, _ in VGG16_BLOCKS]
