@@ -37,7 +37,7 @@ def load_frame():
         source = "real KITTI stereo 2015 frame 000000_10, LiDAR disparity"
     else:
         sys.path.insert(0, str(ROOT / "tests"))
-        from conftest import synthetic_pair
+        from helpers import synthetic_pair
 
         left, right, _, disp = synthetic_pair((375, 1242))
         disp_path = Path(tempfile.mkdtemp()) / "d.npy"

@@ -15,7 +15,8 @@ import numpy as np
 
 from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, write_dataset
-from freespace.errors import FreespaceError, InvalidOptionError
+from freespace.data.synthetic.dataset import MAX_FRAMES
+from freespace.errors import FreespaceError, InvalidOptionError, check_seed
 from freespace.generate import generate_dataset
 from freespace.geometry import compute_disparity, fit_road_model
 from freespace.io import PathLike, read_disparity, read_image, read_road_label, write_image, write_json
@@ -43,10 +44,16 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
     from SGBM disparity) and the mean absolute difference to the left image on the road of the raw
     right image and of the generated image; and the results table.
     """
-    if num_frames < 1:
-        raise InvalidOptionError(f"--num must be ≥ 1, got {num_frames}")
-    out = Path(out)
     config = config or SynthConfig(width=160, height=128, frames_per_scenario=4)
+    least = 3 * config.frames_per_scenario if train else 1  # train, val and test need a drive each
+    if not least <= num_frames <= MAX_FRAMES:
+        raise InvalidOptionError(f"--num must be in {least}…{MAX_FRAMES:,}"
+                                 + (f" (training needs 3 drives of {config.frames_per_scenario} frames)" if train else "")
+                                 + f", got {num_frames}")
+    if epochs is not None and epochs < 1:
+        raise InvalidOptionError(f"--epochs must be ≥ 1, got {epochs}")
+    check_seed(seed)
+    out = Path(out)
     t0 = time.perf_counter()
     log.info("rendering %d stereo frames into %s", num_frames, out / "dataset")
     rows = write_dataset(out / "dataset", num_frames, seed=seed, config=config)
@@ -98,9 +105,9 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
         from freespace.models import list_models
 
         log.info("training %s with and without the augmentation", "all six networks" if full else "U-Net")
+        epochs = epochs if epochs is not None else 30 if full else 12
         experiment = reproduce("synth", out / "dataset", out / "experiment", models=list_models() if full else ["unet"],
-                               seeds=3 if full else 1, epochs=epochs or (30 if full else 12), patience=5,
-                               batch_size=8, figures=3)
+                               seeds=3 if full else 1, epochs=epochs, patience=5, batch_size=8, figures=3)
         result["results"] = experiment["table"]
         result["results_md"] = str(out / "experiment" / "results.md")
     result["seconds"] = round(time.perf_counter() - t0, 2)

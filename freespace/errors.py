@@ -42,5 +42,22 @@ class OutputError(FreespaceError, OSError):
     """An output file or folder cannot be written (permissions, a file where a folder should be, ...)."""
 
 
+class TrainingError(FreespaceError):
+    """Training cannot go on (e.g. the loss became NaN); exit code 1, as for a run that failed."""
+
+    exit_code = 1
+
+
+#: seeds are 32-bit: NumPy's legacy seeding and Lightning's ``seed_everything`` take no more
+MAX_SEED = 2**32 - 1
+
+
+def check_seed(seed: int, flag: str = "--seed") -> int:
+    """``seed`` if it is an integer in 0…2³²−1, else an :class:`InvalidOptionError` naming ``flag``."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise InvalidOptionError(f"{flag} must be an integer in 0…{MAX_SEED}, got {seed!r}")
+    return seed
+
+
 class PretrainedWeightsError(FreespaceError, RuntimeError):
     """Pretrained weights cannot be loaded (no network to download them, or none exist for that configuration)."""

@@ -6,12 +6,11 @@ checks every input before it writes anything, and writes every output atomically
 
 from __future__ import annotations
 
-import csv
-import io as _io
 import json
 import logging
 import math
 import multiprocessing
+import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -20,24 +19,25 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import FreespaceError, InvalidOptionError, ShapeMismatchError
-from freespace.geometry import RoadModel, compute_disparity, fit_road_model, generate_view
+from freespace.errors import DatasetError, FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError
+from freespace.geometry import SGBM_MAX_DISPARITY, RoadModel, compute_disparity, fit_road_model, generate_view
 from freespace.io import (
+    IMAGE_SUFFIXES,
     PathLike,
-    atomic_write_text,
+    check_outputs,
     encode_image,
     atomic_write_bytes,
     read_disparity,
     read_image,
     read_road_label,
+    write_csv,
     write_json,
 )
+from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FitOptions", "GenerateResult", "generate_pair", "generate_dataset", "IMAGE_SUFFIXES"]
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")
+__all__ = ["FitOptions", "GenerateResult", "generate_pair", "generate_dataset"]
 
 
 @dataclass(frozen=True)
@@ -46,12 +46,12 @@ class FitOptions:
 
     robust: bool = True
     inlier_threshold: float = 1.0
-    max_disparity: int = 128
+    max_disparity: int = SGBM_MAX_DISPARITY
 
     def check(self) -> None:
         """Raise InvalidOptionError for out-of-range values."""
-        if not self.inlier_threshold > 0:
-            raise InvalidOptionError(f"--inlier-threshold must be > 0 pixels, got {self.inlier_threshold}")
+        if not 0 < self.inlier_threshold < math.inf:
+            raise InvalidOptionError(f"--inlier-threshold must be a finite number of pixels > 0, got {self.inlier_threshold}")
         if not 1 <= self.max_disparity <= 1024:
             raise InvalidOptionError(f"--max-disparity must be in 1..1024 pixels, got {self.max_disparity}")
 
@@ -103,7 +103,7 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
         raise ShapeMismatchError(f"road mask is {_size(road.shape)} but the images are {_size(reference.shape)}; "
                                  f"give the label of the reference image")
     if not road.any():
-        raise FreespaceError("the road mask marks no road pixel; give a label with road (magenta in KITTI "
+        raise RoadFitError("the road mask marks no road pixel; give a label with road (magenta in KITTI "
                              "colours, non-zero in a single-channel mask)")
     source = "file"
     if disparity is None:
@@ -115,7 +115,9 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
         raise ShapeMismatchError(f"disparity is {_size(disparity.shape)} but the images are "
                                  f"{_size(reference.shape)}; give the disparity of the reference image")
     if not np.isfinite(disparity).any():
-        raise FreespaceError("the disparity map has no valid value (all 0, NaN or inf); check the disparity file")
+        hint = ("the stereo matcher found no match: check that the images are one rectified pair"
+                if source == "sgbm" else "check the disparity file")
+        raise RoadFitError(f"the disparity map has no valid value (all 0, NaN or inf); {hint}")
     t0 = time.perf_counter()
     model = fit_road_model(disparity, road, robust=options.robust, inlier_threshold=options.inlier_threshold)
     timings["fit"] = time.perf_counter() - t0
@@ -140,6 +142,8 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
     options.check()
     if out is not None:
         check_output_image_path(out)
+    check_outputs({"--out": out, "--model-json": model_json},
+                  {"--reference": reference, "--target": target, "--road-mask": road_mask, "--disparity": disparity})
     t_start = time.perf_counter()
     ref = read_image(reference, what="reference image")
     tgt = read_image(target, what="target image")
@@ -167,16 +171,19 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
 _DATASET: Any = None  # the dataset of this worker process (set by _init_worker)
 
 
-def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> dict[str, Any]:
-    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record)."""
+def _process_frame(index: int, out: Path, report: Path, options: FitOptions,
+                   settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record).
+    ``settings`` (the run's, :func:`_settings`) are kept in the frame's report, so a resumed run redoes a
+    frame made with other settings."""
     t0 = time.perf_counter()
     frame = _DATASET.frames[index]
     record: dict[str, Any] = {"frame": frame.name}
     try:
         if frame.right is None:
-            raise FreespaceError("missing right image")
+            raise DatasetError("missing right image")
         if frame.label is None:
-            raise FreespaceError("missing road label")
+            raise DatasetError("missing road label")
         sample = _DATASET.load(index)
         result = generate_arrays(sample.left, sample.right, sample.label.road & sample.label.valid,
                                  sample.disparity, options)
@@ -184,6 +191,8 @@ def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> 
             result.disparity_source = sample.disparity_source
         atomic_write_bytes(out, encode_image(result.image, ".png"))
         record.update(status="done", **result.report())
+        if settings is not None:
+            record["settings"] = settings
         record["seconds"]["total"] = time.perf_counter() - t0
         write_json(report, record)
     except FreespaceError as exc:
@@ -194,16 +203,76 @@ def _process_frame(index: int, out: Path, report: Path, options: FitOptions) -> 
     return record
 
 
-def _init_worker(dataset: Any) -> None:
+def _init_worker(dataset: Any, parent: int) -> None:
     import cv2
 
+    from freespace.parallel import die_with_parent
+
+    die_with_parent(parent)
     global _DATASET
     _DATASET = dataset
     cv2.setNumThreads(1)
 
 
+SETTINGS_NAME = "settings.json"
+
+
+def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
+    """What a generated dataset depends on (written to ``OUT/settings.json``; never the shard, so that the
+    shards of one run share an output folder)."""
+    settings = {"dataset": dataset.name, "root": str(Path(dataset.root).resolve()), "split": dataset.split,
+                "robust": options.robust, "inlier_threshold": options.inlier_threshold,
+                "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode}
+    if dataset.disparity_mode == "lidar":
+        settings["lidar_densify"] = getattr(dataset, "lidar_densify", 0.0)
+    return settings
+
+
+def _totals_names(shard: tuple[int, int] | None) -> tuple[str, str]:
+    """``(summary, report)`` file names: ``summary.json``/``report.csv``, or with ``--shard K/N``
+    ``summary.shard-K-of-N.json``/``report.shard-K-of-N.csv`` (shards never overwrite each other's)."""
+    if shard is None:
+        return "summary.json", "report.csv"
+    return f"summary.shard-{shard[0]}-of-{shard[1]}.json", f"report.shard-{shard[0]}-of-{shard[1]}.csv"
+
+
+def _claim_output(out_dir: Path, settings: dict[str, Any], overwrite: bool, frames: set[str] | None = None,
+                  totals: tuple[str, str] = ("summary.json", "report.csv")) -> None:
+    """Make ``out_dir`` this run's. A folder generated with other settings is refused unless ``overwrite``,
+    which removes what the earlier run wrote; a non-empty folder that ``generate`` did not write is refused.
+
+    A shard (``frames``: its frame names, ``totals``: its summary and report names) removes with
+    ``overwrite`` only its own frames and totals (and the whole-run totals, now stale), so shards running
+    at once never delete each other's work. Hidden files (another shard's writes in progress) are ignored."""
+    if not out_dir.is_dir() or not any(not p.name.startswith(".") for p in out_dir.iterdir()):
+        return
+    recorded: Any = None
+    try:  # summary.json's "options": folders written before settings.json existed
+        recorded = json.loads((out_dir / SETTINGS_NAME).read_text()) if (out_dir / SETTINGS_NAME).is_file() \
+            else json.loads((out_dir / "summary.json").read_text())["options"]
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    if not isinstance(recorded, dict):
+        raise InvalidOptionError(f"--out {out_dir} holds files that freespace generate did not write; choose a "
+                                 f"new or empty folder")
+    differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
+    if differ and not overwrite:
+        what = ", ".join(f"{k} {recorded[k]!r} → {settings[k]!r}" for k in differ)
+        raise InvalidOptionError(f"--out {out_dir} holds frames generated with other settings ({what}); choose "
+                                 f"another --out, or add --overwrite to replace them")
+    if overwrite:
+        reports = out_dir / "reports"
+        for report in sorted(reports.glob("*.json")) if reports.is_dir() else []:
+            if frames is None or report.stem in frames:
+                (out_dir / f"{report.stem}.png").unlink(missing_ok=True)
+                report.unlink(missing_ok=True)
+        for name in {SETTINGS_NAME, "summary.json", "report.csv", *totals}:
+            (out_dir / name).unlink(missing_ok=True)
+
+
 def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
-                     options: FitOptions = FitOptions(), progress: bool = True) -> dict[str, Any]:
+                     options: FitOptions = FitOptions(), progress: bool = True,
+                     overwrite: bool = False, shard: tuple[int, int] | None = None) -> dict[str, Any]:
     """Generate the augmented image of every frame of a dataset and write a report.
 
     Args:
@@ -213,9 +282,18 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
             (model, inliers, residual, seconds), ``report.csv`` (one row per frame) and ``summary.json``.
         workers: processes; 1 runs in this process.
         options: fit options.
+        shard: ``(K, N)``: only the K-th of N disjoint parts of the frames (1-based,
+            :func:`freespace.shard.select_shard`), with its totals in ``summary.shard-K-of-N.json`` and
+            ``report.shard-K-of-N.csv``; the shards of one run share ``out_dir`` (``settings.json`` holds
+            no shard). A run without ``shard`` afterwards skips every frame and writes the totals.
 
-    Frames whose image and report already exist are skipped (resumable). A failing frame (missing
+    Frames whose image and report already exist, made with these settings, are skipped (resumable;
+    every report keeps the run's settings). A failing frame (missing
     partner, unreadable file, too little road, ...) is recorded with its reason and does not stop the run.
+    The settings (dataset, fit and disparity options) are recorded in ``settings.json``: a folder made
+    with other settings is refused, unless ``overwrite`` replaces what was generated there (a shard's
+    ``overwrite``: only its own frames). ``out_dir``
+    may not lie inside the dataset's root (nor hold it).
 
     Returns:
         The summary (also written to ``summary.json``): counts, ``failed`` (frame → reason), means.
@@ -227,6 +305,14 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the generated dataset")
+    check_outputs({"--out": out_dir}, {"--root": dataset.root})
+    settings = _settings(dataset, options)
+    if shard is not None:
+        dataset = dataset.subset(select_shard((f.name for f in dataset.frames), *shard))
+    summary_name, report_name = _totals_names(shard)
+    _claim_output(out_dir, settings, overwrite, None if shard is None else {f.name for f in dataset.frames},
+                  (summary_name, report_name))
+    write_json(out_dir / SETTINGS_NAME, settings)
     report_dir = out_dir / "reports"
     frames = dataset.frames
     records: dict[str, dict[str, Any]] = {}
@@ -236,15 +322,18 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
         report_path = report_dir / f"{frame.name}.json"
         if image_path.is_file() and report_path.is_file():
             try:
-                records[frame.name] = {**json.loads(report_path.read_text()), "status": "skipped"}
-                continue
-            except (OSError, ValueError):
+                report = json.loads(report_path.read_text())
+                if report.get("settings", settings) == settings:  # (reports of older runs have none)
+                    records[frame.name] = {**report, "status": "skipped"}
+                    continue
+                log.info("%s was generated with other settings: generating it again", frame.name)
+            except (OSError, ValueError, AttributeError):
                 pass  # unreadable report: do the frame again
-        jobs.append((i, image_path, report_path, options))
+        jobs.append((i, image_path, report_path, options, settings))
     log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
-    from tqdm import tqdm
+    from freespace.log import progress_bar
 
-    bar = tqdm(total=len(jobs), desc="generate", unit="frame", disable=not progress or not jobs)
+    bar = progress_bar(None, total=len(jobs), desc="generate", unit="frame", enabled=progress and bool(jobs))
     t0 = time.perf_counter()
     if workers == 1 or len(jobs) <= 1:
         previous, _DATASET = _DATASET, dataset
@@ -257,7 +346,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
             _DATASET = previous
     else:
         # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset,),
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset, os.getpid()),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = [pool.submit(_process_frame, *job) for job in jobs]
             for future in as_completed(futures):
@@ -270,7 +359,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     for record in ordered:
         if record["status"] == "failed":
             log.warning("frame %s failed: %s", record["frame"], record["reason"])
-    _write_report_csv(out_dir / "report.csv", ordered)
+    _write_report_csv(out_dir / report_name, ordered)
     ok = [r for r in ordered if r["status"] != "failed"]
 
     def mean(key: str) -> float | None:
@@ -280,6 +369,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     summary = {
         "dataset": dataset.name,
         "root": str(dataset.root),
+        **({"shard": f"{shard[0]}/{shard[1]}"} if shard is not None else {}),
         "frames": len(ordered),
         "generated": sum(r["status"] == "done" for r in ordered),
         "skipped": sum(r["status"] == "skipped" for r in ordered),
@@ -292,7 +382,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
         "options": {"robust": options.robust, "inlier_threshold": options.inlier_threshold,
                     "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode},
     }
-    write_json(out_dir / "summary.json", summary)
+    write_json(out_dir / summary_name, summary)
     return summary
 
 
@@ -301,12 +391,10 @@ _CSV_FIELDS = ["frame", "status", "roll_deg", "kappa_hat", "kappa", "num_valid",
 
 
 def _write_report_csv(path: Path, records: list[dict[str, Any]]) -> None:
-    buf = _io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=_CSV_FIELDS, extrasaction="ignore", lineterminator="\n")
-    writer.writeheader()
+    rows = []
     for record in records:
         row = dict(record)
         seconds = record.get("seconds") or {}
         row["seconds"] = round(seconds.get("total", math.nan), 4) if seconds else ""
-        writer.writerow(row)
-    atomic_write_text(path, buf.getvalue())
+        rows.append(row)
+    write_csv(path, _CSV_FIELDS, rows, extra="ignore")

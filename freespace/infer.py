@@ -1,139 +1,221 @@
-"""Inference for deployment: predictors from a checkpoint or an ONNX file, `predict`, `export`, `kitti-submit`."""
+"""Inference for deployment: `predict` (images, folders, globs, videos; sharded), `export`, `kitti-submit`
+(the predictor itself: :mod:`freespace.predictor`)."""
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import io as _io
+import itertools
 import json
 import logging
+import os
+import shutil
 import tempfile
 import time
 import zipfile
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
-from freespace.io import PathLike, atomic_write_bytes, read_image, read_kitti_calib, write_image, write_json
+from freespace.errors import InputFileError, InvalidOptionError, OutputError
+from freespace.io import (
+    PathLike,
+    atomic_write_bytes,
+    check_outputs,
+    read_kitti_calib,
+    staged_folder,
+    write_image,
+    write_json,
+)
+from freespace.metrics import to_confidence
+from freespace.predictor import Predictor, load_checkpoint
+from freespace.shard import select_shard
+from freespace.video import FrameSource, VideoFrame, VideoWriter, open_frames
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Predictor", "predict_folder", "export_model", "kitti_submit", "to_confidence"]
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm")
+__all__ = ["predict_folder", "predict_video", "export_model", "kitti_submit"]
 
 
-def to_confidence(prob: np.ndarray) -> np.ndarray:
-    """KITTI 8-bit road confidence (255 = sure road) of a ``float`` probability map."""
-    return np.clip(np.round(prob * 255.0), 0, 255).astype(np.uint8)
+def _input_paths(source: FrameSource) -> dict[str, Path]:
+    """The input files or folders of ``source`` for :func:`freespace.io.check_outputs`: the video, the
+    folder, the image, or the folders a glob's images lie in (an output may not lie in any of them)."""
+    if source.kind == "folder":
+        folders = [Path(source.spec)]
+    elif source.kind == "glob":
+        folders = sorted({p.parent for p in source.paths})
+    else:
+        return {"--input": source.paths[0]}
+    return {"--input" if i == 0 else f"--input[{i}]": p for i, p in enumerate(folders)}
 
 
-class Predictor:
-    """Road probabilities from a training checkpoint (PyTorch) or an exported ONNX model (onnxruntime).
-
-    Images are resized to the model's training size (kept in the checkpoint / the ONNX metadata) and the
-    probabilities back to each image's own size.
-    """
-
-    def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None) -> None:
-        if (checkpoint is None) == (onnx is None):
-            raise InvalidOptionError("give exactly one of --checkpoint and --onnx")
-        self.image_size: tuple[int, int] | None = None
-        if checkpoint is not None:
-            from freespace.engine.evaluate import load_checkpoint
-
-            self.model, hp = load_checkpoint(checkpoint)
-            self.image_size = tuple(hp["image_size"]) if hp.get("image_size") else None
-            self.name = hp["model"]
-            self.session = None
-        else:
-            import onnxruntime as ort
-
-            path = Path(onnx)  # type: ignore[arg-type]
-            if not path.is_file():
-                raise InputFileError(f"ONNX model not found: {path}")
-            try:
-                self.session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-            except Exception as exc:  # onnxruntime raises its own types for corrupt files
-                raise CorruptFileError(f"cannot load {path} as an ONNX model ({type(exc).__name__})") from None
-            meta = self.session.get_modelmeta().custom_metadata_map
-            self.image_size = tuple(json.loads(meta["image_size"])) if meta.get("image_size") else None
-            self.name = meta.get("model", path.stem)
-            self.model = None
-
-    def _run(self, batch: np.ndarray) -> np.ndarray:
-        if self.session is None:
-            import torch
-
-            with torch.no_grad():
-                return torch.softmax(self.model(torch.from_numpy(batch)), 1)[:, 1].numpy()
-        logits = self.session.run(None, {self.session.get_inputs()[0].name: batch})[0]
-        e = np.exp(logits - logits.max(1, keepdims=True))
-        return (e[:, 1] / e.sum(1)).astype(np.float32)
-
-    def predict(self, images: list[np.ndarray]) -> list[np.ndarray]:
-        """Road probability (``float32 H×W``) of each ``H×W×3 uint8`` RGB image."""
-        by_size: dict[tuple[int, int], list[int]] = {}
-        resized = []
-        for i, img in enumerate(images):
-            if img.ndim != 3 or img.shape[2] != 3:
-                raise InvalidOptionError(f"expected RGB images, got shape {img.shape}")
-            if self.image_size and img.shape[:2] != self.image_size:
-                img = cv2.resize(img, (self.image_size[1], self.image_size[0]), interpolation=cv2.INTER_AREA)
-            resized.append(img)
-            by_size.setdefault(img.shape[:2], []).append(i)
-        out: list[np.ndarray | None] = [None] * len(images)
-        for idx in by_size.values():
-            batch = np.stack([resized[i].transpose(2, 0, 1) for i in idx]).astype(np.float32) / 255.0
-            for i, prob in zip(idx, self._run(batch)):
-                h, w = images[i].shape[:2]
-                out[i] = prob if prob.shape == (h, w) else cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
-        return out  # type: ignore[return-value]
+def _batches(frames: Iterable[VideoFrame], size: int) -> Iterator[list[VideoFrame]]:
+    """Consecutive lists of ``size`` frames (the last may be shorter), drawn lazily: only one batch of
+    decoded frames is held at a time."""
+    it = iter(frames)
+    while batch := list(itertools.islice(it, size)):
+        yield batch
 
 
-def _inputs(path: Path) -> list[Path]:
-    if path.is_file():
-        return [path]
-    if path.is_dir():
-        files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
-        if not files:
-            raise InputFileError(f"no images ({', '.join(IMAGE_SUFFIXES)}) in {path}")
-        return files
-    raise InputFileError(f"input not found: {path}")
+def _shard_source(source: FrameSource, shard: tuple[int, int]) -> FrameSource:
+    """The images of shard ``K/N`` of an image source, by file stem (:func:`freespace.shard.select_shard`)."""
+    if source.kind == "video":
+        raise InvalidOptionError("--shard splits folders and globs of images by file name; a video is one output: "
+                                 "predict it without --shard (or split it into frames first)")
+    keep = set(select_shard((p.stem for p in source.paths), *shard))
+    paths = tuple(p for p in source.paths if p.stem in keep)
+    return dataclasses.replace(source, paths=paths, count=len(paths))
+
+
+def _shard_marker(shard: tuple[int, int]) -> str:
+    return f"summary.shard-{shard[0]}-of-{shard[1]}.json"
+
+
+def _predict_marker(out: Path) -> str:
+    """The summary by which an earlier ``predict`` output in ``out`` is known: ``summary.json``, else a
+    shard's ``summary.shard-K-of-N.json``."""
+    if out.is_dir() and not (out / "summary.json").is_file():
+        shards = sorted(out.glob("summary.shard-*-of-*.json"))
+        if shards:
+            return shards[0].name
+    return "summary.json"
+
+
+@contextlib.contextmanager
+def _merged_folder(out: Path, marker: str) -> Iterator[Path]:
+    """Where a shard writes: a temporary folder beside ``out`` whose files are then moved into ``out``,
+    one atomic rename each, beside the other shards' (their frames never overlap). Nothing reaches
+    ``out`` when the block raises. The shard's summary ``marker`` goes first, so that a shard starting
+    meanwhile sees a folder that ``predict`` writes."""
+    if out.exists() and not out.is_dir():
+        raise InvalidOptionError(f"--out {out} is a file; give a folder")
+    if out.is_dir() and any(out.iterdir()) and _predict_marker(out) not in {p.name for p in out.iterdir()}:
+        raise InvalidOptionError(f"--out {out} holds files that freespace predict did not write; choose a new or "
+                                 f"empty folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    except OSError as exc:
+        raise OutputError(f"cannot write {out}: {exc.strerror}; choose a writable output folder") from None
+    try:
+        yield tmp
+        files = sorted((p for p in tmp.rglob("*") if p.is_file()), key=lambda p: (p.name != marker, str(p)))
+        for path in files:
+            target = out / path.relative_to(tmp)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(path, target)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_size: int = 4,
-                   progress: bool = True) -> dict[str, Any]:
+                   progress: bool = True, shard: tuple[int, int] | None = None) -> dict[str, Any]:
     """Write ``OUT/<name>.png`` (8-bit road confidence, the input's size), ``OUT/overlays/<name>.png`` and
-    ``OUT/summary.json`` (frames, seconds per frame) for every image of ``inputs`` (a file or a folder)."""
-    from tqdm import tqdm
+    ``OUT/summary.json`` for every frame of ``inputs``.
+
+    Args:
+        inputs: an image, a folder of images, a glob of images or a video (frames named
+            ``<video stem>_<index>``; :func:`freespace.video.open_frames`), decoded one batch at a time.
+        out: the output folder, written all or nothing: it replaces an earlier ``predict`` output there
+            whole. With ``shard`` only that shard's frames are written, beside the other shards' in the same
+            folder, and its summary is ``summary.shard-K-of-N.json``.
+        batch_size: frames per network call (≥ 1). shard: ``(K, N)``, 1-based (:mod:`freespace.shard`);
+            images only.
+
+    Returns:
+        The summary: ``frames``, ``seconds_per_frame`` (the network), ``frames_per_second`` (end to end:
+        decoding, network, writing), ``model``, ``image_size``, ``shard``.
+    """
+    if batch_size < 1:
+        raise InvalidOptionError("--batch-size must be ≥ 1")
+    check_outputs({"--out": out}, {"--input": inputs})
+    source = open_frames(inputs)
+    check_outputs({"--out": out}, _input_paths(source))
+    out = Path(out)
+    if shard is not None:
+        source = _shard_source(source, shard)
+        with _merged_folder(out, _shard_marker(shard)) as staging:
+            return _predict_into(predictor, source, staging, batch_size, progress, shard)
+    with staged_folder(out, _predict_marker(out), "predict") as staging:
+        return _predict_into(predictor, source, staging, batch_size, progress, None)
+
+
+def _summary(predictor: Predictor, frames: int, seconds: float, wall: float, **extra: Any) -> dict[str, Any]:
+    return {"frames": frames, "seconds_per_frame": seconds / frames if frames else None,
+            "frames_per_second": frames / wall if frames and wall > 0 else None, "model": predictor.name,
+            "image_size": list(predictor.image_size) if predictor.image_size else None, **extra}
+
+
+def _predict_into(predictor: Predictor, source: FrameSource, out: Path, batch_size: int, progress: bool,
+                  shard: tuple[int, int] | None) -> dict[str, Any]:
+    from freespace.log import progress_bar
+
+    from freespace.viz import overlay_road
+
+    seconds, frames, t_start = 0.0, 0, time.perf_counter()
+    bar = progress_bar(None, total=len(source), desc="predict", unit="frame", enabled=progress)
+    for batch in _batches(source, batch_size):
+        t0 = time.perf_counter()
+        probs = predictor.predict([f.image for f in batch])
+        seconds += time.perf_counter() - t0
+        for frame, prob in zip(batch, probs):
+            conf = to_confidence(prob)
+            write_image(out / f"{frame.name}.png", conf)
+            write_image(out / "overlays" / f"{frame.name}.png", overlay_road(frame.image, conf >= 128))
+        frames += len(batch)
+        bar.update(len(batch))
+    bar.close()
+    extra = {"shard": f"{shard[0]}/{shard[1]}"} if shard else {}
+    summary = _summary(predictor, frames, seconds, time.perf_counter() - t_start, **extra)
+    write_json(out / (_shard_marker(shard) if shard else "summary.json"), summary)
+    return summary
+
+
+def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_size: int = 4,
+                  progress: bool = True) -> dict[str, Any]:
+    """Write the road overlay (predicted road tinted magenta, as ``predict``'s ``overlays/``) of every frame
+    of ``inputs`` as one MP4 video ``out``.
+
+    Args:
+        inputs: a video, a folder or a glob of images (one size; :func:`freespace.video.open_frames`),
+            decoded one batch of ``batch_size`` frames at a time: memory does not grow with the length.
+        out: the ``.mp4`` file, written atomically (:class:`freespace.video.VideoWriter`), at the input's
+            frame rate (10 frames per second for images); never one of the inputs.
+
+    Returns:
+        ``frames``, ``seconds_per_frame`` (the network), ``frames_per_second`` (end to end: decoding,
+        network, encoding), ``fps`` (the video's frame rate), ``model``, ``image_size``.
+    """
+    from freespace.log import progress_bar
 
     from freespace.viz import overlay_road
 
     if batch_size < 1:
         raise InvalidOptionError("--batch-size must be ≥ 1")
-    files = _inputs(Path(inputs))
     out = Path(out)
-    seconds = 0.0
-    bar = tqdm(total=len(files), desc="predict", unit="image", disable=not progress)
-    for start in range(0, len(files), batch_size):
-        chunk = files[start:start + batch_size]
-        images = [read_image(p, what="input image") for p in chunk]
-        images = [np.repeat(im[..., None], 3, 2) if im.ndim == 2 else im for im in images]
-        t0 = time.perf_counter()
-        probs = predictor.predict(images)
-        seconds += time.perf_counter() - t0
-        for path, image, prob in zip(chunk, images, probs):
-            conf = to_confidence(prob)
-            write_image(out / f"{path.stem}.png", conf)
-            write_image(out / "overlays" / f"{path.stem}.png", overlay_road(image, conf >= 128))
-        bar.update(len(chunk))
+    if out.suffix.lower() != ".mp4":
+        raise InvalidOptionError(f"--out {out}: a video output must end in .mp4 (or give a folder for PNGs)")
+    if out.is_dir():
+        raise InvalidOptionError(f"--out {out} is a folder; give a .mp4 file name")
+    check_outputs({"--out": out}, {"--input": inputs})
+    source = open_frames(inputs)
+    check_outputs({"--out": out}, _input_paths(source))
+    seconds, t_start = 0.0, time.perf_counter()
+    bar = progress_bar(None, total=len(source), desc="predict", unit="frame", enabled=progress)
+    with VideoWriter(out, fps=source.fps) as writer:
+        for batch in _batches(source, batch_size):
+            t0 = time.perf_counter()
+            probs = predictor.predict([f.image for f in batch])
+            seconds += time.perf_counter() - t0
+            for frame, prob in zip(batch, probs):
+                writer.write(overlay_road(frame.image, to_confidence(prob) >= 128))
+            bar.update(len(batch))
     bar.close()
-    summary = {"frames": len(files), "seconds_per_frame": seconds / len(files), "model": predictor.name,
-               "image_size": list(predictor.image_size) if predictor.image_size else None}
-    write_json(out / "summary.json", summary)
-    return summary
+    return _summary(predictor, writer.frames, seconds, time.perf_counter() - t_start, fps=source.fps,
+                    path=str(out))
 
 
 def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any]:
@@ -141,10 +223,9 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any
     validated against PyTorch at the training size and at an odd size. Returns the max abs differences."""
     import torch
 
-    from freespace.engine.evaluate import load_checkpoint
-
     if fmt not in ("onnx", "torchscript"):
         raise InvalidOptionError(f"--format must be onnx or torchscript, got {fmt!r}")
+    check_outputs({"--out": out}, {"--checkpoint": checkpoint})
     model, hp = load_checkpoint(checkpoint)
     size = tuple(hp.get("image_size") or (384, 1248))
     example = torch.rand(1, 3, *size)
@@ -193,24 +274,36 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any
 
 def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: bool = True) -> dict[str, Any]:
     """Predict the KITTI road testing split and write the benchmark's bird's-eye-view confidence maps
-    (``OUT/<cat>_road_<id>.png``, 800×400) and ``OUT/submission.zip`` holding them."""
-    from tqdm import tqdm
+    (``OUT/<cat>_road_<id>.png``, 800×400) and ``OUT/submission.zip`` holding them.
 
-    from freespace.bev import to_bev
+    Every calibration file is read before any prediction; the folder is written all or nothing and
+    replaces an earlier submission there whole."""
     from freespace.data.kitti_road import KittiRoad
 
-    predictor = Predictor(checkpoint=checkpoint)
-    ds = KittiRoad(root, "testing", disparity="none")
+    check_outputs({"--out": out}, {"--checkpoint": checkpoint, "--root": root})
+    ds = KittiRoad(root, "testing", disparity_mode="none")
     missing = [f.name for f in ds.frames if f.calib is None]
     if missing:
         raise InputFileError(f"{len(missing)} testing frames have no calibration (first: {missing[0]}); the BEV "
                              f"transform needs data_road/testing/calib/<frame>.txt")
-    out = Path(out)
+    calibs = [read_kitti_calib(f.calib) for f in ds.frames]  # type: ignore[arg-type]  # every file checked first
+    predictor = Predictor(checkpoint=checkpoint)
+    with staged_folder(out, "submission.zip", "kitti-submit") as staging:
+        names = _submit_into(predictor, ds, calibs, staging, progress)
+    return {"frames": len(names), "zip": str(Path(out) / "submission.zip")}
+
+
+def _submit_into(predictor: Predictor, ds: Any, calibs: list[dict[str, np.ndarray]], out: Path,
+                 progress: bool) -> list[str]:
+    from freespace.log import progress_bar
+
+    from freespace.bev import to_bev
+
     names = []
-    for i, frame in enumerate(tqdm(ds.frames, desc="kitti-submit", unit="frame", disable=not progress)):
+    for i, frame in enumerate(progress_bar(ds.frames, desc="kitti-submit", unit="frame", enabled=progress)):
         image = ds.load(i, right=False, label=False, disparity=False).left
         conf = to_confidence(predictor.predict([image])[0])
-        bev = to_bev(conf, read_kitti_calib(frame.calib))  # type: ignore[arg-type]
+        bev = to_bev(conf, calibs[i])
         name = f"{frame.category}_road_{frame.name.split('_')[1]}.png"
         write_image(out / name, bev)
         names.append(name)
@@ -219,4 +312,4 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
         for name in names:
             zf.write(out / name, arcname=name)
     atomic_write_bytes(out / "submission.zip", buf.getvalue())
-    return {"frames": len(names), "zip": str(out / "submission.zip")}
+    return names

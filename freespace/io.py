@@ -1,10 +1,11 @@
-"""Reading and writing images, disparity maps, road labels and KITTI calibration; atomic writes.
+"""Reading and writing images, disparity and depth maps, road labels and KITTI calibration; atomic writes.
 
 Conventions (the same in the whole package):
 
 * images are ``H×W×3 uint8`` RGB (colour files) or ``H×W uint8`` (grey files) in memory;
 * a disparity map is ``float32 H×W`` in pixels, NaN for "no value";
 * a road label is a pair of ``bool H×W`` arrays: ``road`` and ``valid`` (``valid`` False = don't care);
+  as a class map (training, losses) it is 1 road, 0 non-road, :data:`IGNORE_INDEX` (255) don't care;
 * every writer writes to a temporary file beside the target and renames it, so a crash or a user
   mistake never leaves a partial output file.
 
@@ -13,37 +14,60 @@ Only NumPy and OpenCV are imported here.
 
 from __future__ import annotations
 
+import csv
+import io as _io
 import json
+import math
 import os
+import re
+import shutil
 import tempfile
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
 
 PathLike = str | os.PathLike[str]
 
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
+DEPTH_SUFFIXES = (".png", ".npy", ".pfm")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")  # what OpenCV reads and writes here
+
+#: the largest image side (pixels) a network is trained or run at: bounds sizes read from options and files
+MAX_IMAGE_SIDE = 8192
+
+#: the class id of don't-care pixels in label class maps (losses ignore it, metrics skip it)
+IGNORE_INDEX = 255
 
 __all__ = [
+    "IGNORE_INDEX",
+    "MAX_IMAGE_SIDE",
+    "staged_folder",
+    "DISPARITY_SUFFIXES",
+    "IMAGE_SUFFIXES",
     "RoadLabel",
     "atomic_write_bytes",
     "atomic_write_text",
     "write_json",
+    "write_csv",
     "read_image",
     "read_raw",
     "write_image",
     "encode_image",
     "read_disparity",
     "write_disparity",
+    "read_depth",
     "read_road_label",
     "road_label_from_image",
     "road_label_to_kitti",
     "read_kitti_calib",
+    "check_outputs",
 ]
 
 
@@ -86,6 +110,94 @@ def atomic_write_text(path: PathLike, text: str) -> Path:
 def write_json(path: PathLike, obj: Any) -> Path:
     """Write ``obj`` as indented JSON (NaN/inf are rejected: use None) atomically."""
     return atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+
+
+def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLike | None]) -> None:
+    """Refuse outputs that would overwrite or land among a command's inputs, before any work.
+
+    Args:
+        outputs: option name → output path (file or folder; None = not given).
+        inputs: option name → input path (file or folder; None = not given).
+
+    Raises :class:`InvalidOptionError` when an output is an input, lies inside an input folder, or is a
+    folder that holds an input, or when two outputs are the same path. Symbolic links are resolved
+    first, so a link to an input counts as the input.
+    """
+    def real(p: PathLike) -> Path:
+        return Path(os.path.realpath(os.path.expanduser(os.fspath(p))))
+
+    outs = {k: real(v) for k, v in outputs.items() if v is not None}
+    ins = {k: real(v) for k, v in inputs.items() if v is not None}
+    for out_name, out in outs.items():
+        for in_name, src in ins.items():
+            if out == src:
+                raise InvalidOptionError(f"{out_name} {out} is the input {in_name}; the command would overwrite "
+                                         f"it: choose another output path")
+            if out.is_relative_to(src):
+                raise InvalidOptionError(f"{out_name} {out} lies inside the input {in_name} {src}; choose an "
+                                         f"output outside the input folder")
+            if src.is_relative_to(out):
+                raise InvalidOptionError(f"the input {in_name} {src} lies inside {out_name} {out}; choose an "
+                                         f"output folder that holds no input")
+    seen: dict[Path, str] = {}
+    for out_name, out in outs.items():
+        if out in seen:
+            raise InvalidOptionError(f"{out_name} and {seen[out]} are the same path {out}; give two paths")
+        seen[out] = out_name
+
+
+def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str, Any]],
+              extra: Literal["raise", "ignore"] = "raise") -> Path:
+    """Write ``rows`` (dicts) as a CSV file with the header ``fields``, atomically.
+
+    Values are written with ``str`` (missing keys as empty cells), lines end with ``\n``. ``extra``: what a
+    key outside ``fields`` does — ``"raise"`` (ValueError, a programming error) or ``"ignore"``.
+    """
+    buf = _io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(fields), extrasaction=extra, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return atomic_write_text(path, buf.getvalue())
+
+
+@contextmanager
+def staged_folder(out: PathLike, marker: str, command: str) -> Iterator[Path]:
+    """An output folder written all or nothing, never mixed with an earlier run's files.
+
+    Yields a temporary folder beside ``out`` to write into. When the block ends normally the temporary
+    folder takes the place of ``out`` (an earlier output of the same command there is replaced whole);
+    when it raises, the temporary folder is removed and ``out`` is left as it was.
+
+    Args:
+        out: the output folder.
+        marker: a file name that the command always writes, by which an earlier output of it is known
+            (e.g. ``summary.json``). A non-empty ``out`` without it is refused: it holds someone else's files.
+        command: the command's name, for the message.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InvalidOptionError(f"--out {out} is a file; give a folder")
+    if out.is_dir() and any(out.iterdir()) and not (out / marker).is_file():
+        raise InvalidOptionError(f"--out {out} holds files that freespace {command} did not write; choose a new or "
+                                 f"empty folder")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    except OSError as exc:
+        raise OutputError(f"cannot write {out}: {exc.strerror}; choose a writable output folder") from None
+    try:
+        yield tmp
+        os.chmod(tmp, 0o777 & ~_UMASK)
+        old = None
+        if out.exists():
+            old = out.parent / f".{out.name}.{tmp.name}.old"
+            os.replace(out, old)
+        os.replace(tmp, out)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -174,8 +286,8 @@ def _invalid_to_nan(disp: np.ndarray) -> np.ndarray:
     return disp
 
 
-def _read_pfm(path: PathLike) -> np.ndarray:
-    data = _read_bytes(path, "disparity")
+def _read_pfm(path: PathLike, what: str = "disparity") -> np.ndarray:
+    data = _read_bytes(path, what)
     try:
         header, rest = data.split(b"\n", 1)
         dims, rest = rest.split(b"\n", 1)
@@ -186,17 +298,29 @@ def _read_pfm(path: PathLike) -> np.ndarray:
         width, height = (int(x) for x in dims.split())
         scale = float(scale_line)
     except ValueError:
-        raise CorruptFileError(f"cannot decode disparity {path}: not a PFM file (bad header)") from None
+        raise CorruptFileError(f"cannot decode {what} {path}: not a PFM file (bad header)") from None
     channels = 3 if header == b"PF" else 1
     dtype = "<f4" if scale < 0 else ">f4"
     count = width * height * channels
     if len(raw) < 4 * count:
-        raise CorruptFileError(f"cannot decode disparity {path}: PFM data truncated "
+        raise CorruptFileError(f"cannot decode {what} {path}: PFM data truncated "
                                f"({len(raw)} bytes for {width}×{height}×{channels} floats)")
     arr = np.frombuffer(raw, dtype=dtype, count=count).reshape(height, width, channels)
     if channels != 1:
-        raise CorruptFileError(f"disparity {path} is a 3-channel PFM; expected a single-channel ('Pf') map")
+        raise CorruptFileError(f"{what} {path} is a 3-channel PFM; expected a single-channel ('Pf') map")
     return np.flipud(arr[:, :, 0])  # PFM stores rows bottom to top
+
+
+def _read_npy_2d(path: Path, what: str, expected: str) -> np.ndarray:
+    """A real-valued 2-D array from a ``.npy`` file (no pickles), or a one-line error naming ``what``."""
+    _read_bytes(path, what)
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise CorruptFileError(f"cannot decode {what} {path}: {str(exc).splitlines()[0]}") from None
+    if arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+        raise CorruptFileError(f"{what} {path} holds a {arr.dtype} array of shape {arr.shape}; expected {expected}")
+    return arr
 
 
 def read_disparity(path: PathLike) -> np.ndarray:
@@ -218,15 +342,7 @@ def read_disparity(path: PathLike) -> np.ndarray:
                                    f"KITTI disparity PNG (16-bit, one channel, d = value/256)")
         return _invalid_to_nan(raw.astype(np.float32) / 256.0)
     if suffix == ".npy":
-        _read_bytes(path, "disparity")
-        try:
-            arr = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise CorruptFileError(f"cannot decode disparity {path}: {exc}") from None
-        if arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number):
-            raise CorruptFileError(f"disparity {path} holds a {arr.dtype} array of shape {arr.shape}; "
-                                   f"expected a 2-D float array")
-        return _invalid_to_nan(arr)
+        return _invalid_to_nan(_read_npy_2d(path, "disparity", "a 2-D float array"))
     if suffix == ".pfm":
         return _invalid_to_nan(_read_pfm(path))
     raise InvalidOptionError(f"unknown disparity format {suffix!r} for {path}; use one of "
@@ -250,8 +366,6 @@ def write_disparity(path: PathLike, disparity: np.ndarray) -> Path:
         raw[valid] = np.clip(np.round(disp[valid] * 256.0), 1, 65535).astype(np.uint16)
         return atomic_write_bytes(path, encode_image(raw, ".png"))
     if suffix == ".npy":
-        import io as _io
-
         buf = _io.BytesIO()
         np.save(buf, disp)
         return atomic_write_bytes(path, buf.getvalue())
@@ -261,6 +375,60 @@ def write_disparity(path: PathLike, disparity: np.ndarray) -> Path:
         return atomic_write_bytes(path, header + np.flipud(disp).astype("<f4").tobytes())
     raise InvalidOptionError(f"unknown disparity format {suffix!r} for {path}; use one of "
                              f"{', '.join(DISPARITY_SUFFIXES)}")
+
+
+# ---------------------------------------------------------------------------------------------------
+# depth
+
+
+def read_depth(path: PathLike, *, png_scale: float = 0.001,
+               shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Read a depth map (distance along the camera's optical axis, Z).
+
+    Formats, chosen by suffix:
+
+    * ``.png``: SNE-RoadSeg's ``depth_u16`` — 16-bit, one channel, ``Z = value · png_scale`` (default
+      millimetres: 0.001 m per unit); 0 and 65535 mean "no depth" (65535 is where an interpolation
+      saturated).
+    * ``.npy`` (2-D numeric array) and ``.pfm`` (single channel): float depth in metres.
+
+    Args:
+        path: the depth file.
+        png_scale: metres per stored unit of a PNG (> 0); float files are always metres.
+        shape: ``(H, W)`` the map must have (e.g. its image's), or None not to check.
+
+    Returns:
+        ``float32 H×W`` depth in metres; NaN where there is no value (0/65535 in a PNG; ≤ 0, NaN or
+        inf in a float file).
+
+    Raises:
+        InputFileError: missing or unreadable file. CorruptFileError: not a depth map of a known kind
+        (an 8-bit or colour PNG, a non-2-D array, a truncated file). ShapeMismatchError: not ``shape``.
+        InvalidOptionError: an unknown suffix or a bad ``png_scale``.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if not (math.isfinite(png_scale) and png_scale > 0):
+        raise InvalidOptionError(f"the depth PNG scale must be a positive number of metres per unit, got {png_scale}")
+    if suffix == ".png":
+        raw = _decode(path, "depth", cv2.IMREAD_UNCHANGED)
+        if raw.dtype != np.uint16 or raw.ndim != 2:
+            bits = "8-bit" if raw.dtype == np.uint8 else str(raw.dtype)
+            chans = 1 if raw.ndim == 2 else raw.shape[2]
+            raise CorruptFileError(f"depth {path} is a {bits} image with {chans} channel(s); expected a 16-bit "
+                                   f"one-channel depth PNG (depth_u16: millimetres, 0 = none)")
+        depth = raw.astype(np.float32) * np.float32(png_scale)
+        depth[(raw == 0) | (raw == 65535)] = np.nan
+    elif suffix == ".npy":
+        depth = _invalid_to_nan(_read_npy_2d(path, "depth", "a 2-D float array in metres"))
+    elif suffix == ".pfm":
+        depth = _invalid_to_nan(_read_pfm(path, "depth"))
+    else:
+        raise InvalidOptionError(f"unknown depth format {suffix!r} for {path}; use one of {', '.join(DEPTH_SUFFIXES)}")
+    if shape is not None and depth.shape != tuple(shape):
+        raise ShapeMismatchError(f"depth {path} is {depth.shape[1]}×{depth.shape[0]} but its image is "
+                                 f"{shape[1]}×{shape[0]} (W×H); use the depth map of this frame")
+    return depth
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -338,11 +506,26 @@ def read_kitti_calib(path: PathLike) -> dict[str, np.ndarray]:
         except ValueError:
             raise CorruptFileError(f"calibration file {path} line {lineno} is not 'KEY: numbers'") from None
         key = key.strip()
-        if key.startswith("P") and arr.size == 12 or key.startswith("Tr") and arr.size == 12:
+        if not np.isfinite(arr).all():
+            raise CorruptFileError(f"calibration file {path}: {key} has a value that is not finite (NaN or inf)")
+        if re.fullmatch(r"P\d|Tr_\w+", key):
+            if arr.size != 12:
+                raise CorruptFileError(f"calibration file {path}: {key} has {arr.size} numbers, a 3×4 matrix "
+                                       f"needs 12")
             arr = arr.reshape(3, 4)
-        elif key.startswith("R") and arr.size == 9:
+        elif re.fullmatch(r"R0?_rect", key):
+            if arr.size != 9:
+                raise CorruptFileError(f"calibration file {path}: {key} has {arr.size} numbers, a 3×3 matrix "
+                                       f"needs 9")
             arr = arr.reshape(3, 3)
         calib[key] = arr
     if "P2" not in calib:
         raise CorruptFileError(f"calibration file {path} has no P2 line; expected a KITTI calibration file")
+    for key in [k for k in calib if k.startswith("Tr_")] + [k for k in ("R0_rect", "R_rect") if k in calib]:
+        rotation = calib[key][:, :3]
+        if abs(np.linalg.det(rotation)) < 1e-6:
+            raise CorruptFileError(f"calibration file {path}: {key} is singular (its rotation part has "
+                                   f"determinant {np.linalg.det(rotation):.1e}); expected a rigid transform")
+    if abs(np.linalg.det(calib["P2"][:, :3])) < 1e-9:
+        raise CorruptFileError(f"calibration file {path}: P2 is singular; expected a camera projection matrix")
     return calib

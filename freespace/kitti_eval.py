@@ -19,7 +19,7 @@ import numpy as np
 from freespace.errors import DatasetError, InputFileError, ShapeMismatchError
 from freespace.bev import to_bev
 from freespace.io import PathLike, read_image, read_kitti_calib, road_label_from_image
-from freespace.metrics import KITTI_CATEGORIES, KittiCounts, kitti_counts, kitti_scores
+from freespace.metrics import KITTI_CATEGORIES, RoadEvaluator
 
 __all__ = ["evaluate_kitti_dirs", "read_confidence"]
 
@@ -68,8 +68,7 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLik
     if missing:
         raise InputFileError(f"no prediction in {pred_dir} for {len(missing)} of {len(gts)} ground-truth files "
                              f"(first: {missing[0]}); name them like the ground truth")
-    sums: dict[str, KittiCounts] = {}
-    images: dict[str, int] = {}
+    evaluators: dict[str, RoadEvaluator] = {}
     for cat, gt, pred in pairs:
         gt_image = read_image(gt, what="ground truth")
         conf = read_confidence(pred)
@@ -81,9 +80,8 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLik
             calib = read_kitti_calib(calib_path)
             gt_image, conf = to_bev(gt_image, calib), to_bev(conf, calib)
         label = road_label_from_image(gt_image)
-        counts = kitti_counts(conf, label.road, label.valid)
-        for key in (cat, "all"):
-            sums[key] = sums[key] + counts if key in sums else counts
-            images[key] = images.get(key, 0) + 1
-    order = [c for c in KITTI_CATEGORIES if c in sums] + ["all"]
-    return {k: {**kitti_scores(sums[k]), "images": images[k]} for k in order}
+        evaluators.setdefault(cat, RoadEvaluator()).process(conf, label.road, label.valid)
+    order = [c for c in KITTI_CATEGORIES if c in evaluators] + ["all"]
+    evaluators["all"] = RoadEvaluator.from_vector(sum(ev.to_vector() for ev in evaluators.values()))
+    keys = ("max_f", "ap", "pre", "rec", "fpr", "fnr", "threshold", "images")
+    return {k: {m: v for m, v in evaluators[k].evaluate().items() if m in keys} for k in order}

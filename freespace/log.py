@@ -8,6 +8,22 @@ from __future__ import annotations
 
 import logging
 import sys
+from collections.abc import Iterable
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is at the time of each record (it may be replaced after set-up)."""
+
+    @property  # type: ignore[override]
+    def stream(self):  # noqa: D401
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:  # logging.StreamHandler.__init__ assigns it
+        pass
 
 
 def setup_logging(verbosity: int = 0) -> None:
@@ -20,8 +36,22 @@ def setup_logging(verbosity: int = 0) -> None:
     logger = logging.getLogger("freespace")
     logger.setLevel(level)
     if not any(getattr(h, "_freespace", False) for h in logger.handlers):
-        handler = logging.StreamHandler(sys.stderr)
+        handler = _StderrHandler()
         handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
         handler._freespace = True  # type: ignore[attr-defined]
         logger.addHandler(handler)
     logger.propagate = False
+
+
+def progress_bar(iterable: Iterable[T] | None = None, *, enabled: bool = True, **kwargs: Any) -> Any:
+    """A ``tqdm`` progress bar on a terminal; none off a terminal (a log file gets the stage's lines, not
+    carriage-return frames). ``enabled=False`` (``--no-progress``) turns it off everywhere; ``kwargs`` go
+    to ``tqdm`` (``total``, ``desc``, ``unit``, ...)."""
+    from tqdm import tqdm
+
+    return tqdm(iterable, disable=not (enabled and sys.stderr.isatty()), **kwargs)
+
+
+def on_terminal() -> bool:
+    """Whether stderr (where progress bars go) is a terminal."""
+    return sys.stderr.isatty()

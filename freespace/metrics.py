@@ -23,9 +23,16 @@ import numpy as np
 
 from freespace.errors import ShapeMismatchError
 
-__all__ = ["Counts", "confusion_counts", "KittiCounts", "kitti_counts", "kitti_scores", "KITTI_CATEGORIES"]
+__all__ = ["Counts", "confusion_counts", "KittiCounts", "kitti_counts", "kitti_scores", "KITTI_CATEGORIES",
+           "to_confidence", "RoadEvaluator"]
 
 KITTI_CATEGORIES = ("um_road", "umm_road", "uu_road")
+
+
+def to_confidence(prob: np.ndarray) -> np.ndarray:
+    """The KITTI 8-bit road confidence (``uint8``, 255 = sure road) of a road probability map (``float``
+    in [0, 1], any shape): ``round(255 · p)``, halves to even, clipped to [0, 255]."""
+    return np.clip(np.round(prob * 255.0), 0, 255).astype(np.uint8)
 
 
 def _ratio(num: float, den: float, empty: float = 1.0) -> float:
@@ -91,6 +98,15 @@ class KittiCounts:
     def __add__(self, other: KittiCounts) -> KittiCounts:
         return KittiCounts(self.fn + other.fn, self.fp + other.fp, self.pos + other.pos, self.neg + other.neg)
 
+    def pr_curve(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(recall, precision)``: ``float64`` arrays over the thresholds j/255 with TP > 0, in threshold
+        order (recall falls), as the devkit computes them; empty without road pixels."""
+        tp = self.pos - self.fn
+        keep = tp > 0
+        if self.pos == 0 or not keep.any():
+            return np.zeros(0), np.zeros(0)
+        return tp[keep] / float(self.pos), tp[keep] / (tp[keep] + self.fp[keep] + 1e-10)
+
 
 def kitti_counts(confidence: np.ndarray, road: np.ndarray, valid: np.ndarray | None = None) -> KittiCounts:
     """KITTI counts of one image. ``confidence``: ``uint8 H×W`` (255 = sure road); ``road``/``valid``: bool."""
@@ -116,12 +132,11 @@ def kitti_scores(counts: KittiCounts) -> dict[str, Any]:
     tp = counts.pos - counts.fn
     thresholds = np.arange(256) / 255.0
     keep = tp > 0
-    if counts.pos == 0 or not keep.any():
+    recall, precision = counts.pr_curve()
+    if not recall.size:
         fpr = float(np.float32(counts.fp[0]) / np.float32(counts.neg)) if counts.neg else 0.0
         return {"max_f": 0.0, "ap": 0.0, "pre": 0.0, "rec": 0.0, "fpr": fpr, "fnr": 1.0 if counts.pos else 0.0,
                 "threshold": 0.0}
-    recall = tp[keep] / float(counts.pos)
-    precision = tp[keep] / (tp[keep] + counts.fp[keep] + 1e-10)
     ap_terms = [precision[recall >= r].max() for r in np.arange(0, 1.1, 0.1) if (recall >= r).any()]
     ap = float(np.mean(ap_terms)) if ap_terms else 0.0
     f = 2 * precision * recall / (precision + recall + 1e-10)
@@ -131,3 +146,70 @@ def kitti_scores(counts: KittiCounts) -> dict[str, Any]:
     P, N = np.float32(counts.pos), np.float32(counts.neg)
     return {"max_f": float(f[best]), "ap": ap, "pre": float(TP / (TP + FP)), "rec": float(TP / P),
             "fpr": float(FP / N) if N > 0 else 0.0, "fnr": float(FN / P), "threshold": float(thresholds[i])}
+
+
+class RoadEvaluator:
+    """Accumulates the counts of a whole split, then computes every metric once (detectron2's
+    ``reset`` / ``process`` / ``evaluate``).
+
+    Serves training (validation and test in :class:`freespace.engine.module.RoadModule`, summed over DDP
+    ranks through :meth:`to_vector` / :meth:`from_vector`), ``freespace evaluate`` and ``freespace
+    evaluate-kitti``. Each processed image adds its confusion :class:`Counts` at ``threshold`` and its
+    :class:`KittiCounts` of the 8-bit confidence (:func:`to_confidence`).
+    """
+
+    #: length of :meth:`to_vector`: tp, fp, fn, tn, fn[256], fp[256], pos, neg, images
+    VECTOR_SIZE = 4 + 2 * 256 + 3
+
+    def __init__(self, threshold: float = 0.5) -> None:
+        self.threshold = threshold
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every processed image."""
+        self.counts = Counts()
+        self.kitti = KittiCounts()
+        self.images = 0
+
+    def process(self, prediction: np.ndarray, road: np.ndarray, valid: np.ndarray | None = None) -> None:
+        """Add one image (``H×W``) or a batch (``N×H×W``; the counts are sums over all its pixels).
+
+        Args:
+            prediction: road probability (``float``, ``H×W`` or ``N×H×W``, in [0, 1]; road where
+                p ≥ ``threshold``), or an 8-bit confidence map (``uint8``, 255 = sure road, as KITTI
+                submissions are; road where value ≥ ``round(255 · threshold)``).
+            road: ``bool``, same shape, True = road. valid: ``bool``, same shape, False = don't care
+                (default: every pixel counts).
+        """
+        if prediction.dtype == np.uint8:
+            confidence, pred = prediction, prediction >= round(255 * self.threshold)
+        else:
+            confidence, pred = to_confidence(prediction), prediction >= self.threshold
+        self.counts = self.counts + confusion_counts(pred, road, valid)
+        self.kitti = self.kitti + kitti_counts(confidence, road, valid)
+        self.images += prediction.shape[0] if prediction.ndim == 3 else 1
+
+    def evaluate(self) -> dict[str, Any]:
+        """The metrics of everything processed since :meth:`reset` (fractions): ``accuracy``,
+        ``precision``, ``recall``, ``f_score``, ``iou`` (at ``threshold``); the KITTI ``max_f``, ``ap``,
+        ``pre``, ``rec``, ``fpr``, ``fnr`` and ``threshold`` (see :func:`kitti_scores`); ``images``."""
+        return {**self.counts.metrics(), **kitti_scores(self.kitti), "images": self.images}
+
+    def to_vector(self) -> np.ndarray:
+        """The accumulated state as one ``float64`` vector (:attr:`VECTOR_SIZE`), to sum over processes
+        (exact below 2^53 pixels)."""
+        c = self.counts
+        return np.concatenate([[c.tp, c.fp, c.fn, c.tn], self.kitti.fn, self.kitti.fp,
+                               [self.kitti.pos, self.kitti.neg, self.images]]).astype(np.float64)
+
+    @classmethod
+    def from_vector(cls, vector: np.ndarray, threshold: float = 0.5) -> RoadEvaluator:
+        """An evaluator holding the state of :meth:`to_vector` (e.g. summed over DDP ranks)."""
+        v = np.rint(np.asarray(vector, np.float64)).astype(np.int64)
+        if v.shape != (cls.VECTOR_SIZE,):
+            raise ShapeMismatchError(f"an evaluator state has {cls.VECTOR_SIZE} values, got shape {v.shape}")
+        ev = cls(threshold)
+        ev.counts = Counts(*(int(x) for x in v[:4]))
+        ev.kitti = KittiCounts(v[4:260].copy(), v[260:516].copy(), int(v[516]), int(v[517]))
+        ev.images = int(v[518])
+        return ev

@@ -1,6 +1,7 @@
-"""Pictures: disparity colour maps, road overlays, captioned image grids (NumPy + OpenCV).
+"""Pictures: disparity colour maps, road overlays, captioned image grids (NumPy + OpenCV), and the
+precision-recall curve (matplotlib, imported when drawn).
 
-All functions take and return ``H×W×3 uint8`` RGB images.
+The image functions take and return ``H×W×3 uint8`` RGB images.
 """
 
 from __future__ import annotations
@@ -10,7 +11,9 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-__all__ = ["colorize_disparity", "overlay_road", "overlay_errors", "caption", "grid"]
+from freespace.io import PathLike, atomic_write_bytes
+
+__all__ = ["colorize_disparity", "overlay_road", "overlay_errors", "caption", "grid", "write_pr_curve"]
 
 
 def colorize_disparity(disparity: np.ndarray, max_disparity: float | None = None) -> np.ndarray:
@@ -64,3 +67,27 @@ def grid(rows: Sequence[Sequence[np.ndarray]], width: int | None = None) -> np.n
         return cv2.resize(img, (width, round(img.shape[0] * width / img.shape[1])), interpolation=cv2.INTER_AREA)
 
     return np.vstack([np.hstack([fit(img) for img in row]) for row in rows])
+
+
+def write_pr_curve(path: PathLike, recall: np.ndarray, precision: np.ndarray) -> None:
+    """Draw a road precision-recall curve (fractions, one point per threshold, e.g. from
+    :meth:`freespace.metrics.KittiCounts.pr_curve`) into a PNG file, written atomically."""
+    import io as _io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(4, 4), dpi=100)
+    ax.plot(recall, precision)
+    ax.set_xlabel("recall")
+    ax.set_ylabel("precision")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.01)
+    ax.grid(True, alpha=0.3)
+    ax.set_title("road precision-recall (256 thresholds)")
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_bytes(path, buf.getvalue())

@@ -14,7 +14,7 @@ import pytest
 from freespace.cli import main
 from freespace.io import read_image, road_label_to_kitti, write_disparity, write_image
 
-from conftest import synthetic_pair
+from helpers import synthetic_pair
 
 
 @pytest.fixture
@@ -177,6 +177,48 @@ def test_dataset_workers_and_sgbm(tmp_path: Path) -> None:
         assert report["disparity_source"] == "sgbm"
 
 
+def test_dataset_shards_are_disjoint_and_cover_every_frame(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    root, whole, shared = tmp_path / "kitti", tmp_path / "whole", tmp_path / "shared"
+    names = _kitti_tree(root, n=7)
+    args = ["generate", "--dataset", "kitti", "--root", str(root)]
+    assert main(args + ["--out", str(whole)]) == 0
+    by_shard = []
+    for k in (1, 2, 3):  # three shards into one folder, as a job array does
+        before = {p.stem for p in (shared / "reports").glob("*.json")} if shared.is_dir() else set()
+        assert main(args + ["--out", str(shared), "--shard", f"{k}/3"]) == 0
+        assert f"of {(3, 2, 2)[k - 1]} frames (shard {k}/3)" in capsys.readouterr().out
+        written = {p.stem for p in (shared / "reports").glob("*.json")} - before
+        summary = json.loads((shared / f"summary.shard-{k}-of-3.json").read_text())
+        rows = (shared / f"report.shard-{k}-of-3.csv").read_text().splitlines()[1:]
+        assert summary["shard"] == f"{k}/3" and summary["generated"] == summary["frames"] == len(written)
+        assert {r.split(",")[0] for r in rows} == written                # each shard writes only its frames
+        by_shard.append(written)
+    assert [len(s) for s in by_shard] == [3, 2, 2]
+    assert set.union(*by_shard) == set(names) and sum(map(len, by_shard)) == len(names)   # disjoint, covering
+    assert sorted(p.name for p in shared.glob("*.png")) == sorted(p.name for p in whole.glob("*.png"))
+    for name in names:
+        np.testing.assert_array_equal(read_image(shared / f"{name}.png"), read_image(whole / f"{name}.png"))
+    assert not (shared / "summary.json").exists()
+    settings = json.loads((shared / "settings.json").read_text())
+    assert settings == json.loads((whole / "settings.json").read_text()) and "shard" not in settings
+    # the settings check still guards the shared folder; an unsharded run then writes the totals
+    assert main(args + ["--out", str(shared), "--shard", "1/3", "--inlier-threshold", "2"]) == 2
+    assert "other settings (inlier_threshold 1.0 → 2.0)" in capsys.readouterr().err
+    assert main(args + ["--out", str(shared)]) == 0
+    summary = json.loads((shared / "summary.json").read_text())
+    assert summary["frames"] == summary["skipped"] == 7 and summary["generated"] == 0
+    # with --overwrite a shard replaces only its own frames; the others' are redone by their next run
+    # (every report keeps its settings), never skipped
+    assert main(args + ["--out", str(shared), "--shard", "2/3", "--inlier-threshold", "2", "--overwrite"]) == 0
+    assert json.loads((shared / "summary.shard-2-of-3.json").read_text())["generated"] == 2
+    assert not (shared / "summary.json").exists()                          # the old totals are stale
+    assert main(args + ["--out", str(shared), "--inlier-threshold", "2"]) == 0
+    summary = json.loads((shared / "summary.json").read_text())
+    assert (summary["generated"], summary["skipped"]) == (5, 2)
+    assert main(args + ["--out", str(shared), "--shard", "1/0"]) == 2
+    assert "K/N with whole numbers" in capsys.readouterr().err
+
+
 def test_dataset_user_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["generate", "--dataset", "kitti", "--root", str(tmp_path / "none"), "--out", str(tmp_path)]) == 2
     assert "dataset root not found" in capsys.readouterr().err
@@ -194,3 +236,16 @@ def test_unwritable_model_json_leaves_no_image(pair_files: dict[str, Path], tmp_
                       str(tmp_path / "blocker" / "M.json"))
     assert main(args) == 2
     assert not out.exists()
+
+
+def test_unusable_inputs_raise_typed_errors() -> None:
+    from freespace.errors import RoadFitError
+    from freespace.generate import generate_arrays
+
+    image = np.zeros((40, 60, 3), np.uint8)
+    road = np.zeros((40, 60), bool)
+    with pytest.raises(RoadFitError, match="marks no road pixel"):
+        generate_arrays(image, image, road, np.ones((40, 60), np.float32))
+    road[30:, :] = True
+    with pytest.raises(RoadFitError, match="no valid value"):
+        generate_arrays(image, image, road, np.full((40, 60), np.nan, np.float32))

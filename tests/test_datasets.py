@@ -9,17 +9,18 @@ import cv2
 import numpy as np
 import pytest
 
-import freespace.data.base as base
+import freespace.data.disparity as disparity_sources
 from freespace.cli import main
-from freespace.data.base import get_dataset, list_datasets
+from freespace.data import get_dataset, list_datasets
 from freespace.data.folder import CarlaStereo, SynthiaStereo
+from freespace.data.info import check_dataset
 from freespace.data.kitti_road import KittiRoad
 from freespace.data.splits import make_splits, read_splits, split_sizes, write_splits
 from freespace.data.synthetic import format_kitti_calib
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError
+from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
 from freespace.io import road_label_to_kitti, write_disparity, write_image
 
-from conftest import synthetic_pair
+from helpers import synthetic_pair
 
 SHAPE = (160, 320)
 
@@ -71,9 +72,32 @@ def test_kitti_training_and_testing(tmp_path: Path) -> None:
     assert s.left.shape == SHAPE + (3,) and s.right is not None and s.label is not None
     assert s.calibration.fx == 300.0 and s.calibration.baseline == pytest.approx(0.5)
     assert s.calibration.road_distance == pytest.approx(1.6)
-    test = KittiRoad(tmp_path, "testing", disparity="none")
+    test = KittiRoad(tmp_path, "testing", disparity_mode="none")
     assert len(test) == 2 and test.load(0).label is None
-    assert test.check() == []  # no labels expected in testing
+    assert check_dataset(test) == []  # no labels expected in testing
+
+
+def test_subset_and_labelled(tmp_path: Path) -> None:
+    kitti_tree(tmp_path, 4)
+    (tmp_path / "data_road" / "training" / "gt_image_2" / "um_road_000003.png").unlink()
+    ds = KittiRoad(tmp_path, disparity_mode="none")
+    assert [f.name for f in ds.labelled()] == ["um_000000", "umm_000001", "uu_000002"]
+    sub = ds.subset(["uu_000002", "um_000000"])
+    assert [f.name for f in sub] == ["uu_000002", "um_000000"] and sub.index("um_000000") == 1
+    np.testing.assert_array_equal(sub.load(1).left, ds.load(0).left)
+    assert (sub.split, sub.disparity_mode, len(ds)) == ("training", "none", 4)  # same options; ds untouched
+    assert ds.subset([]).frames == []
+    with pytest.raises(DatasetError, match="'um_000009' is not in kitti training"):
+        ds.subset(["um_000009"])
+
+
+def test_missing_root_is_the_same_error_everywhere(tmp_path: Path) -> None:
+    from freespace.data.info import dataset_info
+
+    for open_missing in (lambda: get_dataset("kitti", tmp_path / "none"), lambda: KittiRoad(tmp_path / "none"),
+                         lambda: dataset_info("synthia", tmp_path / "none")):
+        with pytest.raises(InputFileError, match="dataset root not found"):
+            open_missing()
 
 
 def test_kitti_without_right_images_and_user_disparity(tmp_path: Path) -> None:
@@ -99,8 +123,8 @@ def test_kitti_problems_are_listed_by_frame(tmp_path: Path, capsys: pytest.Captu
     write_image(tmp_path / "data_road_right/training/image_3/um_000099.png",          # mispaired
                 np.zeros(SHAPE + (3,), np.uint8))
     (tr / "gt_image_2/uu_road_000002.png").write_bytes(b"\x89PNG\r\n\x1a\ntruncated")  # corrupt
-    write_image(tr / "gt_image_2/um_road_000003.png", np.zeros((100, 320, 3), np.uint8))  # wrong size
-    problems = [str(p) for p in KittiRoad(tmp_path).check()]
+    write_image(tr / "gt_image_2/um_road_000003.png", np.full((100, 320, 3), (255, 0, 255), np.uint8))  # wrong size
+    problems = [str(p) for p in check_dataset(KittiRoad(tmp_path))]
     joined = "\n".join(problems)
     assert "umm_000001: missing right file" in joined
     assert "um_000099: right image" in joined and "has no left image" in joined
@@ -153,7 +177,7 @@ def test_synthia(tmp_path: Path) -> None:
     assert ok.mean() > 0.7
     np.testing.assert_allclose(s.disparity[ok], truth[ok], rtol=0.01, atol=0.01)
     assert s.label.road[100, 160] and not s.label.valid[10, 10]
-    assert ds.check() == []
+    assert check_dataset(ds) == []
     # a single sequence folder works as the root too; freespace.yaml overrides the defaults
     one = SynthiaStereo(tmp_path / "SYNTHIA-SEQS-01-SPRING")
     assert len(one) == 3
@@ -202,7 +226,7 @@ def test_carla_mispaired_and_corrupt(tmp_path: Path) -> None:
     carla_tree(tmp_path, camera=False)
     (tmp_path / "Town02_rain/right/00002.png").rename(tmp_path / "Town02_rain/right/00007.png")
     (tmp_path / "Town01_clear/depth/00000.png").write_bytes(b"junk")
-    problems = [str(p) for p in CarlaStereo(tmp_path).check()]
+    problems = [str(p) for p in check_dataset(CarlaStereo(tmp_path))]
     assert any(p.startswith("Town02_rain_00007: right file") for p in problems)
     assert "Town02_rain_00002: missing right file" in problems
     assert any(p.startswith("Town01_clear_00000: cannot decode") for p in problems)
@@ -231,7 +255,7 @@ def test_generic(tmp_path: Path) -> None:
     assert [f.scenario for f in ds.frames] == ["drive0", "drive0", "drive1", "drive1"]
     s = ds.load(0)
     assert s.disparity_source == "file" and s.label.road.any() and s.calibration is None
-    assert ds.check() == []
+    assert check_dataset(ds) == []
 
 
 def test_generic_config_mistakes(tmp_path: Path) -> None:
@@ -242,7 +266,7 @@ def test_generic_config_mistakes(tmp_path: Path) -> None:
     with pytest.raises(InvalidOptionError, match="unknown keys"):
         get_dataset("generic", tmp_path)
     (tmp_path / "freespace.yaml").write_text("left: [unclosed\n")
-    with pytest.raises(Exception, match="cannot parse"):
+    with pytest.raises(CorruptFileError, match="cannot parse .*freespace.yaml"):
         get_dataset("generic", tmp_path)
     (tmp_path / "freespace.yaml").write_text("left: L\n")
     with pytest.raises(DatasetError, match="no frames"):
@@ -263,13 +287,13 @@ def test_sgbm_disparity_is_cached(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     def boom(*args, **kwargs):
         raise AssertionError("SGBM ran again")
 
-    monkeypatch.setattr(base, "compute_disparity", boom)
+    monkeypatch.setattr(disparity_sources, "compute_disparity", boom)
     again = KittiRoad(tmp_path / "k", cache_dir=tmp_path / "cache").load(0)
     np.testing.assert_array_equal(again.disparity, first.disparity)
     other = KittiRoad(tmp_path / "k", cache_dir=tmp_path / "cache", max_disparity=64)
     with pytest.raises(AssertionError, match="SGBM ran again"):  # new settings, new key
         other.load(0)
-    assert KittiRoad(tmp_path / "k", disparity="none").load(0).disparity is None
+    assert KittiRoad(tmp_path / "k", disparity_mode="none").load(0).disparity is None
 
 
 # --- splits --------------------------------------------------------------------------------------------
@@ -322,10 +346,11 @@ def test_generate_on_every_layout(layout: str, tmp_path: Path, capsys: pytest.Ca
 
 def test_torch_dataset(tmp_path: Path) -> None:
     torch = pytest.importorskip("torch")
-    from freespace.data.torch_dataset import IGNORE_INDEX, RoadSegmentationDataset
+    from freespace.data.torch_dataset import RoadSegmentationDataset
+    from freespace.io import IGNORE_INDEX
 
     kitti_tree(tmp_path, 3)
-    ds = RoadSegmentationDataset(KittiRoad(tmp_path, disparity="none"))
+    ds = RoadSegmentationDataset(KittiRoad(tmp_path, disparity_mode="none"))
     item = ds[0]
     assert item["image"].shape == (3,) + SHAPE and item["image"].dtype == torch.float32
     assert 0 <= float(item["image"].min()) and float(item["image"].max()) <= 1
@@ -336,6 +361,34 @@ def test_torch_dataset(tmp_path: Path) -> None:
     kitti_tree(tmp_path / "t", 1, split="testing", label=False)
     with pytest.raises(DatasetError, match="no road label"):
         RoadSegmentationDataset(KittiRoad(tmp_path / "t", "testing"), names=["um_000000"])
+
+
+def test_torch_dataset_training_options(tmp_path: Path) -> None:
+    """Resize (labels nearest), image overrides (DS-Generator views), cache, augmentation drawn from
+    (seed, epoch, i) only."""
+    torch = pytest.importorskip("torch")
+    from freespace.data.torch_dataset import Item, RoadSegmentationDataset
+    from freespace.io import IGNORE_INDEX
+
+    names = kitti_tree(tmp_path, 3)
+    kitti = KittiRoad(tmp_path, disparity_mode="none")
+    view = np.full(SHAPE + (3,), 200, np.uint8)
+    write_image(tmp_path / "view.png", view)
+    items = [Item(kitti.index(names[0]), names[0]), Item(kitti.index(names[1]), names[1], str(tmp_path / "view.png"))]
+    plain = RoadSegmentationDataset(kitti, items, size=(40, 80))
+    cached = RoadSegmentationDataset(kitti, items, size=(40, 80), cache=True)
+    a, b = plain[1], cached[1]
+    assert a["image"].shape == (3, 40, 80) and a["name"] == names[1] and a["index"] == 1
+    assert torch.equal(a["image"], torch.full((3, 40, 80), 200 / 255.0))  # the override image, resized
+    full = RoadSegmentationDataset(kitti, items)[1]["label"]
+    assert torch.equal(a["label"], full[::4, ::4])  # nearest (OpenCV: source pixel 4·i): no new values
+    assert torch.equal(a["label"], b["label"]) and set(cached._cache) == {1} and not plain._cache
+    aug = RoadSegmentationDataset(kitti, items, size=(40, 80), augment=True, seed=3)
+    again = RoadSegmentationDataset(kitti, items, size=(40, 80), augment=True, seed=3)
+    draws = [aug[(e, 0)]["label"] for e in range(4)]
+    assert all(torch.equal(d, again[(e, 0)]["label"]) for e, d in enumerate(draws))  # (seed, epoch, i) only
+    assert not all(torch.equal(draws[0], d) for d in draws[1:])  # epochs differ
+    assert set(torch.unique(torch.stack(draws)).tolist()) <= {0, 1, IGNORE_INDEX}
 
 
 def test_datasets_split_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -11,6 +12,7 @@ import pytest
 from freespace.cli import main
 from freespace.data.synthetic import SynthConfig
 from freespace.demo import run_demo
+from freespace.io import read_image
 from freespace.viz import caption, colorize_disparity, grid, overlay_road
 
 
@@ -31,11 +33,26 @@ def test_demo_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["demo", "--out", str(tmp_path), "--num", "24", "--epochs", "2"]) == 0
     out = capsys.readouterr().out
     assert "generated view differs" in out and "| HA-unet |" in out and "figures:" in out
-    assert (tmp_path / "experiment" / "figures" / "unet.png").is_file()
+    summary = json.loads((tmp_path / "demo_summary.json").read_text())
+    # the DS-Generator part: the exact-disparity fit recovers the rendered roll, the generated view is
+    # closer to the left image on the road than the raw right image
+    assert summary["max_roll_error_deg"] < 0.01 and not summary["generate_failed"]
+    assert summary["mean_road_mae_generated"] < summary["mean_road_mae_right"]
+    assert len(list((tmp_path / "figures").glob("*.jpg"))) == 4
+    # the training part: both variants trained and tested, the table and its CSV agree
+    rows = list(csv.DictReader((tmp_path / "experiment" / "results.csv").open()))
+    assert [r["network"] for r in rows] == ["unet", "HA-unet"] and all(r["seeds"] == "1" for r in rows)
+    assert [r["network"] for r in summary["results"]] == ["unet", "HA-unet"]
+    for row, result in zip(rows, summary["results"]):
+        assert float(row["f_score"]) == pytest.approx(result["f_score"], abs=1e-4)
+        assert 20 < result["f_score"] <= 100 and 0 < result["iou"] <= result["f_score"]  # %, not a dead network
+    assert f"| HA-unet | 1 | {float(rows[1]['accuracy']):.2f} ± 0.00 |" in out
+    assert read_image(tmp_path / "experiment" / "figures" / "unet.png").shape[0] == 3 * 128
 
 
-def test_demo_mistake(tmp_path: Path) -> None:
+def test_demo_mistake(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["demo", "--out", str(tmp_path), "--num", "0"]) == 2
+    assert "--num must be in 12…" in capsys.readouterr().err and list(tmp_path.iterdir()) == []
 
 
 def test_viz() -> None:

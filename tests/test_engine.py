@@ -4,6 +4,7 @@ atomic checkpoints, DDP with two CPU processes."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import subprocess
@@ -17,7 +18,8 @@ import yaml
 from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.engine.config import TrainConfig
-from freespace.errors import FreespaceError
+from freespace.errors import FreespaceError, InputFileError
+from freespace.io import IGNORE_INDEX
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +99,7 @@ def test_nan_loss_stops_the_run(tiny: Path, tmp_path: Path, monkeypatch: pytest.
                                 capsys: pytest.CaptureFixture) -> None:
     from freespace.models.base import SegmentationModel
 
-    def nan_loss(self, outputs, target, ignore_index=255):
+    def nan_loss(self, outputs, target, ignore_index=IGNORE_INDEX):
         return {"total": torch.nn.functional.cross_entropy(outputs, target, ignore_index=ignore_index) * float("nan")}
 
     monkeypatch.setattr(SegmentationModel, "loss", nan_loss)
@@ -107,15 +109,36 @@ def test_nan_loss_stops_the_run(tiny: Path, tmp_path: Path, monkeypatch: pytest.
 
 
 def test_checkpoints_are_written_atomically(tmp_path: Path) -> None:
-    from freespace.engine.train import _atomic_io
+    from freespace.engine.train import _checkpoint_io
 
-    io = _atomic_io()
+    io = _checkpoint_io(tmp_path)
     path = tmp_path / "last.ckpt"
     io.save_checkpoint({"epoch": 1}, path)
-    with pytest.raises(Exception):
-        io.save_checkpoint({"bad": lambda: 0}, path)  # cannot be pickled: the old file must survive
+
+    class Unpicklable:
+        def __reduce__(self):
+            raise RuntimeError("cannot be pickled")
+
+    with pytest.raises(RuntimeError, match="cannot be pickled"):
+        io.save_checkpoint({"bad": Unpicklable()}, path)  # the old file must survive
     assert torch.load(path, weights_only=True) == {"epoch": 1}
     assert [p.name for p in tmp_path.iterdir()] == ["last.ckpt"]
+
+
+def test_resumed_checkpoint_paths_stay_in_the_run_folder(tmp_path: Path) -> None:
+    """A checkpoint callback state that names files elsewhere (a moved run, a crafted file) is confined."""
+    from freespace.engine.train import _checkpoint_io
+
+    io = _checkpoint_io(tmp_path / "run")
+    elsewhere = "/elsewhere/checkpoints/"
+    state = {"dirpath": elsewhere, "best_model_path": elsewhere + "best.ckpt", "last_model_path": "/etc/passwd",
+             "kth_best_model_path": elsewhere + "best.ckpt", "best_k_models": {elsewhere + "best.ckpt": 0.5}}
+    path = tmp_path / "last.ckpt"
+    io.save_checkpoint({"state_dict": {}, "callbacks": {"ModelCheckpoint{}": state}}, path)
+    loaded = io.load_checkpoint(path)["callbacks"]["ModelCheckpoint{}"]
+    folder = str(tmp_path / "run" / "checkpoints")
+    assert loaded["dirpath"] == folder and loaded["best_model_path"] == folder + "/best.ckpt"
+    assert loaded["last_model_path"] == "" and loaded["best_k_models"] == {folder + "/best.ckpt": 0.5}
 
 
 def test_config_round_trip(tmp_path: Path) -> None:
@@ -127,6 +150,59 @@ def test_config_round_trip(tmp_path: Path) -> None:
         TrainConfig.load(tmp_path / "bad.yaml")
 
 
+def test_config_file_and_flags(tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                               capsys: pytest.CaptureFixture) -> None:
+    import freespace.engine.train as train_module
+
+    seen: list[TrainConfig] = []
+
+    def fake_training(config: TrainConfig, resume: bool, progress: bool) -> dict[str, float]:
+        seen.append(config)
+        return dict.fromkeys(("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"), 0.5)
+
+    monkeypatch.setattr(train_module, "run_training", fake_training)
+    run = TrainConfig(dataset="synth", root=str(tiny), out=str(tmp_path / "a"), model="segnet", epochs=7,
+                      image_size=(64, 96), splits_dir=str(tmp_path), disparity_mode="sgbm", tensorboard=False)
+    run.save(tmp_path / "config.yaml")
+    # a run's config.yaml, flags override it
+    assert main(["train", "--config", str(tmp_path / "config.yaml"), "--epochs", "3", "--out", str(tmp_path / "b")]) == 0
+    assert seen[-1] == dataclasses.replace(run, epochs=3, out=str(tmp_path / "b"))
+    # flags alone: every field has one (names of the CLI kept: --splits, --disparity-source)
+    assert main(["train", "--dataset", "synth", "--root", str(tiny), "--out", str(tmp_path / "c"), "--model", "segnet",
+                 "--epochs", "7", "--image-size", "64x96", "--splits", str(tmp_path), "--disparity-source", "sgbm"]) == 0
+    assert seen[-1] == dataclasses.replace(run, out=str(tmp_path / "c"))
+    # a config.yaml written before the renames still reads
+    old = {**run.to_dict(), "splits": str(tmp_path), "disparity": "sgbm"}
+    del old["splits_dir"], old["disparity_mode"]
+    (tmp_path / "old.yaml").write_text(yaml.safe_dump(old))
+    assert TrainConfig.load(tmp_path / "old.yaml") == run
+    capsys.readouterr()
+    for text, message in [("epoch: 3\n", "unknown option epoch;"), ("epochs: ten\n", "epochs must be an integer"),
+                          ("image_size: 12x5\n", "--image-size must be HxW"), ("- 3\n", "not a freespace training config")]:
+        (tmp_path / "bad.yaml").write_text(text)
+        assert main(["train", "--config", str(tmp_path / "bad.yaml"), "--dataset", "synth", "--root", str(tiny),
+                     "--out", str(tmp_path / "d")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    assert main(["train", "--config", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "d")]) == 2
+    assert "config file not found" in capsys.readouterr().err
+    assert len(seen) == 2 and not (tmp_path / "d").exists()
+
+
+def test_missing_root_error(tmp_path: Path) -> None:
+    with pytest.raises(InputFileError, match="dataset root not found"):
+        TrainConfig(dataset="synth", root=str(tmp_path / "none"), out=str(tmp_path / "o")).check()
+
+
+def test_evaluate_subset_names(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["evaluate", "--checkpoint", str(tmp_path / "x.ckpt"), "--dataset", "synth", "--root", str(tiny),
+                 "--subset", "every", "--out", str(tmp_path / "e")]) == 2
+    assert "--subset must be train, val, test or all" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # the on-disk split is --split; --disk-split is gone
+        main(["evaluate", "--checkpoint", "x", "--dataset", "synth", "--root", str(tiny), "--disk-split", "training",
+              "--out", str(tmp_path / "e")])
+
+
 def test_ddp_two_cpu_processes(tiny: Path, tmp_path: Path) -> None:
     run = tmp_path / "ddp"
     cmd = [sys.executable, "-m", "freespace.cli", "train", "--dataset", "synth", "--root", str(tiny), "--model",
@@ -136,7 +212,17 @@ def test_ddp_two_cpu_processes(tiny: Path, tmp_path: Path) -> None:
     assert res.returncode == 0, res.stderr[-2000:]
     assert "Initializing distributed: GLOBAL_RANK: 0, MEMBER: 1/2" in res.stderr
     assert len(list(csv.DictReader((run / "metrics.csv").open()))) == 2
-    assert json.loads((run / "metrics.json").read_text())["f_score"] >= 0
+    # the test metrics were counted on two processes (disjoint halves of the test split) and summed: they
+    # equal a single-process evaluation of the same checkpoint on the same frames
+    from freespace.engine.evaluate import evaluate_checkpoint
+
+    m = json.loads((run / "metrics.json").read_text())
+    test_names = (run / "splits" / "test.txt").read_text().split()
+    assert m["frames"]["test"] == len(test_names) >= 2
+    single = evaluate_checkpoint(run / m["checkpoint"], "synth", tiny, tmp_path / "eval", progress=False)
+    assert single["frames"] == len(test_names)
+    for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"):
+        assert m[k] == pytest.approx(single[k], abs=1e-6), k
 
 
 def test_evaluate_checkpoint(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -155,10 +241,11 @@ def test_evaluate_checkpoint(tiny: Path, tmp_path: Path, capsys: pytest.CaptureF
     capsys.readouterr()
     assert main(["evaluate", "--checkpoint", str(tmp_path / "none.ckpt"), "--dataset", "synth", "--root", str(tiny),
                  "--out", str(tmp_path / "e2")]) == 2
+    assert "checkpoint not found" in capsys.readouterr().err and not (tmp_path / "e2").exists()
     (tmp_path / "junk.ckpt").write_bytes(b"not a checkpoint")
     assert main(["evaluate", "--checkpoint", str(tmp_path / "junk.ckpt"), "--dataset", "synth", "--root", str(tiny),
                  "--out", str(tmp_path / "e2")]) == 2
-    assert "not a freespace training checkpoint" in capsys.readouterr().err
+    assert "not a freespace training checkpoint" in capsys.readouterr().err and not (tmp_path / "e2").exists()
 
 
 def test_tensorboard_is_optional(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

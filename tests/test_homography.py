@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from freespace.errors import InvalidOptionError
-from freespace.geometry import RoadModel, StereoCalibration, homography_from_pose, road_homography
+from freespace.geometry import RoadModel, StereoCalibration, homography_from_pose
 from freespace.io import read_kitti_calib
 
-from conftest import shared_path
+from helpers import shared_path
 
 
 def _rot(rx: float, ry: float, rz: float) -> np.ndarray:
@@ -65,7 +65,6 @@ def test_stereo_road_model_from_calibration() -> None:
     np.testing.assert_allclose(a * p[:, 0] + b * p[:, 1] + c, 720.0 * 0.54 / X[:, 2], rtol=1e-9)
     # the pose homography (left → right, t = (−B, 0, 0)) is the model's affine homography
     np.testing.assert_allclose(calib.homography(), model.homography, atol=1e-9)
-    np.testing.assert_allclose(road_homography(model), model.homography)
     # rolling the rig by Φ about the optical axis rolls the disparity plane by Φ
     assert model.roll_deg == pytest.approx(2.0, abs=1e-9)
 

@@ -16,7 +16,7 @@ from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.io import read_image, read_kitti_calib, read_road_label, write_image
 
-from conftest import shared_path
+from helpers import shared_path
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +76,7 @@ def test_bev_of_a_rendered_road_is_the_road_ahead(run: dict[str, Path]) -> None:
     assert bev[520:720, 180:220].mean() > 0.9
 
 
-def test_evaluate_kitti_bev(run: dict[str, Path], tmp_path: Path) -> None:
+def test_evaluate_kitti_bev(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     tr = run["data"] / "data_road" / "training"
     pred = tmp_path / "pred"
     for gt in (tr / "gt_image_2").glob("*.png"):
@@ -86,8 +86,10 @@ def test_evaluate_kitti_bev(run: dict[str, Path], tmp_path: Path) -> None:
                  "--pred", str(pred), "--out", str(out)]) == 0
     res = json.loads(out.read_text())
     assert res["all"]["max_f"] == pytest.approx(1.0, abs=1e-9) and res["all"]["fpr"] == 0.0
+    assert res["all"]["images"] == 12 and res["all"]["ap"] == pytest.approx(1.0, abs=1e-9)
     assert main(["evaluate-kitti", "--bev", "--gt", str(tr / "gt_image_2"), "--pred", str(pred),
                  "--out", str(tmp_path / "x.json")]) == 2
+    assert "--bev needs --calib" in capsys.readouterr().err and not (tmp_path / "x.json").exists()
 
 
 def test_export_and_predict(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -108,23 +110,52 @@ def test_export_and_predict(run: dict[str, Path], tmp_path: Path, capsys: pytest
         assert (a / "overlays" / img.name).is_file()
     summary = json.loads((a / "summary.json").read_text())
     assert summary["frames"] == 12 and summary["seconds_per_frame"] > 0
-    # one file works too
-    one = next(images.glob("*.png"))
+    assert summary["model"] == "segnet" and summary["image_size"] == [128, 160]
+    # one file works too, and gives that file's map of the folder run
+    one = sorted(images.glob("*.png"))[3]
     assert main(["predict", "--onnx", str(onnx), "--input", str(one), "--out", str(tmp_path / "one"), "--no-progress"]) == 0
+    assert sorted(p.name for p in (tmp_path / "one").glob("*.png")) == [one.name]
+    assert np.abs(read_image(tmp_path / "one" / one.name).astype(int) - read_image(b / one.name).astype(int)).max() <= 1
+    assert json.loads((tmp_path / "one" / "summary.json").read_text())["frames"] == 1
+
+
+def test_predict_then_evaluate_kitti_equals_evaluate(run: dict[str, Path], tmp_path: Path) -> None:
+    """Two paths to the same numbers: `predict` + `evaluate-kitti` on its 8-bit maps, and `evaluate`
+    (the same predictor, the same confidence conversion, the same evaluator)."""
+    tr = run["data"] / "data_road" / "training"
+    pred = tmp_path / "pred"
+    assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(tr / "image_2"), "--out", str(pred),
+                 "--batch-size", "1", "--no-progress"]) == 0
+    assert main(["evaluate-kitti", "--gt", str(tr / "gt_image_2"), "--pred", str(pred), "--out",
+                 str(tmp_path / "kitti.json")]) == 0
+    assert main(["evaluate", "--checkpoint", str(run["ckpt"]), "--dataset", "synth", "--root", str(run["data"]),
+                 "--subset", "all", "--out", str(tmp_path / "eval"), "--no-progress"]) == 0
+    kitti = json.loads((tmp_path / "kitti.json").read_text())["all"]
+    evaluated = json.loads((tmp_path / "eval" / "metrics.json").read_text())
+    assert kitti["images"] == evaluated["frames"] == 12
+    assert kitti["max_f"] == pytest.approx(evaluated["max_f"], abs=1e-12)
+    assert kitti["ap"] == pytest.approx(evaluated["ap"], abs=1e-12)
+    assert 0.3 < evaluated["max_f"] <= 1 and 0 < evaluated["ap"] <= 1  # better than no road at all (max_f 0)
 
 
 def test_inference_mistakes(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "m.onnx"
     assert main(["export", "--checkpoint", str(tmp_path / "none.ckpt"), "--format", "onnx", "--out", str(out)]) == 2
-    assert not out.exists()
+    assert "checkpoint not found" in capsys.readouterr().err and not out.exists()
+    images = run["data"] / "data_road" / "training" / "image_2"
+    assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(images), "--batch-size", "0",
+                 "--out", str(tmp_path / "p")]) == 2
+    assert "--batch-size must be ≥ 1" in capsys.readouterr().err and not (tmp_path / "p").exists()
     assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(tmp_path / "none"), "--out", str(tmp_path / "p")]) == 2
+    assert "input not found" in capsys.readouterr().err
     (tmp_path / "bad.onnx").write_bytes(b"junk")
-    assert main(["predict", "--onnx", str(tmp_path / "bad.onnx"), "--input", str(tmp_path), "--out", str(tmp_path / "p")]) == 2
+    assert main(["predict", "--onnx", str(tmp_path / "bad.onnx"), "--input", str(images), "--out", str(tmp_path / "p")]) == 2
     err = capsys.readouterr().err
-    assert err.count("freespace: error:") == 3
+    assert err.startswith("freespace: error:") and "cannot load" in err and "as an ONNX model" in err
+    assert not (tmp_path / "p").exists()
 
 
-def test_kitti_submit(run: dict[str, Path], tmp_path: Path) -> None:
+def test_kitti_submit(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     root = tmp_path / "kitti"
     src = run["data"] / "data_road" / "training"
     for sub in ("image_2", "calib"):
@@ -136,5 +167,8 @@ def test_kitti_submit(run: dict[str, Path], tmp_path: Path) -> None:
     assert len(maps) == 12 and read_image(maps[0]).shape == BEV_SHAPE
     with zipfile.ZipFile(out / "submission.zip") as zf:
         assert sorted(zf.namelist()) == [m.name for m in maps]
+    bev = read_image(maps[0])
+    assert bev.dtype == np.uint8 and 0 < np.count_nonzero(bev) < bev.size  # the camera's field of view only
     (root / "data_road" / "testing" / "calib" / maps[0].name.replace("_road_", "_").replace(".png", ".txt")).unlink()
     assert main(["kitti-submit", "--checkpoint", str(run["ckpt"]), "--root", str(root), "--out", str(tmp_path / "s2")]) == 2
+    assert "have no calibration" in capsys.readouterr().err and not (tmp_path / "s2").exists()

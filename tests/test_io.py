@@ -20,7 +20,7 @@ from freespace.io import (
     write_image,
 )
 
-from conftest import shared_path
+from helpers import shared_path
 
 
 def _disparity() -> np.ndarray:

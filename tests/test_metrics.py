@@ -1,5 +1,6 @@
 """Metrics: hand-computed cases, the KITTI devkit's published algorithm as a fixture, per-category
-summing, don't-care handling, degenerate cases; `freespace evaluate-kitti`."""
+summing, don't-care handling, degenerate cases; the evaluator (batches, DDP-style sums); `freespace
+evaluate-kitti`."""
 
 from __future__ import annotations
 
@@ -10,8 +11,10 @@ import numpy as np
 import pytest
 
 from freespace.cli import main
+from freespace.errors import ShapeMismatchError
 from freespace.io import RoadLabel, road_label_to_kitti, write_image
-from freespace.metrics import Counts, KittiCounts, confusion_counts, kitti_counts, kitti_scores
+from freespace.metrics import (Counts, KittiCounts, RoadEvaluator, confusion_counts, kitti_counts, kitti_scores,
+                               to_confidence)
 
 
 def devkit_reference(images: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> dict[str, float]:
@@ -128,6 +131,69 @@ def test_kitti_degenerate_cases() -> None:
     assert constant["rec"] == 1.0 and constant["pre"] == pytest.approx(0.2) and not np.isnan(constant["ap"])
 
 
+def test_to_confidence_rounds_half_to_even_and_clips() -> None:
+    prob = np.array([0.0, 0.5, 1.0, 1.2, -0.1, 1 / 510, 3 / 510, 0.25], np.float32)
+    assert to_confidence(prob).tolist() == [0, 128, 255, 255, 0, 0, 2, 64]
+    assert to_confidence(prob).dtype == np.uint8
+
+
+def _random_prob(rng: np.random.Generator, shape=(30, 40)):
+    road = np.zeros(shape, bool)
+    road[shape[0] // 2:, 5:30] = True
+    prob = np.clip(np.where(road, 0.7, 0.3) + rng.normal(0, 0.3, shape), 0, 1).astype(np.float32)
+    return prob, road, rng.random(shape) > 0.1
+
+
+def test_evaluator_sums_counts_over_images_batches_and_processes() -> None:
+    rng = np.random.default_rng(11)
+    images = [_random_prob(rng) for _ in range(6)]
+    ev = RoadEvaluator()
+    for prob, road, valid in images:
+        ev.process(prob, road, valid)
+    counts, kitti = Counts(), KittiCounts()
+    for prob, road, valid in images:
+        counts = counts + confusion_counts(prob >= 0.5, road, valid)
+        kitti = kitti + kitti_counts(to_confidence(prob), road, valid)
+    m = ev.evaluate()
+    assert ev.images == 6 and m["images"] == 6
+    assert ev.counts == counts and {k: m[k] for k in counts.metrics()} == counts.metrics()
+    assert {k: m[k] for k in kitti_scores(kitti)} == kitti_scores(kitti)
+    assert 0.6 < m["f_score"] < 0.95 and 0.6 < m["max_f"] < 0.95  # noisy but informative maps
+    # one batch (N×H×W) counts the same as image by image
+    batch = RoadEvaluator()
+    batch.process(*(np.stack(x) for x in zip(*images)))
+    assert batch.images == 6 and np.array_equal(batch.to_vector(), ev.to_vector())
+    # two "ranks" each see half the images; their summed state is the whole split's
+    ranks = [RoadEvaluator(), RoadEvaluator()]
+    for i, image in enumerate(images):
+        ranks[i % 2].process(*image)
+    assert ranks[0].evaluate()["f_score"] != m["f_score"]
+    summed = RoadEvaluator.from_vector(ranks[0].to_vector() + ranks[1].to_vector())
+    assert summed.evaluate() == m
+    # 8-bit maps are taken as they are: the same KITTI counts as the probabilities they encode
+    conf = RoadEvaluator()
+    for prob, road, valid in images:
+        conf.process(to_confidence(prob), road, valid)
+    assert {k: conf.evaluate()[k] for k in ("max_f", "ap", "pre", "rec")} == {k: m[k] for k in ("max_f", "ap", "pre", "rec")}
+    ev.reset()
+    assert ev.images == 0 and ev.counts == Counts() and not ev.to_vector().any()
+    with pytest.raises(ShapeMismatchError, match="519 values"):
+        RoadEvaluator.from_vector(np.zeros(10))
+
+
+def test_pr_curve_points_are_the_devkit_ones() -> None:
+    rng = np.random.default_rng(3)
+    images = [_random_image(rng) for _ in range(3)]
+    total = KittiCounts()
+    for image in images:
+        total = total + kitti_counts(*image)
+    recall, precision = total.pr_curve()
+    assert recall.shape == precision.shape and recall.size > 100 and np.all(np.diff(recall) <= 0)
+    f = 2 * precision * recall / (precision + recall + 1e-10)
+    assert f.max() == pytest.approx(float(devkit_reference(images)["max_f"]), abs=1e-12)
+    assert KittiCounts().pr_curve()[0].size == 0
+
+
 def test_evaluate_kitti_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     rng = np.random.default_rng(7)
     gt_dir, pred_dir = tmp_path / "gt", tmp_path / "pred"
@@ -143,7 +209,11 @@ def test_evaluate_kitti_command(tmp_path: Path, capsys: pytest.CaptureFixture) -
     assert list(res) == ["um_road", "uu_road", "all"] and res["um_road"]["images"] == 2
     ref = devkit_reference([images["um_road_000000"], images["um_road_000001"]])
     assert res["um_road"]["max_f"] == pytest.approx(float(ref["max_f"]), abs=1e-12)
-    assert set(res["all"]) >= {"max_f", "ap", "pre", "rec", "fpr", "fnr"}
+    assert list(res["all"]) == ["max_f", "ap", "pre", "rec", "fpr", "fnr", "threshold", "images"]
+    ref_all = devkit_reference(list(images.values()))
+    for key in ("max_f", "ap", "pre", "rec", "fpr", "fnr"):
+        assert res["all"][key] == pytest.approx(float(ref_all[key]), abs=1e-12), key
+    assert res["all"]["images"] == 3
     assert "MaxF" in capsys.readouterr().out
     # user mistakes: a missing prediction, a size mismatch, a missing folder
     (pred_dir / "uu_road_000000.png").unlink()
@@ -152,4 +222,5 @@ def test_evaluate_kitti_command(tmp_path: Path, capsys: pytest.CaptureFixture) -
     write_image(pred_dir / "uu_000000.png", np.zeros((10, 10), np.uint8))
     assert main(["evaluate-kitti", "--gt", str(gt_dir), "--pred", str(pred_dir), "--out", str(tmp_path / "x.json")]) == 2
     assert "10×10" in capsys.readouterr().err
-    assert main(["evaluate-kitti", "--gt", str(tmp_path / "no"), "--pred", str(pred_dir), "--out", str(out)]) == 2
+    assert main(["evaluate-kitti", "--gt", str(tmp_path / "no"), "--pred", str(pred_dir), "--out", str(tmp_path / "x.json")]) == 2
+    assert "ground-truth folder not found" in capsys.readouterr().err and not (tmp_path / "x.json").exists()

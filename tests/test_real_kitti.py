@@ -13,7 +13,7 @@ import pytest
 from freespace.geometry import compute_disparity, fit_road_model, generate_view
 from freespace.io import read_disparity, read_image
 
-from conftest import shared_path
+from helpers import shared_path
 
 ROAD_POLYGONS = {
     "000000_10": [(400, 374), (400, 240), (570, 190), (615, 190), (700, 225), (880, 300), (880, 374)],

@@ -6,9 +6,11 @@ import csv
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from freespace.cli import main
+from freespace.io import read_image
 from freespace.data.synthetic import SynthConfig, write_dataset
 
 
@@ -28,10 +30,23 @@ def test_reproduce(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture) ->
     assert "| HA-segnet |" in printed and "HA gain" in printed
     rows = list(csv.DictReader((out / "results.csv").open()))
     assert [r["network"] for r in rows] == ["segnet", "HA-segnet"] and all(r["seeds"] == "2" for r in rows)
-    assert rows[1]["gain_f_score"] != "" and float(rows[0]["f_score_std"]) >= 0
+    assert rows[0]["gain_f_score"] == "" and rows[1]["gain_f_score"] != ""
     index = json.loads((out / "index.json").read_text())
     assert [(r["variant"], r["seed"]) for r in index] == [("none", 0), ("none", 1), ("homography", 0), ("homography", 1)]
-    assert (out / "figures" / "segnet.png").is_file()
+    for entry in index:  # the index holds each run's own test metrics, from one set of counts
+        m = json.loads((out / entry["run"] / "metrics.json").read_text())
+        assert entry["status"] == "done" and entry["metrics"] == {k: m[k] for k in entry["metrics"]}
+        assert m["iou"] == pytest.approx(m["f_score"] / (2 - m["f_score"]), abs=1e-12)  # IoU = F/(2−F)
+        assert 0.2 < m["f_score"] <= 1 and 0 < m["precision"] <= 1 and 0 < m["recall"] <= 1
+    for row, variant in zip(rows, ("none", "homography")):  # mean ± std (in %) over the seeds of the index
+        for k in ("accuracy", "f_score", "iou"):
+            values = 100 * np.array([e["metrics"][k] for e in index if e["variant"] == variant])
+            assert float(row[k]) == pytest.approx(values.mean(), abs=1e-4)
+            assert float(row[f"{k}_std"]) == pytest.approx(values.std(ddof=1), abs=1e-4)
+    md = (out / "results.md").read_text()
+    assert f"| HA-segnet | 2 | {float(rows[1]['accuracy']):.2f} ± {float(rows[1]['accuracy_std']):.2f} |" in md
+    # three test frames of seed 0: image, X, HA-X side by side at the data's size (96×128)
+    assert read_image(out / "figures" / "segnet.png").shape == (3 * 96, 3 * 128, 3)
     gain = float(rows[1]["f_score"]) - float(rows[0]["f_score"])
     assert float(rows[1]["gain_f_score"]) == pytest.approx(gain, abs=1e-3)
     # both variants of a seed share the split
@@ -44,3 +59,5 @@ def test_reproduce_mistakes(data: Path, tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["reproduce", "--dataset", "synth", "--root", str(data), "--models", "fcn", "--out", str(tmp_path)]) == 2
     assert "unknown models" in capsys.readouterr().err
     assert main(["reproduce", "--dataset", "synth", "--root", str(data), "--seeds", "0", "--out", str(tmp_path)]) == 2
+    assert "--seeds must be in 1…1000" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # rejected before any work

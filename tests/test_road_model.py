@@ -11,7 +11,7 @@ from scipy.optimize import minimize
 from freespace.errors import RoadFitError, ShapeMismatchError
 from freespace.geometry import RoadModel, fit_road_model, fit_road_model_closed_form, road_energy, road_pixels
 
-from conftest import plane_disparity, road_mask
+from helpers import plane_disparity, road_mask
 
 SHAPE = (375, 1242)
 

@@ -8,7 +8,7 @@ import pytest
 from freespace.errors import InvalidOptionError, ShapeMismatchError
 from freespace.geometry import RoadModel, compute_disparity, fit_road_model, generate_view
 
-from conftest import road_mask
+from helpers import road_mask
 
 
 def _noise_texture(shape: tuple[int, int], seed: int) -> np.ndarray:

@@ -11,7 +11,7 @@ import freespace.geometry.warp
 from freespace.errors import InvalidOptionError, ShapeMismatchError
 from freespace.geometry import RoadModel, generate_view, valid_column_ranges
 
-from conftest import textured_image
+from helpers import textured_image
 
 SHAPE = (120, 200)
 

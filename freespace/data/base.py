@@ -1,35 +1,28 @@
 """The dataset interface shared by every layout (torch-free).
 
 A dataset lists its frames (:class:`FrameRef`: paths only, cheap) and loads them on demand
-(:class:`Sample`: arrays). Layouts differ only in how they list frames and decode labels and depth;
-the rest — disparity resolution (file → depth + calibration → cached SGBM), integrity checks,
-registry — lives here.
+(:class:`Sample`: arrays). Layouts differ only in how they list frames and decode labels and depth.
+Disparity sources live in :mod:`freespace.data.disparity`, the registry in :mod:`freespace.data.registry`
+and the integrity scan in :mod:`freespace.data.info`.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import logging
-import os
+import copy
 from abc import ABC, abstractmethod
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
-from freespace.errors import DatasetError, FreespaceError, InputFileError, InvalidOptionError, ShapeMismatchError
-from freespace.geometry import StereoCalibration, compute_disparity
-from freespace.io import PathLike, RoadLabel, atomic_write_bytes, read_disparity, read_image, read_raw
+from freespace.data.disparity import DisparityCache, check_disparity_mode, resolve_disparity
+from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
+from freespace.geometry import SGBM_MAX_DISPARITY, StereoCalibration
+from freespace.io import PathLike, RoadLabel, read_image
 
-log = logging.getLogger(__name__)
-
-__all__ = ["FrameRef", "Sample", "Problem", "StereoRoadDataset", "DisparityCache", "register_dataset",
-           "get_dataset", "list_datasets", "DISPARITY_MODES", "image_size"]
-
-DISPARITY_MODES = ("auto", "file", "sgbm", "none")
+__all__ = ["FrameRef", "Sample", "Problem", "StereoRoadDataset", "check_dataset_root"]
 
 
 @dataclass(frozen=True)
@@ -49,6 +42,7 @@ class FrameRef:
     disparity: Path | None = None
     depth: Path | None = None
     calib: Path | None = None
+    velodyne: Path | None = None
 
 
 @dataclass
@@ -60,7 +54,7 @@ class Sample:
         left: ``H×W×3 uint8`` RGB reference image; right: the target image or None.
         label: road label with don't-care (``valid``), or None (unlabelled split).
         disparity: ``float32 H×W`` left disparity in pixels (NaN invalid), or None.
-        disparity_source: ``file``, ``depth``, ``sgbm`` or ``none``.
+        disparity_source: ``file``, ``depth``, ``lidar``, ``sgbm`` or ``none``.
         calibration: the rig (and road plane when known), or None.
     """
 
@@ -86,50 +80,12 @@ class Problem:
         return f"{self.frame}: {self.message}"
 
 
-def image_size(path: Path) -> tuple[int, int]:
-    """``(H, W)`` of an image file; decodes it fully so corrupt files are caught.
-
-    Raises:
-        InputFileError, CorruptFileError.
-    """
-    img = read_raw(path)
-    return int(img.shape[0]), int(img.shape[1])
-
-
-class DisparityCache:
-    """SGBM disparities on disk, keyed by the frame's image files (path, size, mtime) and the matcher
-    settings, so a second run costs one ``.npy`` read. Default folder: ``$XDG_CACHE_HOME/freespace/sgbm``
-    (``~/.cache/freespace/sgbm``)."""
-
-    def __init__(self, folder: PathLike | None = None, **settings: Any) -> None:
-        base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "freespace" / "sgbm"
-        self.folder = Path(folder) if folder is not None else base
-        self.settings = dict(sorted(settings.items()))
-
-    def path(self, frame: FrameRef) -> Path:
-        """Cache file of ``frame`` under the current settings."""
-        parts = [self.settings]
-        for p in (frame.left, frame.right):
-            st = Path(p).stat()  # type: ignore[arg-type]
-            parts.append([str(Path(p).resolve()), st.st_size, st.st_mtime_ns])  # type: ignore[arg-type]
-        key = hashlib.sha1(json.dumps(parts, default=str).encode()).hexdigest()[:16]
-        return self.folder / f"{frame.name}-{key}.npy"
-
-    def get(self, frame: FrameRef, left: np.ndarray, right: np.ndarray) -> np.ndarray:
-        """The cached disparity, computing and storing it on a miss."""
-        path = self.path(frame)
-        if path.is_file():
-            try:
-                return np.load(path, allow_pickle=False)
-            except (OSError, ValueError):
-                log.warning("unreadable cache file %s: recomputing", path)
-        disp = compute_disparity(left, right, **self.settings)
-        import io as _io
-
-        buf = _io.BytesIO()
-        np.save(buf, disp)
-        atomic_write_bytes(path, buf.getvalue())
-        return disp
+def check_dataset_root(root: PathLike, layout: str) -> Path:
+    """``root`` as a Path if it is a folder; InputFileError (the same everywhere) if it is not."""
+    root = Path(root)
+    if not root.is_dir():
+        raise InputFileError(f"dataset root not found: {root} (give the folder that holds the {layout} dataset)")
+    return root
 
 
 class StereoRoadDataset(ABC):
@@ -139,28 +95,25 @@ class StereoRoadDataset(ABC):
         root: dataset folder.
         split: the layout's on-disk split (``training``/``testing`` for KITTI road; layouts without
             on-disk splits accept only ``all``).
-        disparity: where disparities come from: ``auto`` (file, else depth + calibration, else SGBM),
-            ``file`` (file or depth only), ``sgbm`` (always SGBM), ``none``.
-        cache_dir: folder of the SGBM cache (see :class:`DisparityCache`).
+        disparity_mode: where disparities come from: ``auto`` (file, else depth + calibration, else
+            SGBM), ``file`` (file or depth only), ``depth`` (depth only), ``lidar`` (Velodyne scans
+            only), ``sgbm`` (always SGBM), ``none`` (:func:`~freespace.data.disparity.resolve_disparity`).
+            ``depth`` and ``lidar`` refuse a dataset without any depth map or scan.
+        cache_dir: folder of the SGBM cache (see :class:`~freespace.data.disparity.DisparityCache`).
         max_disparity: SGBM search range in pixels.
     """
 
     name: ClassVar[str] = ""
     splits: ClassVar[tuple[str, ...]] = ("all",)
 
-    def __init__(self, root: PathLike, split: str | None = None, *, disparity: str = "auto",
-                 cache_dir: PathLike | None = None, max_disparity: int = 128) -> None:
-        self.root = Path(root)
-        if not self.root.is_dir():
-            raise InputFileError(f"dataset root not found: {self.root} (give the folder that holds the "
-                                 f"{self.name} dataset)")
+    def __init__(self, root: PathLike, split: str | None = None, *, disparity_mode: str = "auto",
+                 cache_dir: PathLike | None = None, max_disparity: int = SGBM_MAX_DISPARITY) -> None:
+        self.root = check_dataset_root(root, self.name)
         self.split = split or self.splits[0]
         if self.split not in self.splits:
             raise InvalidOptionError(f"unknown split {self.split!r} for {self.name}; choose one of "
                                      f"{', '.join(self.splits)}")
-        if disparity not in DISPARITY_MODES:
-            raise InvalidOptionError(f"unknown disparity source {disparity!r}; choose one of {', '.join(DISPARITY_MODES)}")
-        self.disparity_mode = disparity
+        self.disparity_mode = check_disparity_mode(disparity_mode)
         self.cache = DisparityCache(cache_dir, max_disparity=max_disparity)
         self.frames: list[FrameRef] = self._list()
         if not self.frames:
@@ -169,6 +122,11 @@ class StereoRoadDataset(ABC):
         names = [f.name for f in self.frames]
         if len(set(names)) != len(names):
             raise DatasetError(f"{self.name}: frame names are not unique under {self.root}")
+        kind = {"depth": "depth", "lidar": "velodyne"}.get(self.disparity_mode)
+        if kind is not None and not any(getattr(f, kind) is not None for f in self.frames):
+            raise DatasetError(f"--disparity-source {self.disparity_mode}: no frame of {self.name} split "
+                               f"{self.split!r} under {self.root} has a {'depth map' if kind == 'depth' else 'Velodyne scan'}; "
+                               f"see the layout's tree in the docs")
 
     # --- what a layout provides ---------------------------------------------------------------------
     @abstractmethod
@@ -186,6 +144,11 @@ class StereoRoadDataset(ABC):
     def read_depth(self, frame: FrameRef) -> np.ndarray:
         """Decode the frame's depth map (``float32 H×W`` metres along the optical axis, NaN invalid)."""
         raise DatasetError(f"{self.name} has no depth maps")
+
+    def read_lidar(self, frame: FrameRef, shape: tuple[int, int]) -> np.ndarray:
+        """The frame's Velodyne scan projected into the left image: ``float32 H×W`` disparity in pixels
+        (``shape`` = ``(H, W)``), NaN where no point landed. Layouts with scans override."""
+        raise DatasetError(f"{self.name} has no Velodyne scans")
 
     def orphans(self) -> list[Problem]:
         """Files without a left image (mispaired names); layouts override."""
@@ -210,6 +173,27 @@ class StereoRoadDataset(ABC):
         """Whether any frame has a right image (needed for the augmentation)."""
         return any(f.right is not None for f in self.frames)
 
+    def subset(self, names: Iterable[str]) -> StereoRoadDataset:
+        """This dataset (layout, split, disparity options) restricted to the frames called ``names``, in
+        that order; positions (:meth:`index`, :meth:`load`) are those of the subset.
+
+        Raises:
+            DatasetError: a name is not a frame of this dataset.
+        """
+        by_name = {f.name: f for f in self.frames}
+        frames = []
+        for name in names:
+            if name not in by_name:
+                raise DatasetError(f"frame {name!r} is not in {self.name} {self.split}")
+            frames.append(by_name[name])
+        view = copy.copy(self)
+        view.frames = frames
+        return view
+
+    def labelled(self) -> StereoRoadDataset:
+        """The frames that have a road label (:meth:`subset`), in order."""
+        return self.subset(f.name for f in self.frames if f.label is not None)
+
     def load(self, i: int, *, right: bool = True, label: bool = True, disparity: bool = True) -> Sample:
         """Load frame ``i`` (what is not asked for, or not there, is None)."""
         frame = self.frames[i]
@@ -232,108 +216,16 @@ class StereoRoadDataset(ABC):
 
     def _disparity(self, frame: FrameRef, left: np.ndarray, right: np.ndarray | None,
                    calib: StereoCalibration | None) -> tuple[np.ndarray | None, str]:
-        mode = self.disparity_mode
-        if mode in ("auto", "file"):
-            if frame.disparity is not None:
-                return read_disparity(frame.disparity), "file"
-            if frame.depth is not None and calib is not None:
-                return depth_to_disparity(self.read_depth(frame), calib), "depth"
-        if mode in ("auto", "sgbm") and right is not None:
-            return self.cache.get(frame, left, right), "sgbm"
-        return None, "none"
-
-    def check(self, progress: bool = False) -> list[Problem]:
-        """Open every file of every frame; return every problem found (missing partners, sizes that
-        disagree, unreadable files, files without a left image)."""
-        return self.scan(progress)[0]
-
-    def scan(self, progress: bool = False) -> tuple[list[Problem], dict[str, tuple[int, int]]]:
-        """:meth:`check`, plus the ``(H, W)`` of every readable left image by frame name."""
-        from tqdm import tqdm
-
-        problems = list(self.orphans())
-        left_sizes: dict[str, tuple[int, int]] = {}
-        expect = self.expected_partners()
-        for frame in tqdm(self.frames, desc="check", unit="frame", disable=not progress):
-            sizes: dict[str, tuple[int, int]] = {}
-            for kind in ("left", "right", "label", "disparity", "depth"):
-                path = getattr(frame, kind)
-                if path is None:
-                    if kind in expect:
-                        problems.append(Problem(frame.name, f"missing {kind} file"))
-                    continue
-                try:
-                    if kind == "disparity" and Path(path).suffix.lower() != ".png":
-                        sizes[kind] = read_disparity(path).shape  # type: ignore[assignment]
-                    else:
-                        sizes[kind] = image_size(path)
-                except FreespaceError as exc:
-                    problems.append(Problem(frame.name, str(exc)))
-            if frame.calib is None and "calib" in expect:
-                problems.append(Problem(frame.name, "missing calib file"))
-            elif frame.calib is not None:
-                try:
-                    self.calibration(frame)
-                except (FreespaceError, KeyError, ValueError) as exc:
-                    problems.append(Problem(frame.name, f"bad calibration {frame.calib}: {exc}"))
-            ref = sizes.get("left")
-            if ref is not None:
-                left_sizes[frame.name] = ref
-            for kind, size in sizes.items():
-                if ref is not None and size != ref:
-                    problems.append(Problem(frame.name, f"{kind} is {size[1]}×{size[0]} but left is {ref[1]}×{ref[0]}"))
-        return problems, left_sizes
+        return resolve_disparity(frame, left, right, calib, mode=self.disparity_mode, cache=self.cache,
+                                 read_depth=lambda: self.read_depth(frame),
+                                 read_lidar=lambda: self.read_lidar(frame, left.shape[:2]))
 
     def expected_partners(self) -> set[str]:
-        """Kinds of file every frame should have, given which folders exist (a missing one is a problem)."""
+        """Kinds of file every frame should have, given which folders exist (a missing one is a problem for
+        :func:`freespace.data.info.check_dataset`)."""
         kinds = set()
-        for kind in ("right", "label", "disparity", "depth", "calib"):
+        for kind in ("right", "label", "disparity", "depth", "calib", "velodyne"):
             if any(getattr(f, kind) is not None for f in self.frames):
                 kinds.add(kind)
         return kinds
-
-
-def depth_to_disparity(depth: np.ndarray, calib: StereoCalibration) -> np.ndarray:
-    """Disparity ``d = fx·B / Z`` (pixels) from depth along the optical axis ``Z`` (metres); invalid
-    depth (≤ 0, NaN, inf) gives NaN."""
-    depth = np.asarray(depth, np.float32)
-    out = np.full(depth.shape, np.nan, np.float32)
-    ok = np.isfinite(depth) & (depth > 0)
-    out[ok] = np.float32(calib.fx * calib.baseline) / depth[ok]
-    return out
-
-
-# --- registry ----------------------------------------------------------------------------------------
-
-_REGISTRY: dict[str, type[StereoRoadDataset]] = {}
-
-
-def register_dataset(*names: str):
-    """Class decorator: make a layout available under ``names`` (first = canonical)."""
-    def wrap(cls: type[StereoRoadDataset]) -> type[StereoRoadDataset]:
-        cls.name = names[0]
-        for n in names:
-            _REGISTRY[n] = cls
-        return cls
-    return wrap
-
-
-def list_datasets() -> list[str]:
-    """Registered dataset names."""
-    _load_layouts()
-    return sorted(_REGISTRY)
-
-
-def get_dataset(name: str, root: PathLike, split: str | None = None, **options: Any) -> StereoRoadDataset:
-    """Open the dataset layout called ``name`` at ``root`` (options: see :class:`StereoRoadDataset`)."""
-    _load_layouts()
-    if name not in _REGISTRY:
-        raise InvalidOptionError(f"unknown dataset {name!r}; choose one of {', '.join(sorted(_REGISTRY))}")
-    return _REGISTRY[name](root, split, **options)
-
-
-def _load_layouts() -> None:
-    import freespace.data.folder  # noqa: F401  (registers synthia, carla, generic)
-    import freespace.data.kitti_road  # noqa: F401  (registers kitti)
-
 

@@ -8,7 +8,8 @@ All three pair files by frame stem across folders and decode labels and depth as
     ignore_ids: [0]            # class ids that are don't-care
     label_encoding: class_id   # class_id | kitti (KITTI colours) | mask (non-zero = road)
     label_channel: 0           # channel holding the class id in a colour label, RGB order
-    depth_encoding: png16      # png16 (integer × depth_scale) | carla_rgb | float (.npy/.pfm × depth_scale)
+    depth_encoding: png16      # png16 (integer × depth_scale; 0 and, in 16-bit PNGs, 65535 = none)
+                               # | carla_rgb | float (.npy/.pfm × depth_scale)
     depth_channel: 0
     depth_scale: 0.01          # metres per stored unit
     camera: {fx: 320, fy: 320, cx: 320, cy: 240, baseline: 1.5}   # pixels, metres
@@ -23,15 +24,23 @@ from typing import Any
 
 import numpy as np
 
-from freespace.data.base import FrameRef, Problem, StereoRoadDataset, register_dataset
+from freespace.data.base import FrameRef, Problem, StereoRoadDataset
+from freespace.data.registry import register_dataset
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
 from freespace.geometry import StereoCalibration
-from freespace.io import DISPARITY_SUFFIXES, PathLike, RoadLabel, read_disparity, read_raw, read_road_label
+from freespace.io import (
+    DISPARITY_SUFFIXES,
+    IMAGE_SUFFIXES,
+    PathLike,
+    RoadLabel,
+    read_disparity,
+    read_raw,
+    read_road_label,
+)
 
 __all__ = ["FolderSpec", "GenericStereo", "SynthiaStereo", "CarlaStereo", "CONFIG_NAME"]
 
 CONFIG_NAME = "freespace.yaml"
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 LABEL_ENCODINGS = ("class_id", "kitti", "mask")
 DEPTH_ENCODINGS = ("png16", "carla_rgb", "float")
 
@@ -72,7 +81,28 @@ class FolderSpec:
         folders.update({k: str(data.pop(k)) for k in list(data) if k in folder_keys})
         for key in ("road_ids", "ignore_ids"):
             if key in data:
-                data[key] = tuple(int(x) for x in (data[key] if isinstance(data[key], list) else [data[key]]))
+                ids = data[key] if isinstance(data[key], list) else [data[key]]
+                if not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in ids):
+                    raise InvalidOptionError(f"{path}: {key} must be a list of class ids (integers ≥ 0), "
+                                             f"got {data[key]!r}")
+                data[key] = tuple(ids)
+        for key in ("label_channel", "depth_channel"):
+            if key in data and (not isinstance(data[key], int) or isinstance(data[key], bool)
+                                or not 0 <= data[key] <= 3):
+                raise InvalidOptionError(f"{path}: {key} must be a channel index 0…3 (RGB order, 3 = alpha), "
+                                         f"got {data[key]!r}")
+        if "depth_scale" in data and (isinstance(data["depth_scale"], bool)
+                                      or not isinstance(data["depth_scale"], (int, float))
+                                      or not 0 < data["depth_scale"] < float("inf")):
+            raise InvalidOptionError(f"{path}: depth_scale must be a positive number (metres per stored unit), "
+                                     f"got {data['depth_scale']!r}")
+        for key in ("label_encoding", "depth_encoding", "scenario_pattern"):
+            if key in data and not isinstance(data[key], str):
+                raise InvalidOptionError(f"{path}: {key} must be a string, got {data[key]!r}")
+        if "camera" in data and (not isinstance(data["camera"], dict) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in data["camera"].values())):
+            raise InvalidOptionError(f"{path}: camera must be a mapping of numbers (fx, cx, cy, baseline), "
+                                     f"got {data['camera']!r}")
         spec = replace(self, folders=folders, **data)
         spec.check(path)
         return spec
@@ -82,6 +112,11 @@ class FolderSpec:
             raise InvalidOptionError(f"{where}: label_encoding must be one of {LABEL_ENCODINGS}")
         if self.depth_encoding not in DEPTH_ENCODINGS:
             raise InvalidOptionError(f"{where}: depth_encoding must be one of {DEPTH_ENCODINGS}")
+        if self.scenario_pattern is not None:
+            try:
+                re.compile(self.scenario_pattern)
+            except re.error as exc:
+                raise InvalidOptionError(f"{where}: scenario_pattern is not a regular expression ({exc})") from None
         if self.camera is not None:
             missing = {"fx", "cx", "cy", "baseline"} - set(self.camera)
             if missing:
@@ -124,7 +159,10 @@ class FolderDataset(StereoRoadDataset):
             metres = (rgb[..., 0] + rgb[..., 1] * 256 + rgb[..., 2] * 65536) / (256 ** 3 - 1) * 1000.0
             depth = metres.astype(np.float32)
         else:
-            depth = _channel(img, spec.depth_channel).astype(np.float32) * np.float32(spec.depth_scale)
+            raw = _channel(img, spec.depth_channel)
+            depth = raw.astype(np.float32) * np.float32(spec.depth_scale)
+            if raw.dtype == np.uint16:
+                depth[raw == 65535] = np.nan  # saturated: "no depth" in SNE-RoadSeg's depth_u16
         depth[depth <= 0] = np.nan
         return depth
 

@@ -1,18 +1,92 @@
-"""`freespace datasets info`: what a dataset holds and every problem in it."""
+"""`freespace datasets info`: what a dataset holds and every problem in it (the integrity scan)."""
 
 from __future__ import annotations
 
 from collections import Counter
 from typing import Any
 
-from freespace.data.base import get_dataset
+import numpy as np
+
+from freespace.data.base import Problem, StereoRoadDataset, check_dataset_root
+from freespace.data.registry import get_dataset, get_dataset_class
 from freespace.data.splits import make_splits
-from freespace.errors import DatasetError, InputFileError
-from freespace.io import PathLike
+from freespace.errors import DatasetError, FreespaceError, InputFileError
+from freespace.geometry.lidar import read_velodyne
+from freespace.io import PathLike, read_disparity, read_raw
 
-__all__ = ["dataset_info", "format_info"]
+__all__ = ["dataset_info", "format_info", "check_dataset", "scan_dataset", "image_size"]
 
-_KINDS = ("right", "label", "disparity", "depth", "calib")
+_KINDS = ("right", "label", "disparity", "depth", "velodyne", "calib")
+
+
+def image_size(path: PathLike) -> tuple[int, int]:
+    """``(H, W)`` of an image file; decodes it fully so corrupt files are caught.
+
+    Raises:
+        InputFileError, CorruptFileError.
+    """
+    img = read_raw(path)
+    return int(img.shape[0]), int(img.shape[1])
+
+
+def check_dataset(dataset: StereoRoadDataset, progress: bool = False) -> list[Problem]:
+    """Open every file of every frame; return every problem found (missing partners, sizes that
+    disagree, unreadable files, files without a left image)."""
+    return scan_dataset(dataset, progress)[0]
+
+
+def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[list[Problem], dict[str, tuple[int, int]]]:
+    """:func:`check_dataset`, plus the ``(H, W)`` of every readable left image by frame name."""
+    from freespace.log import progress_bar
+
+    problems = list(dataset.orphans())
+    left_sizes: dict[str, tuple[int, int]] = {}
+    expect = dataset.expected_partners()
+    for frame in progress_bar(dataset.frames, desc="check", unit="frame", enabled=progress):
+        sizes: dict[str, tuple[int, int]] = {}
+        for kind in ("left", "right", "label", "disparity", "depth", "velodyne"):
+            path = getattr(frame, kind)
+            if path is None:
+                if kind in expect:
+                    problems.append(Problem(frame.name, f"missing {kind} file"))
+                continue
+            try:  # read as generate and train read them, so that every problem they would hit shows here
+                if kind == "disparity":
+                    disparity = read_disparity(path)
+                    sizes[kind] = disparity.shape  # type: ignore[assignment]
+                    if not np.isfinite(disparity).any():
+                        problems.append(Problem(frame.name, f"disparity {path} has no valid value (all 0 or NaN)"))
+                elif kind == "depth":
+                    depth = dataset.read_depth(frame)
+                    sizes[kind] = depth.shape  # type: ignore[assignment]
+                    if not np.isfinite(depth).any():
+                        problems.append(Problem(frame.name, f"depth {path} has no valid value (all 0 or none)"))
+                elif kind == "velodyne":
+                    read_velodyne(path)  # a scan has no image size; its projection needs the calibration
+                elif kind == "label":
+                    label = dataset.read_label(frame)
+                    sizes[kind] = label.road.shape  # type: ignore[assignment]
+                    if not (label.road & label.valid).any():
+                        problems.append(Problem(frame.name, f"label {path} marks no road pixel (the DS-Generator "
+                                                            f"needs road to fit)"))
+                else:
+                    sizes[kind] = image_size(path)
+            except FreespaceError as exc:
+                problems.append(Problem(frame.name, str(exc)))
+        if frame.calib is None and "calib" in expect:
+            problems.append(Problem(frame.name, "missing calib file"))
+        elif frame.calib is not None:
+            try:
+                dataset.calibration(frame)
+            except (FreespaceError, KeyError, ValueError) as exc:
+                problems.append(Problem(frame.name, f"bad calibration {frame.calib}: {exc}"))
+        ref = sizes.get("left")
+        if ref is not None:
+            left_sizes[frame.name] = ref
+        for kind, size in sizes.items():
+            if ref is not None and size != ref:
+                problems.append(Problem(frame.name, f"{kind} is {size[1]}×{size[0]} but left is {ref[1]}×{ref[0]}"))
+    return problems, left_sizes
 
 
 def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int = 0,
@@ -27,25 +101,20 @@ def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int 
     Raises:
         InputFileError: the root is missing. DatasetError: no split holds any frame.
     """
-    from freespace.data.base import _REGISTRY, _load_layouts
-
-    _load_layouts()
-    options: dict[str, Any] = {"disparity": "file"}
+    layout = get_dataset_class(name)
+    check_dataset_root(root, layout.name)
+    options: dict[str, Any] = {"disparity_mode": "file"}
     if disparity_dir is not None:
         options["disparity_dir"] = disparity_dir
-    layout = _REGISTRY.get(name)
-    splits = layout.splits if layout is not None else ("all",)
     info: dict[str, Any] = {"dataset": name, "root": str(root), "splits": {}, "problems": []}
     errors = []
-    for split in splits:
+    for split in layout.splits:
         try:
             ds = get_dataset(name, root, split, **options)
         except (DatasetError, InputFileError) as exc:
-            if "dataset root not found" in str(exc):
-                raise
             errors.append(exc)
             continue
-        problems, sizes = ds.scan(progress=progress)
+        problems, sizes = scan_dataset(ds, progress=progress)
         entry: dict[str, Any] = {
             "frames": len(ds),
             "categories": dict(sorted(Counter(f.category for f in ds.frames).items())),
@@ -53,7 +122,7 @@ def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int 
             "resolutions": {f"{w}×{h}": n for (h, w), n in sorted(Counter(sizes.values()).items())},
             "have": {k: sum(getattr(f, k) is not None for f in ds.frames) for k in _KINDS},
         }
-        labelled = [(f.name, f.scenario) for f in ds.frames if f.label is not None]
+        labelled = [(f.name, f.scenario) for f in ds.labelled()]
         if labelled:
             entry["paper_split"] = {k: len(v) for k, v in make_splits(labelled, seed=seed).items()}
         info["splits"][split] = entry

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError
+from freespace.errors import DatasetError, InputFileError, InvalidOptionError, check_seed
 from freespace.io import PathLike, atomic_write_text
 
 __all__ = ["SPLIT_NAMES", "split_sizes", "make_splits", "write_splits", "read_splits"]
@@ -45,6 +45,7 @@ def make_splits(frames: Sequence[tuple[str, str]], seed: int = 0,
     Returns:
         ``{"train": [...], "val": [...], "test": [...]}``, names sorted.
     """
+    check_seed(seed)
     if not frames:
         raise DatasetError("no frames to split")
     sizes = sizes or split_sizes(len(frames))

@@ -1,18 +1,30 @@
-"""The training configuration: every option checked before any work, saved as the run's config.yaml."""
+"""The training configuration: every option declared once — its default, help text and choices — checked
+before any work and saved as the run's config.yaml. The ``train`` and ``reproduce`` command-line options
+are generated from these declarations (:func:`add_config_arguments`), and a YAML file of them
+(:func:`read_config_yaml`, e.g. a run's config.yaml) can stand in for the flags."""
 
 from __future__ import annotations
 
+import argparse
 import re
-from dataclasses import asdict, dataclass, fields
+import types
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import MISSING, Field, asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Union, get_args, get_origin, get_type_hints
 
-from freespace.errors import CorruptFileError, InvalidOptionError
-from freespace.io import PathLike, atomic_write_text
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, check_seed
+from freespace.io import MAX_IMAGE_SIDE, PathLike, atomic_write_text
 
-__all__ = ["TrainConfig", "parse_size", "AUGMENTS"]
+__all__ = ["TrainConfig", "parse_size", "AUGMENTS", "PRESETS", "STRATEGIES", "add_config_arguments",
+           "config_from_args", "read_config_yaml"]
 
 AUGMENTS = ("none", "homography")
+PRESETS = ("light", "paper")
+STRATEGIES = ("auto", "ddp")
+
+# config.yaml keys of runs made before the names said which split and which disparity they mean
+_RENAMED = {"splits": "splits_dir", "disparity": "disparity_mode"}
 
 
 def parse_size(text: str | None) -> tuple[int, int] | None:
@@ -20,64 +32,94 @@ def parse_size(text: str | None) -> tuple[int, int] | None:
     if text is None or str(text).lower() == "auto":
         return None
     m = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", str(text))
-    if not m or min(int(m.group(1)), int(m.group(2))) < 32:
-        raise InvalidOptionError(f"--image-size must be HxW with both ≥ 32 (e.g. 384x1248), got {text!r}")
+    if not m or min(int(m.group(1)), int(m.group(2))) < 32 or max(int(m.group(1)), int(m.group(2))) > MAX_IMAGE_SIDE:
+        raise InvalidOptionError(f"--image-size must be HxW with both in 32…{MAX_IMAGE_SIDE} (e.g. 384x1248), "
+                                 f"got {text!r}")
     return int(m.group(1)), int(m.group(2))
+
+
+def _datasets() -> tuple[str, ...]:
+    from freespace.data.registry import list_datasets
+
+    return tuple(list_datasets())
+
+
+def _models() -> tuple[str, ...]:
+    from freespace.models import list_models  # imports torch: only called for train/reproduce
+
+    return tuple(list_models())
+
+
+def _disparity_modes() -> tuple[str, ...]:
+    from freespace.data.disparity import DISPARITY_MODES
+
+    return DISPARITY_MODES
+
+
+def _option(help: str, default: Any = MISSING, *, choices: tuple[str, ...] | Callable[[], tuple[str, ...]] | None = None,
+            flag: str | None = None, metavar: str | None = None, parse: Callable[[str], Any] | None = None) -> Any:
+    """A :class:`TrainConfig` field with its command-line declaration (``flag`` defaults to ``--name-with-dashes``;
+    ``parse`` turns the flag's text into the value)."""
+    meta = {"help": help, "choices": choices, "flag": flag, "metavar": metavar, "parse": parse}
+    return field(metadata=meta) if default is MISSING else field(default=default, metadata=meta)
 
 
 @dataclass
 class TrainConfig:
-    """Everything a training run depends on (written to ``RUN_DIR/config.yaml``)."""
+    """Everything a training run depends on (written to ``RUN_DIR/config.yaml``).
 
-    dataset: str
-    root: str
-    out: str
-    model: str = "unet"
-    preset: str = "light"
-    split: str | None = None
-    augment: str = "none"
-    epochs: int = 50
-    batch_size: int = 4
-    lr: float = 0.001
-    momentum: float = 0.9
-    weight_decay: float = 0.0
-    patience: int = 10
-    image_size: tuple[int, int] | None = None
-    seed: int = 0
-    devices: int = 1
-    num_nodes: int = 1
-    strategy: str = "auto"
-    workers: int = 0
-    splits: str | None = None
-    max_frames: int | None = None
-    disparity: str = "auto"
-    cache_dir: str | None = None
-    tensorboard: bool = False
+    ``split`` is the dataset's on-disk split (as everywhere); ``splits_dir`` a folder of train/val/test
+    lists (default: the paper's split by scenario); ``disparity_mode`` where the DS-Generator's
+    disparities come from (:data:`freespace.data.disparity.DISPARITY_MODES`).
+    """
+
+    dataset: str = _option("dataset layout (synth = the renderer's output, read as KITTI road)", choices=_datasets)
+    root: str = _option("dataset folder", metavar="DIR")
+    out: str = _option("run folder", metavar="RUN_DIR")
+    model: str = _option("network", "unet", choices=_models)
+    preset: str = _option("network size: light (CPU) or paper", "light", choices=PRESETS)
+    split: str | None = _option("on-disk split (KITTI: training or testing; default: the layout's first)", None)
+    augment: str = _option("homography adds the DS-Generator view of every training frame", "none", choices=AUGMENTS)
+    epochs: int = _option("most epochs", 50)
+    batch_size: int = _option("training batch size", 4)
+    lr: float = _option("SGD learning rate", 0.001)
+    momentum: float = _option("SGD momentum", 0.9)
+    weight_decay: float = _option("SGD weight decay", 0.0)
+    patience: int = _option("early-stopping patience in epochs", 10)
+    image_size: tuple[int, int] | None = _option("HxW all frames are resized to (default: the first frame's size)",
+                                                 None, metavar="HxW", parse=parse_size)
+    seed: int = _option("seed of the split, the data order, the augmentation and the weights", 0)
+    devices: int = _option("processes or GPUs", 1)
+    num_nodes: int = _option("machines, for multi-node DDP (see the README)", 1)
+    strategy: str = _option("ddp: one process per device", "auto", choices=STRATEGIES)
+    workers: int = _option("data-loading processes", 0)
+    splits_dir: str | None = _option("train.txt/val.txt/test.txt to use (default: the paper's split)", None,
+                                     flag="--splits", metavar="DIR")
+    max_frames: int | None = _option("use only the first N labelled frames (quick runs)", None, metavar="N")
+    disparity_mode: str = _option("disparities for the DS-Generator: auto = file, else depth + camera, else cached "
+                                  "SGBM", "auto", choices=_disparity_modes, flag="--disparity-source")
+    cache_dir: str | None = _option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
+    tensorboard: bool = _option("also write TensorBoard logs (needs tensorboard)", False)
 
     def check(self) -> None:
         """Reject bad options (one-line errors), before any work."""
-        from freespace.data.base import DISPARITY_MODES, list_datasets
-        from freespace.models import list_models
+        from freespace.data.base import check_dataset_root
+        from freespace.data.registry import get_dataset_class
 
-        if self.dataset not in list_datasets():
-            raise InvalidOptionError(f"unknown dataset {self.dataset!r}; choose one of {', '.join(list_datasets())}")
-        if self.model not in list_models():
-            raise InvalidOptionError(f"unknown model {self.model!r}; choose one of {', '.join(list_models())}")
-        if self.augment not in AUGMENTS:
-            raise InvalidOptionError(f"--augment must be one of {', '.join(AUGMENTS)}, got {self.augment!r}")
-        if self.preset not in ("light", "paper"):
-            raise InvalidOptionError(f"--preset must be light or paper, got {self.preset!r}")
-        if self.disparity not in DISPARITY_MODES:
-            raise InvalidOptionError(f"--disparity-source must be one of {', '.join(DISPARITY_MODES)}")
+        for f in fields(self):
+            choices = _choices(f)
+            value = getattr(self, f.name)
+            if choices is not None and value not in choices:
+                raise InvalidOptionError(f"unknown {f.name.replace('_', ' ')} {value!r} ({_flag(f)}); "
+                                         f"choose one of {', '.join(choices)}")
         for name in ("epochs", "batch_size", "patience", "devices", "num_nodes"):
             if getattr(self, name) < 1:
                 raise InvalidOptionError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(self, name)}")
         if self.workers < 0:
             raise InvalidOptionError("--workers must be ≥ 0")
+        check_seed(self.seed)
         if not (0 < self.lr < 10) or not (0 <= self.momentum < 1) or self.weight_decay < 0:
             raise InvalidOptionError("--lr must be in (0, 10), --momentum in [0, 1), --weight-decay ≥ 0")
-        if self.strategy not in ("auto", "ddp"):
-            raise InvalidOptionError(f"--strategy must be auto or ddp, got {self.strategy!r}")
         if self.max_frames is not None and self.max_frames < 3:
             raise InvalidOptionError("--max-frames must be ≥ 3 (train, val and test need a frame each)")
         if self.tensorboard:
@@ -85,8 +127,7 @@ class TrainConfig:
                 import tensorboard  # noqa: F401
             except ImportError:
                 raise InvalidOptionError("--tensorboard needs the tensorboard package: pip install tensorboard") from None
-        if not Path(self.root).is_dir():
-            raise InvalidOptionError(f"dataset root not found: {self.root}")
+        check_dataset_root(self.root, get_dataset_class(self.dataset).name)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -102,15 +143,131 @@ class TrainConfig:
     @classmethod
     def load(cls, path: PathLike) -> TrainConfig:
         """Read a config.yaml written by :meth:`save` (``yaml.safe_load``: runs no code)."""
-        import yaml
+        values = read_config_yaml(path)
+        missing = [f.name for f in fields(cls) if f.default is MISSING and f.name not in values]
+        if missing:
+            raise CorruptFileError(f"{path} is not a freespace training config (no {', '.join(missing)})")
+        return cls(**values)
 
-        try:
-            data = yaml.safe_load(Path(path).read_text())
-        except (OSError, yaml.YAMLError) as exc:
-            raise CorruptFileError(f"cannot read {path}: {str(exc).splitlines()[0]}") from None
-        known = {f.name for f in fields(cls)}
-        if not isinstance(data, dict) or set(data) - known:
-            raise CorruptFileError(f"{path} is not a freespace training config")
-        if data.get("image_size"):
-            data["image_size"] = tuple(data["image_size"])
-        return cls(**data)
+
+def _flag(f: Field) -> str:
+    return f.metadata.get("flag") or "--" + f.name.replace("_", "-")
+
+
+def _choices(f: Field) -> tuple[str, ...] | None:
+    choices = f.metadata.get("choices")
+    return tuple(choices()) if callable(choices) else choices
+
+
+def _accepts(hint: Any, value: Any) -> bool:
+    """Whether ``value`` (from YAML) has the type ``hint`` of a field."""
+    if get_origin(hint) in (Union, types.UnionType):
+        return any(_accepts(h, value) for h in get_args(hint))
+    if hint is type(None):
+        return value is None
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if hint is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if hint is str:
+        return isinstance(value, str)
+    if get_origin(hint) is tuple:
+        args = get_args(hint)
+        return isinstance(value, (list, tuple)) and len(value) == len(args) and all(map(_accepts, args, value))
+    return False
+
+
+def _base_type(hint: Any) -> type:
+    """``int`` of ``int | None`` (the type a flag's text is converted to)."""
+    if get_origin(hint) in (Union, types.UnionType):
+        return next(h for h in get_args(hint) if h is not type(None))
+    return hint
+
+
+def _type_name(hint: Any) -> str:
+    if get_origin(hint) in (Union, types.UnionType):
+        return " or ".join(_type_name(h) for h in get_args(hint))
+    if get_origin(hint) is tuple:
+        return f"a list of {len(get_args(hint))} integers"
+    return {type(None): "null", bool: "true or false", int: "an integer", float: "a number", str: "a string"}[hint]
+
+
+def read_config_yaml(path: PathLike) -> dict[str, Any]:
+    """The options in a YAML file of :class:`TrainConfig` fields (e.g. a run's config.yaml), checked and
+    converted (``yaml.safe_load``: runs no code). Fields may be missing.
+
+    Raises:
+        InputFileError: no file. CorruptFileError: not YAML, or not a mapping. InvalidOptionError: an
+        unknown key or a value of the wrong type.
+    """
+    import yaml
+
+    if not Path(path).is_file():
+        raise InputFileError(f"config file not found: {path}")
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise CorruptFileError(f"cannot read {path}: {str(exc).splitlines()[0]}") from None
+    if not isinstance(data, dict):
+        raise CorruptFileError(f"{path} is not a freespace training config (a mapping of options)")
+    data = {_RENAMED.get(k, k): v for k, v in data.items()}
+    by_name = {f.name: f for f in fields(TrainConfig)}
+    unknown = sorted(str(k) for k in data if k not in by_name)
+    if unknown:
+        raise InvalidOptionError(f"{path}: unknown option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
+                                 f"a training config has {', '.join(by_name)}")
+    hints = get_type_hints(TrainConfig)
+    values = {}
+    for key, value in data.items():
+        parse = by_name[key].metadata.get("parse")
+        if parse is not None and isinstance(value, str):
+            value = parse(value)
+        if not _accepts(hints[key], value):
+            raise InvalidOptionError(f"{path}: {key} must be {_type_name(hints[key])}, got {value!r}")
+        if hints[key] is float:
+            value = float(value)
+        values[key] = tuple(value) if isinstance(value, list) else value
+    return values
+
+
+def add_config_arguments(parser: argparse.ArgumentParser, names: Iterable[str] | None = None,
+                         defaults: Mapping[str, Any] | None = None) -> None:
+    """Add a command-line option for each :class:`TrainConfig` field in ``names`` (default: all), with its
+    help text, choices and default; ``defaults`` (e.g. from :func:`read_config_yaml`) replace the fields'
+    defaults, and a field given there is no longer required on the command line. Choices are listed in the
+    help and checked by :meth:`TrainConfig.check`, so that flags and YAML files are checked alike."""
+    hints = get_type_hints(TrainConfig)
+    wanted = set(names) if names is not None else None
+    defaults = defaults or {}
+    for f in fields(TrainConfig):
+        if wanted is not None and f.name not in wanted:
+            continue
+        hint, meta = hints[f.name], f.metadata
+        default = defaults.get(f.name, None if f.default is MISSING else f.default)
+        text = meta["help"].replace("%", "%%")
+        choices = _choices(f)
+        if choices is not None:
+            text += f"; one of {', '.join(choices)}"
+        if default is not None and default is not False:
+            text += "; default %(default)s"
+        kwargs: dict[str, Any] = {"dest": f.name, "default": default, "help": text}
+        if hint is bool:
+            kwargs["action"] = argparse.BooleanOptionalAction
+        else:
+            kwargs["type"] = str if meta.get("parse") else _base_type(hint)
+            kwargs["metavar"] = meta.get("metavar") or ("NAME" if choices is not None else None)
+            kwargs["required"] = f.default is MISSING and f.name not in defaults
+        parser.add_argument(_flag(f), **kwargs)
+
+
+def config_from_args(args: argparse.Namespace, names: Iterable[str] | None = None) -> dict[str, Any]:
+    """The :class:`TrainConfig` values of the options :func:`add_config_arguments` added (flag texts parsed)."""
+    out = {}
+    for f in fields(TrainConfig):
+        if (names is None or f.name in set(names)) and hasattr(args, f.name):
+            value = getattr(args, f.name)
+            parse = f.metadata.get("parse")
+            out[f.name] = parse(value) if parse is not None and isinstance(value, str) else value
+    return out

@@ -9,17 +9,12 @@ import lightning.pytorch as pl
 import numpy as np
 import torch
 
-from freespace.errors import FreespaceError
-from freespace.metrics import Counts, KittiCounts, kitti_scores
-from freespace.models import IGNORE_INDEX, create_model, main_logits
+from freespace.errors import TrainingError
+from freespace.io import IGNORE_INDEX
+from freespace.metrics import RoadEvaluator
+from freespace.models import create_model, main_logits
 
 __all__ = ["RoadModule", "TrainingError"]
-
-
-class TrainingError(FreespaceError):
-    """Training cannot go on (e.g. the loss became NaN)."""
-
-    exit_code = 1
 
 
 class RoadModule(pl.LightningModule):
@@ -34,9 +29,7 @@ class RoadModule(pl.LightningModule):
         self._reset()
 
     def _reset(self) -> None:
-        self._counts = torch.zeros(4, dtype=torch.float64)  # tp, fp, fn, tn
-        self._kitti = torch.zeros(2, 256, dtype=torch.float64)  # fn, fp per threshold
-        self._totals = torch.zeros(2, dtype=torch.float64)  # pos, neg
+        self._evaluator = RoadEvaluator()
         self._seconds = 0.0
         self._frames = 0
 
@@ -66,19 +59,8 @@ class RoadModule(pl.LightningModule):
         self._seconds += time.perf_counter() - t0
         self._frames += batch["image"].shape[0]
         label = batch["label"]
-        valid = label != IGNORE_INDEX
-        road = label == 1
         prob = torch.softmax(logits.float(), 1)[:, 1]
-        pred = prob >= 0.5
-        c = torch.stack([(pred & road & valid).sum(), (pred & ~road & valid).sum(),
-                         (~pred & road & valid).sum(), (~pred & ~road & valid).sum()]).double()
-        self._counts += c.cpu()
-        conf = torch.clamp(torch.round(prob * 255), 0, 255).long()
-        hr = torch.bincount(conf[road & valid], minlength=256).double().cpu()
-        hn = torch.bincount(conf[~road & valid], minlength=256).double().cpu()
-        self._kitti[0] += torch.cat([torch.zeros(1, dtype=torch.float64), torch.cumsum(hr, 0)[:-1]])
-        self._kitti[1] += torch.flip(torch.cumsum(torch.flip(hn, [0]), 0), [0])
-        self._totals += torch.stack([hr.sum(), hn.sum()])
+        self._evaluator.process(prob.cpu().numpy(), (label == 1).cpu().numpy(), (label != IGNORE_INDEX).cpu().numpy())
 
     def validation_step(self, batch: dict[str, Any], batch_idx: int) -> None:
         self._accumulate(batch)
@@ -93,16 +75,12 @@ class RoadModule(pl.LightningModule):
         self._reset()
 
     def _reduce(self) -> dict[str, float]:
-        packed = torch.cat([self._counts, self._kitti.flatten(), self._totals,
-                            torch.tensor([self._seconds, self._frames], dtype=torch.float64)]).to(self.device)
-        packed = self.trainer.strategy.reduce(packed, reduce_op="sum").cpu()
-        tp, fp, fn, tn = (int(x) for x in packed[:4])
-        metrics = Counts(tp, fp, fn, tn).metrics()
-        kitti = KittiCounts(packed[4:260].long().numpy(), packed[260:516].long().numpy(), int(packed[516]),
-                            int(packed[517]))
-        scores = kitti_scores(kitti)
-        metrics.update(max_f=scores["max_f"], ap=scores["ap"])
-        metrics["seconds_per_frame"] = float(packed[518] / max(packed[519], 1))
+        """Sum the split's counts over ranks, then compute the metrics once."""
+        packed = np.concatenate([self._evaluator.to_vector(), [self._seconds, self._frames]])
+        packed = self.trainer.strategy.reduce(torch.from_numpy(packed).to(self.device), reduce_op="sum").cpu().numpy()
+        scores = RoadEvaluator.from_vector(packed[:RoadEvaluator.VECTOR_SIZE]).evaluate()
+        metrics = {k: scores[k] for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap")}
+        metrics["seconds_per_frame"] = float(packed[-2] / max(packed[-1], 1))
         return metrics
 
     def on_validation_epoch_end(self) -> None:

@@ -13,6 +13,8 @@ from __future__ import annotations
 import csv
 import io as _io
 import logging
+import shutil
+import warnings
 import time
 from pathlib import Path
 from typing import Any
@@ -20,9 +22,11 @@ from typing import Any
 import torch
 
 from freespace.engine.config import TrainConfig
-from freespace.engine.data import EpochSampler, RoadFrames, is_rank_zero, prepare_data
-from freespace.errors import InvalidOptionError
-from freespace.io import atomic_write_bytes, atomic_write_text, write_json
+from freespace.data.torch_dataset import RoadSegmentationDataset
+from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
+from freespace.errors import CorruptFileError, InvalidOptionError
+from freespace.io import atomic_write_bytes, write_csv, write_json
+from freespace.log import on_terminal
 from freespace.models.registry import warn_if_below_intact_size
 
 log = logging.getLogger(__name__)
@@ -57,11 +61,11 @@ def _callbacks(run_dir: Path, patience: int):
             row = {"epoch": trainer.current_epoch, "lr": trainer.optimizers[0].param_groups[0]["lr"],
                    "seconds": round(time.perf_counter() - self.t0, 3)}
             row.update({k: f"{float(m[k]):.6f}" for k in CSV_FIELDS if k in m})
-            buf = _io.StringIO()
-            writer = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
-            writer.writeheader()
-            writer.writerows(rows + [row])
-            atomic_write_text(self.path, buf.getvalue())
+            write_csv(self.path, CSV_FIELDS, rows + [row])
+            if not on_terminal() or not trainer.progress_bar_callback:  # a log gets one line per epoch
+                log.info("epoch %d/%d  loss %s  val F %s  IoU %s  (%.1f s)", trainer.current_epoch + 1,
+                         trainer.max_epochs, row.get("train_loss", "—"), row.get("val_f_score", "—"),
+                         row.get("val_iou", "—"), row["seconds"])
 
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor="val_f_score", mode="max",
                            save_top_k=1, save_last=True, enable_version_counter=False)
@@ -69,18 +73,57 @@ def _callbacks(run_dir: Path, patience: int):
     return [ckpt, stop, EpochCSV()], ckpt
 
 
-def _atomic_io():
+#: what a run writes into its folder (removed when a plain rerun takes over a start that never checkpointed)
+RUN_FILES = ("config.yaml", "splits", "generated", "metrics.csv", "metrics.json", "checkpoints", "tensorboard")
+
+
+def _checkpoint_io(run_dir: Path):
     from lightning.pytorch.plugins.io import TorchCheckpointIO
 
-    class AtomicCheckpointIO(TorchCheckpointIO):
-        """Checkpoints go to a temporary file and are renamed: a killed run keeps a valid last.ckpt."""
+    class RunCheckpointIO(TorchCheckpointIO):
+        """Checkpoints of one run folder.
+
+        Saving goes to a temporary file that is renamed, so a killed run keeps a valid ``last.ckpt``.
+        Loading uses ``torch.load(weights_only=True)`` (a checkpoint runs no code), refuses a corrupt or
+        crafted file with one line, and points every path that the checkpoint callback stored back into
+        this run folder: a copied or moved run, or a crafted file, never reads or deletes files elsewhere.
+        """
 
         def save_checkpoint(self, checkpoint: dict[str, Any], path, storage_options=None) -> None:
             buf = _io.BytesIO()
             torch.save(checkpoint, buf)
             atomic_write_bytes(path, buf.getvalue())
 
-    return AtomicCheckpointIO()
+        def load_checkpoint(self, path, map_location=None, weights_only=None) -> dict[str, Any]:
+            try:
+                with warnings.catch_warnings():  # torch warns about the pickle protocol of crafted files
+                    warnings.simplefilter("ignore")
+                    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+            except Exception as exc:  # pickle, zip and torch errors: the file is not a plain checkpoint
+                raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged "
+                                       f"({type(exc).__name__}); it was not loaded") from None
+            if not isinstance(checkpoint, dict) or "state_dict" not in checkpoint:
+                raise CorruptFileError(f"{path} is not a freespace training checkpoint")
+            for state in (checkpoint.get("callbacks") or {}).values():
+                if isinstance(state, dict) and "dirpath" in state:
+                    _confine_paths(state, run_dir / "checkpoints")
+            return checkpoint
+
+    return RunCheckpointIO()
+
+
+def _confine_paths(state: dict[str, Any], folder: Path) -> None:
+    """Rewrite a ModelCheckpoint state so that every file it names is ``folder/<its own file name>``."""
+    def inside(path: Any) -> str:
+        name = Path(str(path)).name if path else ""
+        return str(folder / name) if name in ("best.ckpt", "last.ckpt") else ""
+
+    state["dirpath"] = str(folder)
+    for key in ("best_model_path", "kth_best_model_path", "last_model_path"):
+        if key in state:
+            state[key] = inside(state[key])
+    if isinstance(state.get("best_k_models"), dict):
+        state["best_k_models"] = {inside(k): v for k, v in state["best_k_models"].items() if inside(k)}
 
 
 def run_training(config: TrainConfig, resume: bool = False, progress: bool = True) -> dict[str, Any]:
@@ -103,10 +146,14 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     run_dir = Path(config.out)
     last = run_dir / "checkpoints" / "last.ckpt"
     if resume:
-        if not (run_dir / "config.yaml").is_file() or not last.is_file():
+        if (run_dir / "config.yaml").is_file() and not last.is_file():
+            raise InvalidOptionError(f"{run_dir} never reached its first checkpoint, so there is nothing to resume; "
+                                     f"run the same command without --resume to start it again")
+        if not (run_dir / "config.yaml").is_file():
             raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
                                      f"{run_dir} has none")
         saved = TrainConfig.load(run_dir / "config.yaml")
+        _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
         if config.image_size is None:
             config.image_size = saved.image_size  # "auto" was resolved when the run started
         changed = [k for k, v in saved.to_dict().items()
@@ -116,7 +163,14 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
             raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
                                      f"resume with the same options (only --epochs may grow)")
     elif (run_dir / "config.yaml").is_file() and is_rank_zero():  # DDP children re-run the command: skip
-        raise InvalidOptionError(f"{run_dir} already holds a run; add --resume to continue it or choose another --out")
+        if last.is_file():
+            raise InvalidOptionError(f"{run_dir} already holds a run; add --resume to continue it or choose another "
+                                     f"--out")
+        config.check()
+        log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
+        for name in RUN_FILES:
+            path = run_dir / name
+            shutil.rmtree(path) if path.is_dir() else path.unlink(missing_ok=True)
     config.check()
     pl.seed_everything(config.seed, workers=True, verbose=False)
     data = prepare_data(config, run_dir)
@@ -125,11 +179,10 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         config.save(run_dir / "config.yaml")
     ds, size = data["dataset"], tuple(data["size"])
     warn_if_below_intact_size(config.model, config.preset, size)
-    train = RoadFrames(ds, data["train"], size, augment=True, seed=config.seed)
-    val = RoadFrames(ds, data["val"], size, augment=False, seed=config.seed)
-    test = RoadFrames(ds, data["test"], size, augment=False, seed=config.seed)
+    train, val, test = (RoadSegmentationDataset(ds, data[k], size=size, augment=k == "train", seed=config.seed,
+                                                cache=True) for k in ("train", "val", "test"))
 
-    def loader(frames: RoadFrames, shuffle: bool) -> torch.utils.data.DataLoader:
+    def loader(frames: RoadSegmentationDataset, shuffle: bool) -> torch.utils.data.DataLoader:
         return torch.utils.data.DataLoader(frames, batch_size=config.batch_size if shuffle else 1,
                                            sampler=EpochSampler(len(frames), config.seed, shuffle),
                                            num_workers=config.workers, persistent_workers=config.workers > 0)
@@ -142,16 +195,18 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
         devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",
-        max_epochs=config.epochs, callbacks=callbacks, plugins=[_atomic_io()], logger=_logger(config, run_dir),
+        max_epochs=config.epochs, callbacks=callbacks, plugins=[_checkpoint_io(run_dir)],
+        logger=_logger(config, run_dir),
         default_root_dir=str(run_dir), num_sanity_val_steps=0, deterministic=True,
-        enable_progress_bar=progress, enable_model_summary=False, use_distributed_sampler=False,
+        enable_progress_bar=progress and on_terminal(), enable_model_summary=False, use_distributed_sampler=False,
         log_every_n_steps=1)
     trainer.fit(module, loader(train, True), loader(val, False), ckpt_path=str(last) if resume else None)
-    best = ckpt.best_model_path or str(last)
-    trainer.test(module, loader(test, False), ckpt_path=best, verbose=False)
+    best = run_dir / "checkpoints" / "best.ckpt"  # this folder's, whatever a resumed checkpoint recorded
+    best = best if best.is_file() else last
+    trainer.test(module, loader(test, False), ckpt_path=str(best), verbose=False)
     metrics = {**module.test_metrics, "best_epoch": _best_epoch(run_dir), "epochs_run": trainer.current_epoch,
                "frames": {k: len(data[k]) for k in ("train", "val", "test")}, "image_size": list(size),
-               "checkpoint": str(Path(best).relative_to(run_dir)) if Path(best).is_relative_to(run_dir) else best}
+               "checkpoint": best.relative_to(run_dir).as_posix()}
     if trainer.is_global_zero:
         write_json(run_dir / "metrics.json", metrics)
     return metrics

@@ -11,8 +11,6 @@ Finished runs are skipped when the command is run again; interrupted ones resume
 
 from __future__ import annotations
 
-import csv
-import io as _io
 import json
 import logging
 from pathlib import Path
@@ -22,11 +20,11 @@ import numpy as np
 
 from freespace.engine.config import TrainConfig
 from freespace.errors import InvalidOptionError
-from freespace.io import PathLike, atomic_write_text, write_image, write_json
+from freespace.io import PathLike, atomic_write_text, write_csv, write_image, write_json
 
 log = logging.getLogger(__name__)
 
-__all__ = ["reproduce", "tables_from_index", "VARIANTS", "METRICS"]
+__all__ = ["reproduce", "VARIANTS", "METRICS"]
 
 VARIANTS = ("none", "homography")
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
@@ -35,6 +33,10 @@ PAPER_GAINS = "the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points"
 
 def _name(model: str, variant: str, seed: int) -> str:
     return f"{model}-{'ha' if variant == 'homography' else 'orig'}-s{seed}"
+
+
+#: more seeds than this is a typo, not an experiment (each seed trains every network and variant)
+MAX_SEEDS = 1000
 
 
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str], seeds: int = 3, epochs: int = 50,
@@ -47,8 +49,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     unknown = [m for m in models if m not in list_models()]
     if unknown or not models:
         raise InvalidOptionError(f"unknown models {unknown}; choose from {', '.join(list_models())} or all")
-    if seeds < 1:
-        raise InvalidOptionError("--seeds must be ≥ 1")
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
     out = Path(out)
     index: list[dict[str, Any]] = []
     results: dict[tuple[str, str], list[dict[str, float]]] = {}
@@ -114,26 +116,23 @@ def _write_tables(out: Path, rows: list[dict[str, Any]], dataset: str, seeds: in
         gains = [f"{r['gain_f_score']:+.2f}", f"{r['gain_iou']:+.2f}"] if "gain_f_score" in r else ["", ""]
         md.append(f"| {r['network']} | {r['seeds']} | " + " | ".join(cells + gains) + " |")
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
-    buf = _io.StringIO()
     fields = ["network", "seeds"] + [x for k in METRICS for x in (k, f"{k}_std")] + ["gain_f_score", "gain_iou"]
-    writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows([{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
-    atomic_write_text(out / "results.csv", buf.getvalue())
+    write_csv(out / "results.csv", fields,
+              [{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
 
 
 def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int) -> None:
     """``figures/<model>.png``: test frames of seed 0 — image, X prediction, HA-X prediction (TP/FN/FP)."""
-    from freespace.data.base import get_dataset
+    from freespace.data.registry import get_dataset
     from freespace.data.splits import read_splits
-    from freespace.infer import Predictor
+    from freespace.predictor import Predictor
     from freespace.viz import caption, grid, overlay_errors
 
     runs = {v: out / "runs" / _name(model, v, 0) for v in VARIANTS}
     ckpts = {v: r / "checkpoints" / "best.ckpt" for v, r in runs.items()}
     if not all(c.is_file() for c in ckpts.values()) or frames < 1:
         return
-    ds = get_dataset(dataset, root, disparity="none")
+    ds = get_dataset(dataset, root, disparity_mode="none")
     names = read_splits(runs["none"] / "splits")["test"][:frames]
     predictors = {v: Predictor(checkpoint=c) for v, c in ckpts.items()}
     rows = []
@@ -146,15 +145,3 @@ def _figure(out: Path, model: str, dataset: str, root: PathLike, frames: int) ->
         rows.append(row)
     write_image(out / "figures" / f"{model}.png", grid(rows, width=min(480, rows[0][0].shape[1])))
 
-
-def tables_from_index(out: PathLike, dataset: str, seeds: int) -> list[dict[str, Any]]:
-    """Rebuild ``results.md``/``results.csv`` from ``OUT/index.json`` (e.g. of an interrupted run)."""
-    out = Path(out)
-    index = json.loads((out / "index.json").read_text())
-    models = list(dict.fromkeys(e["model"] for e in index))
-    results: dict[tuple[str, str], list[dict[str, float]]] = {}
-    for e in index:
-        results.setdefault((e["model"], e["variant"]), []).append(e["metrics"])
-    table = _table(models, results)
-    _write_tables(out, table, dataset, seeds)
-    return table

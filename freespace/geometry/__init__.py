@@ -6,7 +6,7 @@ integers; ``H_tr`` maps reference (left) pixels to target (right) pixels; images
 RGB; disparity maps are ``float32 H×W`` with NaN for "no value".
 """
 
-from freespace.geometry.homography import StereoCalibration, homography_from_pose, road_homography
+from freespace.geometry.homography import StereoCalibration, homography_from_pose
 from freespace.geometry.road_model import (
     RoadModel,
     fit_road_model,
@@ -14,10 +14,11 @@ from freespace.geometry.road_model import (
     road_energy,
     road_pixels,
 )
-from freespace.geometry.stereo import compute_disparity
+from freespace.geometry.stereo import SGBM_MAX_DISPARITY, compute_disparity
 from freespace.geometry.warp import generate_view, valid_column_ranges
 
 __all__ = [
+    "SGBM_MAX_DISPARITY",
     "RoadModel",
     "StereoCalibration",
     "compute_disparity",
@@ -26,7 +27,6 @@ __all__ = [
     "generate_view",
     "homography_from_pose",
     "road_energy",
-    "road_homography",
     "road_pixels",
     "valid_column_ranges",
 ]

@@ -20,7 +20,7 @@ import numpy as np
 from freespace.errors import InvalidOptionError
 from freespace.geometry.road_model import RoadModel
 
-__all__ = ["homography_from_pose", "road_homography", "StereoCalibration"]
+__all__ = ["homography_from_pose", "StereoCalibration"]
 
 
 def _as_matrix(x: np.ndarray, shape: tuple[int, ...], name: str) -> np.ndarray:
@@ -57,11 +57,6 @@ def homography_from_pose(K_r: np.ndarray, K_t: np.ndarray, R_tr: np.ndarray, t_t
     n = n / norm
     H = K_t @ (R_tr - np.outer(t_tr, n) / D) @ np.linalg.inv(K_r)
     return H / H[2, 2] if abs(H[2, 2]) > 1e-12 else H
-
-
-def road_homography(model: RoadModel) -> np.ndarray:
-    """``H_tr`` of a :class:`RoadModel` (reference → target pixels), ``(u, v) ↦ (u − d(u, v), v)``."""
-    return model.homography
 
 
 @dataclass(frozen=True)

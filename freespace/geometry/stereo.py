@@ -12,7 +12,9 @@ import numpy as np
 
 from freespace.errors import InvalidOptionError, ShapeMismatchError
 
-__all__ = ["compute_disparity"]
+__all__ = ["compute_disparity", "SGBM_MAX_DISPARITY"]
+
+SGBM_MAX_DISPARITY = 128  # the default SGBM search range in pixels, wherever SGBM runs (KITTI needs ~128)
 
 
 def _grey(img: np.ndarray) -> np.ndarray:
@@ -26,8 +28,8 @@ def _grey(img: np.ndarray) -> np.ndarray:
     raise InvalidOptionError(f"expected an H×W or H×W×3 image, got shape {img.shape}")
 
 
-def compute_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int = 128, block_size: int = 5,
-                      uniqueness: int = 10, lr_check: bool = True, lr_tolerance: float = 1.0,
+def compute_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int = SGBM_MAX_DISPARITY,
+                      block_size: int = 5, uniqueness: int = 10, lr_check: bool = True, lr_tolerance: float = 1.0,
                       speckle_window: int = 100, speckle_range: int = 2) -> np.ndarray:
     """Disparity of the left image with OpenCV SGBM, tuned for driving scenes.
 
@@ -53,6 +55,10 @@ def compute_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int
     if max_disparity < 1 or block_size < 1 or block_size % 2 == 0:
         raise InvalidOptionError(f"max_disparity must be ≥ 1 and block_size odd (got {max_disparity}, {block_size})")
     num = int(np.ceil(max_disparity / 16.0)) * 16
+    if num >= gl.shape[1]:
+        raise InvalidOptionError(f"the stereo matcher's maximum disparity ({num} px, --max-disparity rounded up to "
+                                 f"a multiple of 16) must be smaller than the image width ({gl.shape[1]} px); "
+                                 f"lower --max-disparity, or give the disparity with --disparity")
     matcher = cv2.StereoSGBM_create(
         minDisparity=0, numDisparities=num, blockSize=block_size,
         P1=8 * block_size * block_size, P2=32 * block_size * block_size,

@@ -18,10 +18,10 @@ import torch.nn.functional as F
 from torch import nn
 
 from freespace.errors import InvalidOptionError, PretrainedWeightsError
+from freespace.io import IGNORE_INDEX
 
 __all__ = ["SegmentationModel", "main_logits", "IGNORE_INDEX", "load_smp_encoder"]
 
-IGNORE_INDEX = 255
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 

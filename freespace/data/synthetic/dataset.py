@@ -17,9 +17,10 @@ configuration whatever ``num`` is.
 from __future__ import annotations
 
 import csv
-import io as _io
 import json
 import multiprocessing
+import os
+import shutil
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
@@ -29,8 +30,9 @@ import numpy as np
 
 from freespace.data.synthetic.render import StereoSample, render_sample
 from freespace.data.synthetic.scene import SynthConfig
-from freespace.errors import InvalidOptionError
-from freespace.io import PathLike, atomic_write_text, road_label_to_kitti, write_disparity, write_image, write_json
+from freespace.errors import InvalidOptionError, check_seed
+from freespace.io import (PathLike, atomic_write_text, road_label_to_kitti, write_csv, write_disparity, write_image,
+                          write_json)
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
 
@@ -74,47 +76,98 @@ def _render_and_write(job: tuple[int, int, SynthConfig, str]) -> dict[str, Any]:
     return _index_row(sample)
 
 
-def _init_worker() -> None:
+def _init_worker(parent: int) -> None:
     import cv2
 
+    from freespace.parallel import die_with_parent
+
+    die_with_parent(parent)
     cv2.setNumThreads(1)
 
 
+MAX_FRAMES = 1_000_000
+
+
+def _claim_output(out: Path, settings: dict[str, Any], overwrite: bool) -> None:
+    """Refuse to mix frames of other settings into ``out`` (unless ``overwrite``, which removes the old tree)."""
+    if not out.is_dir() or not any(out.iterdir()):
+        return
+    recorded: Any = None
+    try:
+        recorded = json.loads((out / "synth.json").read_text())
+    except (OSError, ValueError):
+        pass
+    if not isinstance(recorded, dict):
+        raise InvalidOptionError(f"--out {out} holds files that freespace synth did not write; choose a new or "
+                                 f"empty folder")
+    defaults = json.loads(json.dumps(asdict(SynthConfig())))  # keys added since the folder was written
+    old = {"seed": recorded.get("seed"), **defaults, **(recorded.get("config") or {})}
+    new = {"seed": settings["seed"], **settings["config"]}
+    differ = [k for k in new if old.get(k) != new[k]]
+    if differ and not overwrite:
+        what = ", ".join(f"{k} {old.get(k)!r} → {new[k]!r}" for k in differ)
+        raise InvalidOptionError(f"--out {out} holds a dataset rendered with other settings ({what}); choose "
+                                 f"another --out, or add --overwrite to replace it")
+    if overwrite:
+        for name in ("data_road", "data_road_right"):
+            shutil.rmtree(out / name, ignore_errors=True)
+        for name in ("index.csv", "synth.json"):
+            (out / name).unlink(missing_ok=True)
+
+
 def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig = SynthConfig(),
-                  workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:
+                  workers: int = 1, progress: bool = True, overwrite: bool = False) -> list[dict[str, Any]]:
     """Render frames ``0 … num−1`` and write them as a KITTI road tree (see the module docstring).
+
+    ``num`` is at most :data:`MAX_FRAMES`, ``seed`` in ``0 … 2³²−1``. A folder that already holds a dataset
+    rendered with other settings (seed or configuration, from its ``synth.json``) is refused unless
+    ``overwrite``, which removes it first; with the same settings the frames are (re)written and the
+    index covers frames ``0 … num−1``.
 
     Returns:
         The rows of ``index.csv`` (frame, category, scenario id, weather, rig parameters).
     """
     config.check()
-    if num < 1:
-        raise InvalidOptionError(f"--num must be ≥ 1, got {num}")
+    if not 1 <= num <= MAX_FRAMES:
+        raise InvalidOptionError(f"--num must be in 1…{MAX_FRAMES:,}, got {num}")
+    check_seed(seed)
     if workers < 1:
         raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InvalidOptionError(f"--out {out} is a file; give a folder for the dataset")
-    from tqdm import tqdm
+    settings = {"seed": seed, "config": json.loads(json.dumps(asdict(config)))}
+    _claim_output(out, settings, overwrite)
+    from freespace.log import progress_bar
 
-    jobs = [(i, seed, config, str(out)) for i in range(num)]
-    bar = tqdm(total=num, desc="synth", unit="frame", disable=not progress)
+    jobs = ((i, seed, config, str(out)) for i in range(num))
+    bar = progress_bar(None, total=num, desc="synth", unit="frame", enabled=progress)
     rows: list[dict[str, Any]] = []
     if workers == 1:
         for job in jobs:
             rows.append(_render_and_write(job))
             bar.update()
     else:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(os.getpid(),),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
-            for row in pool.map(_render_and_write, jobs, chunksize=max(1, num // (4 * workers))):
+            for row in pool.map(_render_and_write, jobs, chunksize=max(1, min(64, num // (4 * workers)))):
                 rows.append(row)
                 bar.update()
     bar.close()
-    buf = _io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=INDEX_FIELDS, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    atomic_write_text(out / "index.csv", buf.getvalue())
-    write_json(out / "synth.json", {"seed": seed, "num": num, "config": json.loads(json.dumps(asdict(config)))})
+    rows = _merge_index(out, rows)
+    write_csv(out / "index.csv", INDEX_FIELDS, rows)
+    write_json(out / "synth.json", {**settings, "num": len(rows)})
     return rows
+
+
+def _merge_index(out: Path, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The index of every frame in ``out``: the rows just rendered, plus earlier rows (same settings) of
+    frames that are still on disk and were not rendered again."""
+    path = out / "index.csv"
+    done = {r["frame"] for r in rows}
+    kept = []
+    if path.is_file():
+        with path.open(newline="") as f:
+            kept = [r for r in csv.DictReader(f) if r.get("frame") not in done
+                    and (out / "data_road" / "training" / "image_2" / f"{r.get('frame')}.png").is_file()]
+    return sorted(kept + rows, key=lambda r: int(r["index"]))

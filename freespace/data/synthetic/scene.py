@@ -38,7 +38,10 @@ class SynthConfig:
         width, height: image size in pixels (SYN-Stereo: 640×480).
         frames_per_scenario: frames taken along one drive (one scenario id).
         planar: True = planar road (the paper's model holds exactly); False = slopes and camber.
-        baseline: fixed baseline in metres, or None to draw it per scenario (0.3–1.6 m).
+        baseline: fixed baseline in metres, or None to draw it per scenario from ``baselines``.
+        baselines: (min, max) baseline in metres drawn per scenario when ``baseline`` is None.
+        camera_heights: (min, max) height of the rig above the road in metres, per scenario.
+        pitches_deg: (min, max) rig pitch in degrees (positive = optical axis up), per scenario.
         max_roll_deg: rig roll drawn in ±this (degrees).
         weathers: weathers to draw from.
         vehicles, pedestrians: (min, max) counts per frame.
@@ -49,6 +52,9 @@ class SynthConfig:
     frames_per_scenario: int = 10
     planar: bool = True
     baseline: float | None = None
+    baselines: tuple[float, float] = (0.3, 1.6)
+    camera_heights: tuple[float, float] = (1.4, 2.0)
+    pitches_deg: tuple[float, float] = (-2.0, 2.0)
     max_roll_deg: float = 3.0
     weathers: tuple[str, ...] = WEATHERS
     vehicles: tuple[int, int] = (2, 7)
@@ -62,6 +68,11 @@ class SynthConfig:
             raise InvalidOptionError("--frames-per-scenario must be ≥ 1")
         if self.baseline is not None and not 0.01 <= self.baseline <= 10:
             raise InvalidOptionError(f"--baseline must be 0.01..10 m, got {self.baseline}")
+        for flag, (lo, hi), (least, most) in (("--baselines", self.baselines, (0.01, 10.0)),
+                                               ("--camera-heights", self.camera_heights, (0.3, 10.0)),
+                                               ("--pitches", self.pitches_deg, (-20.0, 20.0))):
+            if not least <= lo <= hi <= most:
+                raise InvalidOptionError(f"{flag} must be MIN,MAX with {least} ≤ MIN ≤ MAX ≤ {most}, got {lo},{hi}")
         if not 0 <= self.max_roll_deg <= 45:
             raise InvalidOptionError(f"--max-roll must be 0..45 degrees, got {self.max_roll_deg}")
         bad = [w for w in self.weathers if w not in WEATHERS]
@@ -233,9 +244,9 @@ def sample_scenario(config: SynthConfig, seed: int, index: int) -> Scenario:
         index=index, category=category, weather=weather,
         focal=focal, cx=0.5 * config.width + float(rng.uniform(-6, 6)),
         cy=0.5 * config.height + float(rng.uniform(-6, 6)),
-        baseline=config.baseline if config.baseline is not None else float(rng.uniform(0.3, 1.6)),
-        cam_height=float(rng.uniform(1.4, 2.0)),
-        pitch=math.radians(rng.uniform(-2.0, 2.0)),
+        baseline=config.baseline if config.baseline is not None else float(rng.uniform(*config.baselines)),
+        cam_height=float(rng.uniform(*config.camera_heights)),
+        pitch=math.radians(rng.uniform(*config.pitches_deg)),
         roll=math.radians(rng.uniform(-config.max_roll_deg, config.max_roll_deg)),
         lanes=lanes, lane_width=lane_width,
         centre=(-ego_offset, float(rng.uniform(-0.04, 0.04)), float(rng.uniform(-1.5e-3, 1.5e-3))),

@@ -1,0 +1,133 @@
+"""Where a frame's left disparity comes from (torch-free): a file, depth and the camera, a LiDAR scan and
+the calibration, or SGBM, which is cached on disk.
+
+The disparity *mode* of a dataset (:data:`DISPARITY_MODES`) says which sources may be used; the *source*
+of a loaded sample (``file``, ``depth``, ``lidar``, ``sgbm`` or ``none``) says which one was.
+
+``auto`` takes the file, else depth + camera, else SGBM; it never takes a LiDAR scan: a scan gives a
+sparse map (about one pixel in twenty, none above the scanner's field of view) whose use should be a
+choice, and a tree that gains a ``velodyne/`` folder must not silently change what ``auto`` generated.
+Ask for it with ``lidar``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io as _io
+import json
+import logging
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from freespace.errors import DatasetError, InvalidOptionError
+from freespace.geometry import StereoCalibration, compute_disparity
+from freespace.geometry.depth import depth_to_disparity as _depth_to_disparity
+from freespace.io import PathLike, atomic_write_bytes, read_disparity
+
+log = logging.getLogger(__name__)
+
+__all__ = ["DISPARITY_MODES", "check_disparity_mode", "DisparityCache", "depth_to_disparity", "resolve_disparity"]
+
+DISPARITY_MODES = ("auto", "file", "depth", "lidar", "sgbm", "none")
+"""``auto``: file, else depth + camera, else cached SGBM; ``file``: file, else depth + camera; ``depth``:
+depth + camera only; ``lidar``: the frame's Velodyne scan projected with its calibration only; ``sgbm``:
+always SGBM; ``none``: no disparity."""
+
+
+class FrameFiles(Protocol):
+    """The files of one frame this module reads (a :class:`freespace.data.base.FrameRef`)."""
+
+    name: str
+    left: Path
+    right: Path | None
+    disparity: Path | None
+    depth: Path | None
+    velodyne: Path | None
+
+
+def check_disparity_mode(mode: str) -> str:
+    """``mode`` if it is one of :data:`DISPARITY_MODES`, else InvalidOptionError."""
+    if mode not in DISPARITY_MODES:
+        raise InvalidOptionError(f"unknown disparity source {mode!r}; choose one of {', '.join(DISPARITY_MODES)}")
+    return mode
+
+
+def depth_to_disparity(depth: np.ndarray, calib: StereoCalibration) -> np.ndarray:
+    """Disparity ``d = fx·B / Z`` (pixels, ``float32 H×W``) from depth along the optical axis ``Z``
+    (metres, ``H×W``); invalid depth (≤ 0, NaN, inf) gives NaN
+    (:func:`freespace.geometry.depth.depth_to_disparity` with the rig's ``fx`` and ``baseline``)."""
+    return _depth_to_disparity(depth, calib.fx, calib.baseline)
+
+
+class DisparityCache:
+    """SGBM disparities on disk, keyed by the frame's image files (path, size, mtime) and the matcher
+    settings, so a second run costs one ``.npy`` read. Default folder: ``$XDG_CACHE_HOME/freespace/sgbm``
+    (``~/.cache/freespace/sgbm``)."""
+
+    def __init__(self, folder: PathLike | None = None, **settings: Any) -> None:
+        base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "freespace" / "sgbm"
+        self.folder = Path(folder) if folder is not None else base
+        self.settings = dict(sorted(settings.items()))
+
+    def path(self, frame: FrameFiles) -> Path:
+        """Cache file of ``frame`` under the current settings."""
+        parts = [self.settings]
+        for p in (frame.left, frame.right):
+            st = Path(p).stat()  # type: ignore[arg-type]
+            parts.append([str(Path(p).resolve()), st.st_size, st.st_mtime_ns])  # type: ignore[arg-type]
+        key = hashlib.sha1(json.dumps(parts, default=str).encode()).hexdigest()[:16]
+        return self.folder / f"{frame.name}-{key}.npy"
+
+    def get(self, frame: FrameFiles, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """The cached disparity, computing and storing it on a miss."""
+        path = self.path(frame)
+        if path.is_file():
+            try:
+                return np.load(path, allow_pickle=False)
+            except (OSError, ValueError):
+                log.warning("unreadable cache file %s: recomputing", path)
+        disp = compute_disparity(left, right, **self.settings)
+        buf = _io.BytesIO()
+        np.save(buf, disp)
+        atomic_write_bytes(path, buf.getvalue())
+        return disp
+
+
+def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | None,
+                      calib: StereoCalibration | None, *, mode: str, cache: DisparityCache,
+                      read_depth: Callable[[], np.ndarray],
+                      read_lidar: Callable[[], np.ndarray] | None = None) -> tuple[np.ndarray | None, str]:
+    """The frame's left disparity (``float32 H×W`` pixels, NaN invalid) and its source.
+
+    ``mode`` ``auto``: the disparity file, else depth (``read_depth()``, metres) and ``calib``, else
+    cached SGBM of ``left`` and ``right``; ``file``: file or depth only; ``depth``: depth only; ``lidar``:
+    ``read_lidar()`` only (the scan's disparity, already in pixels); ``sgbm``: always SGBM; ``none``:
+    nothing. Returns ``(None, "none")`` when no allowed source is there, except for ``depth`` and
+    ``lidar``, which were asked for by name.
+
+    Raises:
+        DatasetError: mode ``depth`` and the frame has no depth file or no camera; mode ``lidar`` and
+            it has no scan or no calibration.
+    """
+    if mode == "depth":
+        if frame.depth is None or calib is None:
+            what = "depth map" if frame.depth is None else "camera calibration (f and B for d = f·B/Z)"
+            raise DatasetError(f"{frame.name} has no {what}; --disparity-source depth needs one for every frame")
+        return depth_to_disparity(read_depth(), calib), "depth"
+    if mode == "lidar":
+        if frame.velodyne is None or read_lidar is None:
+            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); --disparity-source lidar "
+                               f"needs one for every frame")
+        return read_lidar(), "lidar"
+    if mode in ("auto", "file"):
+        if frame.disparity is not None:
+            return read_disparity(frame.disparity), "file"
+        if frame.depth is not None and calib is not None:
+            return depth_to_disparity(read_depth(), calib), "depth"
+    if mode in ("auto", "sgbm") and right is not None:
+        return cache.get(frame, left, right), "sgbm"
+    return None, "none"

@@ -1,0 +1,222 @@
+"""Disparity from KITTI Velodyne scans: read ``velodyne/<frame>.bin``, project into the left image.
+
+Conventions
+-----------
+A scan is ``float32 N×4`` (x, y, z in metres in the Velodyne frame — x forward, y left, z up — and the
+reflectance), stored as raw little-endian float32, 16 bytes per point (KITTI's format). A point goes to
+the image as ``p̃ = P2 · R0_rect · Tr_velo_to_cam · (x, y, z, 1)`` (``R0_rect`` and ``Tr_velo_to_cam``
+padded to 4×4); ``u = p̃₀/p̃₂``, ``v = p̃₁/p̃₂`` in the package's pixel convention (0-based, u right,
+v down, pixel centres at integers, as :class:`~freespace.geometry.StereoCalibration` reads P2), and
+``Z = p̃₂`` is the depth along the P2 camera's optical axis. A point lands on the pixel
+``(round(u), round(v))``.
+
+The map is sparse: about 5 % of the pixels of a KITTI image have a point, and only below the horizon.
+The road fit (:func:`freespace.geometry.fit_road_model`) needs only the road's points, so the sparse
+map is what to fit; :func:`densify_nearest` fills small gaps for uses that want a dense map (display,
+disparity inputs of a network), at the price of values copied from a neighbour.
+
+Only NumPy and OpenCV are imported here; never torch.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
+from freespace.geometry.depth import depth_to_disparity, rig_from_kitti
+from freespace.io import PathLike, atomic_write_bytes, read_kitti_calib
+
+__all__ = [
+    "read_velodyne",
+    "write_velodyne",
+    "velodyne_to_camera",
+    "project_velodyne",
+    "velodyne_to_disparity",
+    "disparity_from_velodyne_file",
+    "densify_nearest",
+    "DEFAULT_MIN_DEPTH_M",
+]
+
+DEFAULT_MIN_DEPTH_M = 0.1
+"""Points closer than this along the optical axis (metres) — and every point behind the camera — are dropped."""
+
+
+def read_velodyne(path: PathLike) -> np.ndarray:
+    """Read a KITTI Velodyne scan.
+
+    Returns:
+        ``float32 N×4``: x, y, z (metres, Velodyne frame) and reflectance, N ≥ 1.
+
+    Raises:
+        InputFileError: missing or unreadable file. CorruptFileError: empty, a size that is not a
+        multiple of 16 bytes (4 float32 per point), or NaN/inf values.
+    """
+    path = Path(path)
+    if not path.is_file():
+        hint = "it is a folder, name a file" if path.is_dir() else "check the path"
+        raise InputFileError(f"Velodyne scan not found: {path} ({hint})")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputFileError(f"cannot read Velodyne scan {path}: {exc.strerror}") from None
+    if not data or len(data) % 16:
+        raise CorruptFileError(f"Velodyne scan {path} has {len(data)} bytes; expected a non-empty multiple of 16 "
+                               f"(float32 x, y, z, reflectance per point)")
+    points = np.frombuffer(data, dtype="<f4").reshape(-1, 4).astype(np.float32)
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        raise CorruptFileError(f"Velodyne scan {path} has {int(bad.sum())} points with NaN or inf values; "
+                               f"expected a KITTI .bin scan (float32 x, y, z, reflectance)")
+    return points
+
+
+def write_velodyne(path: PathLike, points: np.ndarray) -> Path:
+    """Write ``N×4`` (x, y, z, reflectance) or ``N×3`` (reflectance 0) points as a KITTI ``.bin`` scan,
+    atomically. Returns the path written."""
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] not in (3, 4) or not np.isfinite(pts).all():
+        raise InvalidOptionError(f"points must be a finite N×3 or N×4 array, got shape {pts.shape}")
+    if pts.shape[1] == 3:
+        pts = np.hstack([pts, np.zeros((len(pts), 1))])
+    return atomic_write_bytes(path, pts.astype("<f4").tobytes())
+
+
+def _matrix(calib: dict[str, np.ndarray], keys: tuple[str, ...], shape: tuple[int, int],
+            default: np.ndarray | None = None) -> np.ndarray:
+    for key in keys:
+        if key in calib:
+            m = np.asarray(calib[key], np.float64)
+            if m.size != shape[0] * shape[1] or not np.isfinite(m).all():
+                raise CorruptFileError(f"calibration {key} must be {shape[0]}×{shape[1]} finite numbers, got "
+                                       f"{m.size} values")
+            return m.reshape(shape)
+    if default is not None:
+        return default
+    raise CorruptFileError(f"the calibration has no {keys[0]}; projecting a Velodyne scan needs a KITTI calibration "
+                           f"with Tr_velo_to_cam, R0_rect and P2")
+
+
+def velodyne_to_camera(points: np.ndarray, calib: dict[str, np.ndarray], camera: str = "P2") -> np.ndarray:
+    """Homogeneous image coordinates of Velodyne points: ``p̃ = P · R0_rect · Tr_velo_to_cam · (x, y, z, 1)``.
+
+    Args:
+        points: ``N×3`` or ``N×4`` points in the Velodyne frame (metres; a 4th column is ignored).
+        calib: a parsed KITTI calibration (:func:`freespace.io.read_kitti_calib`) with
+            ``Tr_velo_to_cam`` (3×4), ``P2`` (3×4) and ``R0_rect`` (3×3; identity when absent).
+        camera: the projection matrix to use.
+
+    Returns:
+        ``float64 N×3`` ``(p̃₀, p̃₁, p̃₂)``; ``u = p̃₀/p̃₂``, ``v = p̃₁/p̃₂``, depth ``Z = p̃₂`` (metres).
+    """
+    pts = np.asarray(points)
+    if pts.ndim != 2 or pts.shape[1] < 3:
+        raise InvalidOptionError(f"points must be N×3 or N×4, got shape {pts.shape}")
+    tr = _matrix(calib, ("Tr_velo_to_cam", "Tr_velo_cam"), (3, 4))
+    r0 = _matrix(calib, ("R0_rect", "R_rect"), (3, 3), np.eye(3))
+    P = _matrix(calib, (camera,), (3, 4))
+    M = P @ np.vstack([np.hstack([r0, np.zeros((3, 1))]), [0, 0, 0, 1]]) @ np.vstack([tr, [0, 0, 0, 1]])
+    return pts[:, :3].astype(np.float64) @ M[:, :3].T + M[:, 3]
+
+
+def project_velodyne(points: np.ndarray, calib: dict[str, np.ndarray], shape: tuple[int, int], *,
+                     camera: str = "P2", min_depth: float = DEFAULT_MIN_DEPTH_M) -> np.ndarray:
+    """Sparse depth map of a Velodyne scan: the nearest point per pixel.
+
+    Args:
+        points: ``N×3``/``N×4`` scan (:func:`read_velodyne`). calib: KITTI calibration dict (see
+            :func:`velodyne_to_camera`). shape: ``(H, W)`` of the image.
+        camera: projection matrix name. min_depth: points with ``Z ≤ min_depth`` metres (behind or
+            just in front of the camera) are dropped.
+
+    Returns:
+        ``float32 H×W`` depth ``Z`` in metres along the optical axis, NaN where no point landed. Where
+        several points land on one pixel, the nearest (smallest Z) wins.
+    """
+    h, w = (int(x) for x in shape)
+    if h < 1 or w < 1 or not (math.isfinite(min_depth) and min_depth >= 0):
+        raise InvalidOptionError(f"shape must be (H, W) ≥ 1 and min_depth ≥ 0, got {shape}, {min_depth}")
+    p = velodyne_to_camera(points, calib, camera)
+    z = p[:, 2]
+    front = z > min_depth
+    p, z = p[front], z[front]
+    u = np.rint(p[:, 0] / z)
+    v = np.rint(p[:, 1] / z)
+    inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    idx = (v[inside] * w + u[inside]).astype(np.int64)
+    z = z[inside]
+    order = np.lexsort((z, idx))            # by pixel, then nearest first
+    idx, z = idx[order], z[order]
+    first = np.ones(idx.size, bool)
+    first[1:] = idx[1:] != idx[:-1]
+    depth = np.full(h * w, np.nan, np.float32)
+    depth[idx[first]] = z[first].astype(np.float32)
+    return depth.reshape(h, w)
+
+
+def velodyne_to_disparity(points: np.ndarray, calib: dict[str, np.ndarray], shape: tuple[int, int], *,
+                          baseline: float | None = None, min_depth: float = DEFAULT_MIN_DEPTH_M,
+                          densify_gap: int = 0) -> np.ndarray:
+    """Sparse (optionally densified) disparity of a Velodyne scan in the left (P2) image.
+
+    ``d = f·B / Z`` with ``f = P2[0, 0]`` and ``B`` from P2 and P3, or a virtual baseline when
+    ``baseline`` is given or P3 is missing (:func:`freespace.geometry.depth.rig_from_kitti`).
+
+    Args:
+        points, calib, shape, min_depth: as :func:`project_velodyne`.
+        baseline: virtual baseline in metres, or None for the calibration's.
+        densify_gap: 0 (default) keeps the sparse map; ``k > 0`` fills every empty pixel within ``k``
+            pixels of a point with that nearest point's disparity (:func:`densify_nearest`).
+
+    Returns:
+        ``float32 H×W`` disparity in pixels, NaN = no value.
+    """
+    rig = rig_from_kitti(calib, baseline=baseline)
+    disparity = depth_to_disparity(project_velodyne(points, calib, shape, min_depth=min_depth), rig.fx, rig.baseline)
+    return densify_nearest(disparity, densify_gap) if densify_gap else disparity
+
+
+def disparity_from_velodyne_file(scan_path: PathLike, calibration: dict[str, np.ndarray] | PathLike,
+                                 shape: tuple[int, int], *, baseline: float | None = None,
+                                 min_depth: float = DEFAULT_MIN_DEPTH_M, densify_gap: int = 0) -> np.ndarray:
+    """Read a ``velodyne/<frame>.bin`` scan and its KITTI calibration (dict or file path) and return the
+    ``float32 H×W`` disparity of the P2 image (NaN = none); options as :func:`velodyne_to_disparity`."""
+    calib = calibration if isinstance(calibration, dict) else read_kitti_calib(calibration)
+    return velodyne_to_disparity(read_velodyne(scan_path), calib, shape, baseline=baseline, min_depth=min_depth,
+                                 densify_gap=densify_gap)
+
+
+def densify_nearest(disparity: np.ndarray, max_gap_px: float) -> np.ndarray:
+    """Fill holes with the value of the nearest valid pixel, within ``max_gap_px``.
+
+    Args:
+        disparity: ``float32 H×W`` map, NaN = no value (e.g. a projected LiDAR scan).
+        max_gap_px: largest Euclidean distance in pixels from a hole to a valid pixel that is filled
+            (≥ 0; 0 returns a copy). Holes farther from every value stay NaN, so the sky and areas the
+            scanner never reached are not invented.
+
+    Returns:
+        ``float32 H×W``: the valid values unchanged, holes within reach filled (nearest neighbour
+        by OpenCV's 5×5-mask distance transform, within about 2 % of the Euclidean distance; never
+        interpolated across values), the rest NaN.
+    """
+    if not (math.isfinite(max_gap_px) and max_gap_px >= 0):
+        raise InvalidOptionError(f"the densification gap must be ≥ 0 pixels, got {max_gap_px}")
+    disp = np.asarray(disparity, np.float32)
+    if disp.ndim != 2:
+        raise InvalidOptionError(f"disparity must be 2-D (H×W), got shape {disp.shape}")
+    valid = np.isfinite(disp)
+    out = disp.copy()
+    if max_gap_px == 0 or not valid.any() or valid.all():
+        return out
+    # distance (and label) of every pixel to the nearest zero pixel of the mask = the nearest valid pixel
+    dist, labels = cv2.distanceTransformWithLabels((~valid).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_5,
+                                                   labelType=cv2.DIST_LABEL_PIXEL)
+    lookup = np.zeros(int(labels.max()) + 1, np.float32)
+    lookup[labels[valid]] = disp[valid]
+    fill = ~valid & (dist <= max_gap_px)
+    out[fill] = lookup[labels[fill]]
+    return out

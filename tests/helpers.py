@@ -1,0 +1,78 @@
+"""Shared test helpers (importable as ``helpers``: pyproject's pytest ``pythonpath`` holds ``tests``):
+synthetic road planes and scenes, the shared real samples (tests skip when absent)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def shared_path(*parts: str) -> Path:
+    """A path under ../shared/data, or skip the test when the shared samples are not there."""
+    path = SHARED.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"shared sample data not available ({path})")
+    return path
+
+
+def plane_disparity(shape: tuple[int, int], roll_deg: float, kappa_hat: float, kappa: float) -> np.ndarray:
+    """Exact disparity d = ϰ (v cos Φ − u sin Φ + κ) over an H×W grid (float32)."""
+    h, w = shape
+    phi = math.radians(roll_deg)
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    return (kappa_hat * (v * math.cos(phi) - u * math.sin(phi) + kappa)).astype(np.float32)
+
+
+def road_mask(shape: tuple[int, int], top: float = 0.55) -> np.ndarray:
+    """A trapezoid road region in the lower part of an H×W image (bool)."""
+    h, w = shape
+    v, u = np.mgrid[0:h, 0:w]
+    t = np.clip((v - top * h) / ((1 - top) * h), 0, 1)
+    half = w * (0.05 + 0.45 * t)
+    return (v >= top * h) & (np.abs(u - w / 2) <= half)
+
+
+def textured_image(shape: tuple[int, int], seed: int = 0, channels: int = 3) -> np.ndarray:
+    """A smooth random texture (uint8), band-limited so bilinear warps are accurate."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    small = rng.uniform(0, 255, size=(h // 8 + 2, w // 8 + 2, channels)).astype(np.float32)
+    img = cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
+    img = cv2.GaussianBlur(img, (0, 0), 2.0)
+    return np.clip(img, 0, 255).astype(np.uint8).reshape(h, w, channels) if channels > 1 else \
+        np.clip(img, 0, 255).astype(np.uint8).reshape(h, w)
+
+
+def noise_texture(shape: tuple[int, ...], seed: int) -> np.ndarray:
+    """High-frequency random texture (uint8) that a stereo matcher can lock on to."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    img = rng.uniform(0, 255, shape).astype(np.float32)
+    return np.clip(cv2.GaussianBlur(img, (0, 0), 1.0) * 2 - 128, 0, 255).astype(np.uint8)
+
+
+def synthetic_pair(shape: tuple[int, int] = (160, 320), roll_deg: float = 1.0, seed: int = 0):
+    """(left, right, road label, disparity) of a textured road plane seen by a stereo rig.
+
+    The right image is the left one moved by the plane's disparity, so the road homography maps it back
+    exactly; the road is a trapezoid in the lower half (don't-care above row 40).
+    """
+    from freespace.geometry import RoadModel, generate_view
+    from freespace.io import RoadLabel
+
+    h, w = shape
+    model = RoadModel.from_roll(math.radians(roll_deg), 0.3, -0.25 * h)
+    left = noise_texture(shape + (3,), seed)
+    right = generate_view(left, left, np.linalg.inv(model.homography))
+    road = road_mask(shape, top=0.4)
+    valid = np.ones(shape, bool)
+    valid[:40] = False
+    return left, right, RoadLabel(road=road, valid=valid), model.disparity(shape)

@@ -1,0 +1,456 @@
+"""Hostile input: every command refuses what would lose a user's data, and fails in one line.
+
+Each case asserts what matters to the user: exit code 2, one line on stderr and no traceback, inputs
+byte-identical afterwards, and no partial output left behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from freespace.cli import main
+from freespace.data.synthetic import SynthConfig, write_dataset
+from freespace.io import write_disparity, write_image
+
+from helpers import synthetic_pair
+
+SMALL = SynthConfig(width=160, height=128, frames_per_scenario=2)
+
+
+def snapshot(*paths: Path) -> dict[str, bytes]:
+    """The bytes of every file under ``paths`` (files or folders), by path."""
+    files: dict[str, bytes] = {}
+    for p in paths:
+        for f in ([p] if p.is_file() else sorted(q for q in p.rglob("*") if q.is_file())):
+            files[str(f)] = f.read_bytes()
+    return files
+
+
+def refused(capsys: pytest.CaptureFixture, argv: list[str], *, match: str | None = None) -> str:
+    """Run the command in-process; assert exit 2 and exactly one line on stderr; return that line."""
+    capsys.readouterr()
+    code = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert code == 2, f"exit {code}, stderr: {err!r}"
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert err.startswith("freespace: error: "), err
+    if match is not None:
+        assert match.lower() in err.lower(), err
+    return err
+
+
+def run_cli(*args: str, timeout: float = 120, **kw) -> subprocess.CompletedProcess:
+    """The command in a fresh process (what a user sees, tracebacks included)."""
+    return subprocess.run([sys.executable, "-m", "freespace.cli", *args], capture_output=True, text=True,
+                          timeout=timeout, **kw)
+
+
+def refused_process(res: subprocess.CompletedProcess, match: str | None = None) -> None:
+    err = res.stderr.strip()
+    assert res.returncode == 2, (res.returncode, err[-2000:])
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err[-2000:]
+    if match is not None:
+        assert match.lower() in err.lower(), err
+
+
+# --------------------------------------------------------------------------------------------- fixtures
+@pytest.fixture
+def pair(tmp_path: Path) -> dict[str, Path]:
+    left, right, label, disparity = synthetic_pair((96, 160))
+    mask = (label.road & label.valid).astype(np.uint8) * 255
+    files = {"L": tmp_path / "L.png", "R": tmp_path / "R.png", "M": tmp_path / "M.png", "D": tmp_path / "D.png"}
+    write_image(files["L"], left)
+    write_image(files["R"], right)
+    write_image(files["M"], mask)
+    write_disparity(files["D"], disparity)
+    return files
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A tiny dataset and a checkpoint trained on it for one epoch."""
+    base = tmp_path_factory.mktemp("hostile")
+    data = base / "data"
+    write_dataset(data, 8, seed=3, config=SMALL, progress=False)
+    assert main(["train", "--dataset", "synth", "--root", str(data), "--model", "segnet", "--epochs", "1",
+                 "--batch-size", "4", "--image-size", "64x64", "--no-progress", "--out", str(base / "run")]) == 0
+    return {"data": data, "run": base / "run", "ckpt": base / "run" / "checkpoints" / "best.ckpt", "base": base}
+
+
+def _kitti_root(trained: dict[str, Path], tmp_path: Path) -> Path:
+    root = tmp_path / "kitti"
+    shutil.copytree(trained["data"], root)
+    return root
+
+
+# ------------------------------------------------------------------- 1. an output never overwrites an input
+@pytest.mark.parametrize("out_opt", ["--out", "--model-json"])
+@pytest.mark.parametrize("victim", ["L", "R", "M", "D"])
+def test_generate_output_is_an_input(out_opt: str, victim: str, pair: dict[str, Path], tmp_path: Path,
+                                     capsys: pytest.CaptureFixture) -> None:
+    before = snapshot(tmp_path)
+    args = ["generate", "--reference", str(pair["L"]), "--target", str(pair["R"]), "--road-mask", str(pair["M"]),
+            "--disparity", str(pair["D"])]
+    args += ["--out", str(pair[victim])] if out_opt == "--out" else ["--out", str(tmp_path / "G.png"),
+                                                                      "--model-json", str(pair[victim])]
+    refused(capsys, args, match="input")
+    assert snapshot(tmp_path) == before
+
+
+def test_generate_output_through_a_symlink(pair: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    link = tmp_path / "link.png"
+    link.symlink_to(pair["L"])
+    before = snapshot(pair["L"])
+    refused(capsys, ["generate", "--reference", str(pair["L"]), "--target", str(pair["R"]), "--road-mask",
+                     str(pair["M"]), "--disparity", str(pair["D"]), "--out", str(link)], match="input")
+    assert snapshot(pair["L"]) == before
+
+
+def test_generate_dataset_out_inside_the_dataset(trained: dict[str, Path], tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture) -> None:
+    root = _kitti_root(trained, tmp_path)
+    image_2 = root / "data_road" / "training" / "image_2"
+    before = snapshot(root)
+    refused(capsys, ["generate", "--dataset", "synth", "--root", str(root), "--out", str(image_2)], match="inside")
+    refused(capsys, ["generate", "--dataset", "synth", "--root", str(root), "--out", str(root / "gen")], match="inside")
+    assert snapshot(root) == before
+
+
+def test_predict_out_is_the_input(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    images = tmp_path / "images"
+    shutil.copytree(trained["data"] / "data_road" / "training" / "image_2", images)
+    before = snapshot(images)
+    refused(capsys, ["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--out", str(images),
+                     "--no-progress"], match="input")
+    one = sorted(images.iterdir())[0]
+    refused(capsys, ["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(one), "--out", str(images),
+                     "--no-progress"], match="input")
+    assert snapshot(images) == before
+
+
+def test_export_out_is_the_checkpoint(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    ckpt = tmp_path / "model.ckpt"
+    shutil.copy(trained["ckpt"], ckpt)
+    before = snapshot(ckpt)
+    refused(capsys, ["export", "--checkpoint", str(ckpt), "--format", "onnx", "--out", str(ckpt)], match="input")
+    assert snapshot(ckpt) == before
+
+
+def test_evaluate_kitti_out_inside_the_ground_truth(trained: dict[str, Path], tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture) -> None:
+    gt = tmp_path / "gt"
+    shutil.copytree(trained["data"] / "data_road" / "training" / "gt_image_2", gt)
+    before = snapshot(gt)
+    refused(capsys, ["evaluate-kitti", "--gt", str(gt), "--pred", str(gt), "--out", str(gt / "scores.json")],
+            match="inside")
+    assert snapshot(gt) == before
+
+
+# --------------------------------------------------- 2. outputs made with other settings are never mixed
+def test_synth_refuses_other_settings_in_the_same_folder(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "syn"
+    assert main(["synth", "--out", str(out), "--num", "2", "--width", "96", "--height", "64"]) == 0
+    before = snapshot(out)
+    err = refused(capsys, ["synth", "--out", str(out), "--num", "2", "--width", "80", "--height", "64"])
+    assert "width" in err and "--overwrite" in err
+    assert snapshot(out) == before
+    # the same settings extend the dataset; --overwrite replaces it, stale frames included
+    assert main(["synth", "--out", str(out), "--num", "3", "--width", "96", "--height", "64"]) == 0
+    assert len(list((out / "data_road" / "training" / "image_2").iterdir())) == 3
+    assert main(["synth", "--out", str(out), "--num", "1", "--width", "80", "--height", "64", "--overwrite"]) == 0
+    assert len(list((out / "data_road" / "training" / "image_2").iterdir())) == 1
+    assert json.loads((out / "synth.json").read_text())["config"]["width"] == 80
+    assert main(["datasets", "info", "--dataset", "synth", "--root", str(out), "--no-progress"]) == 0
+
+
+def test_generate_dataset_refuses_other_fit_options(trained: dict[str, Path], tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture) -> None:
+    gen = tmp_path / "gen"
+    base = ["generate", "--dataset", "synth", "--root", str(trained["data"]), "--out", str(gen)]
+    assert main(base) == 0
+    before = snapshot(gen)
+    err = refused(capsys, base + ["--inlier-threshold", "2.5"])
+    assert "inlier_threshold" in err and "--overwrite" in err
+    assert snapshot(gen) == before
+    assert main(base) == 0  # the same options: resumes, nothing regenerated
+    assert main(base + ["--inlier-threshold", "2.5", "--overwrite"]) == 0
+    summary = json.loads((gen / "summary.json").read_text())
+    assert summary["options"]["inlier_threshold"] == 2.5 and summary["skipped"] == 0
+
+
+# --------------------------------------------------------------------------------------- 3. run folders
+def test_failed_start_leaves_a_folder_a_plain_rerun_takes_over(trained: dict[str, Path], tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture) -> None:
+    root = _kitti_root(trained, tmp_path)
+    image = sorted((root / "data_road" / "training" / "image_2").iterdir())[0]
+    good = image.read_bytes()
+    image.write_bytes(b"not a png")
+    run = tmp_path / "run"
+    args = ["train", "--dataset", "synth", "--root", str(root), "--model", "segnet", "--epochs", "1",
+            "--image-size", "64x64", "--no-progress", "--out", str(run)]
+    refused(capsys, args, match=image.name)
+    assert not (run / "checkpoints").exists()
+    image.write_bytes(good)
+    assert main(args) == 0  # a plain rerun takes the folder over
+    assert (run / "metrics.json").is_file()
+
+
+def test_resume_reads_only_its_own_folder(trained: dict[str, Path], tmp_path: Path) -> None:
+    moved = tmp_path / "moved"
+    shutil.copytree(trained["run"], moved)
+    original_best = trained["ckpt"].read_bytes()
+    # the original folder's best checkpoint is replaced by garbage: the moved run must not read it
+    trained["ckpt"].write_bytes(b"garbage")
+    try:
+        assert main(["train", "--dataset", "synth", "--root", str(trained["data"]), "--model", "segnet",
+                     "--epochs", "2", "--image-size", "64x64", "--no-progress", "--out", str(moved), "--resume"]) == 0
+    finally:
+        trained["ckpt"].write_bytes(original_best)
+    metrics = json.loads((moved / "metrics.json").read_text())
+    assert metrics["checkpoint"] == "checkpoints/best.ckpt"
+
+
+class _Payload:
+    def __reduce__(self):
+        return (os.system, ("touch PWNED",))
+
+
+def test_resume_refuses_a_malicious_checkpoint(trained: dict[str, Path], tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(trained["run"], run)
+    with open(run / "checkpoints" / "last.ckpt", "wb") as f:
+        pickle.dump({"state_dict": _Payload()}, f)
+    res = run_cli("train", "--dataset", "synth", "--root", str(trained["data"]), "--model", "segnet", "--epochs", "2",
+                  "--image-size", "64x64", "--no-progress", "--out", str(run), "--resume", cwd=tmp_path)
+    refused_process(res, match="last.ckpt")
+    assert not (tmp_path / "PWNED").exists()
+
+
+def test_torch_floor_loads_safely() -> None:
+    import tomllib
+
+    deps = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]
+    torch_req = [d for d in deps["optional-dependencies"]["train"] if d.startswith("torch>")][0]
+    major, minor = map(int, torch_req.split(">=")[1].split(".")[:2])
+    assert (major, minor) >= (2, 6), "torch < 2.6 loads checkpoints with weights_only=False by default"
+
+
+# ------------------------------------------------------------------ 5. tracebacks that reached the user
+@pytest.mark.parametrize("argv", [
+    ["synth", "--out", "{tmp}/s", "--num", "2", "--seed", "-1"],
+    ["datasets", "split", "--dataset", "synth", "--root", "{data}", "--out", "{tmp}/lists", "--seed", "-1"],
+    ["train", "--dataset", "synth", "--root", "{data}", "--seed", "-1", "--out", "{tmp}/run"],
+    ["demo", "--out", "{tmp}/demo", "--seed", "-1"],
+    ["train", "--dataset", "synth", "--root", "{data}", "--image-size", "100000x100000", "--out", "{tmp}/run"],
+    ["synth", "--out", "{tmp}/s", "--num", "10000000000000"],
+    ["reproduce", "--dataset", "synth", "--root", "{data}", "--seeds", "100000000000", "--out", "{tmp}/r"],
+    ["demo", "--out", "{tmp}/demo", "--epochs", "0"],
+    ["demo", "--out", "{tmp}/demo", "--epochs", "-1"],
+    ["demo", "--out", "{tmp}/demo", "--num", "2"],
+    ["generate", "--reference", "{tmp}/L.png", "--target", "{tmp}/R.png", "--road-mask", "{tmp}/M.png",
+     "--out", "{tmp}/G.png", "--inlier-threshold", "inf"],
+])
+def test_bad_values_are_refused_before_any_work(argv: list[str], trained: dict[str, Path], pair: dict[str, Path],
+                                                tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    argv = [a.format(tmp=tmp_path, data=trained["data"]) for a in argv]
+    before = set(tmp_path.rglob("*"))
+    t0 = time.perf_counter()
+    err = refused(capsys, argv)
+    assert time.perf_counter() - t0 < 10, "validated after starting work"
+    assert set(tmp_path.rglob("*")) == before, "left output behind"
+    assert "--splits" not in err
+
+
+def test_huge_image_size_in_a_checkpoint(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    import torch
+
+    ckpt = torch.load(trained["ckpt"], map_location="cpu", weights_only=True)
+    ckpt["hyper_parameters"]["image_size"] = [100000, 100000]
+    crafted = tmp_path / "huge.ckpt"
+    torch.save(ckpt, crafted)
+    images = trained["data"] / "data_road" / "training" / "image_2"
+    refused(capsys, ["predict", "--checkpoint", str(crafted), "--input", str(images), "--out", str(tmp_path / "p"),
+                     "--no-progress"], match="image size")
+    assert not (tmp_path / "p").exists()
+
+
+def test_foreign_onnx_model(tmp_path: Path, trained: dict[str, Path], capsys: pytest.CaptureFixture) -> None:
+    import onnx
+    from onnx import TensorProto, helper
+
+    x = helper.make_tensor_value_info("features", TensorProto.FLOAT, [1, 10])
+    y = helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 10])
+    graph = helper.make_graph([helper.make_node("Relu", ["features"], ["y"])], "foreign", [x], [y])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    path = tmp_path / "foreign.onnx"
+    onnx.save(model, path)
+    images = trained["data"] / "data_road" / "training" / "image_2"
+    refused(capsys, ["predict", "--onnx", str(path), "--input", str(images), "--out", str(tmp_path / "p"),
+                     "--no-progress"], match="input")
+    assert not (tmp_path / "p").exists()
+
+
+CALIB_KEYS = ("P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam", "Tr_imu_to_velo", "Tr_cam_to_road")
+
+
+def _edit_calib(path: Path, key: str, values: str) -> None:
+    lines = [f"{key}: {values}" if line.startswith(key + ":") else line for line in path.read_text().splitlines()]
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize("key,values,match", [
+    ("P2", "1 2", "P2"),
+    ("P2", " ".join(["nan"] * 12), "P2"),
+    ("Tr_cam_to_road", " ".join(["0"] * 12), "Tr_cam_to_road"),
+])
+def test_evaluate_kitti_bev_malformed_calibration(key: str, values: str, match: str, trained: dict[str, Path],
+                                                  tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    training = trained["data"] / "data_road" / "training"
+    calib = tmp_path / "calib"
+    shutil.copytree(training / "calib", calib)
+    _edit_calib(sorted(calib.iterdir())[0], key, values)
+    refused(capsys, ["evaluate-kitti", "--bev", "--calib", str(calib), "--gt", str(training / "gt_image_2"),
+                     "--pred", str(training / "gt_image_2"), "--out", str(tmp_path / "s.json")], match=match)
+    assert not (tmp_path / "s.json").exists()
+
+
+def test_kitti_submit_singular_calibration(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    root = tmp_path / "kitti"
+    (root / "data_road").mkdir(parents=True)
+    shutil.copytree(trained["data"] / "data_road" / "training", root / "data_road" / "testing")
+    calib = sorted((root / "data_road" / "testing" / "calib").iterdir())
+    _edit_calib(calib[-1], "Tr_cam_to_road", " ".join(["0"] * 12))
+    out = tmp_path / "sub"
+    refused(capsys, ["kitti-submit", "--checkpoint", str(trained["ckpt"]), "--root", str(root), "--out", str(out),
+                     "--no-progress"], match="Tr_cam_to_road")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("yaml_text,match", [
+    ("road_ids: [abc]\n", "road_ids"),
+    ("label_channel: 99\n", "label_channel"),
+    ("depth_scale: abc\n", "depth_scale"),
+])
+def test_generic_yaml_wrong_types(yaml_text: str, match: str, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    root = tmp_path / "generic"
+    for sub in ("left", "right", "labels"):
+        (root / sub).mkdir(parents=True)
+    left, right, label, _ = synthetic_pair((64, 96))
+    write_image(root / "left" / "a.png", left)
+    write_image(root / "right" / "a.png", right)
+    write_image(root / "labels" / "a.png", (label.road * 1).astype(np.uint8))
+    (root / "freespace.yaml").write_text("left: left\nright: right\nlabel: labels\n" + yaml_text)
+    refused(capsys, ["datasets", "info", "--dataset", "generic", "--root", str(root), "--no-progress"], match=match)
+
+
+# --------------------------------------------------------------------------------------- 7. no half results
+def test_evaluate_with_a_corrupt_frame_leaves_nothing(trained: dict[str, Path], tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture) -> None:
+    root = _kitti_root(trained, tmp_path)
+    sorted((root / "data_road" / "training" / "image_2").iterdir())[-1].write_bytes(b"corrupt")
+    out = tmp_path / "eval"
+    refused(capsys, ["evaluate", "--checkpoint", str(trained["ckpt"]), "--dataset", "synth", "--root", str(root),
+                     "--subset", "all", "--no-progress", "--out", str(out)])
+    assert not out.exists()
+
+
+def test_failed_kitti_submit_keeps_the_previous_submission(trained: dict[str, Path], tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture) -> None:
+    root = tmp_path / "kitti"
+    (root / "data_road").mkdir(parents=True)
+    shutil.copytree(trained["data"] / "data_road" / "training", root / "data_road" / "testing")
+    out = tmp_path / "sub"
+    assert main(["kitti-submit", "--checkpoint", str(trained["ckpt"]), "--root", str(root), "--out", str(out),
+                 "--no-progress"]) == 0
+    before = snapshot(out)
+    sorted((root / "data_road" / "testing" / "image_2").iterdir())[-1].write_bytes(b"corrupt")
+    refused(capsys, ["kitti-submit", "--checkpoint", str(trained["ckpt"]), "--root", str(root), "--out", str(out),
+                     "--no-progress"])
+    assert snapshot(out) == before
+
+
+# ------------------------------------------------------- 8. datasets info lists what generate/train would hit
+@pytest.mark.parametrize("damage", ["8-bit disparity", "all-black label"])
+def test_info_finds_what_generate_would_hit(damage: str, trained: dict[str, Path], tmp_path: Path,
+                                            capsys: pytest.CaptureFixture) -> None:
+    root = _kitti_root(trained, tmp_path)
+    training = root / "data_road" / "training"
+    if damage == "8-bit disparity":
+        victim = sorted((training / "disparity").iterdir())[0]
+        write_image(victim, np.full((128, 160), 30, np.uint8))
+    else:
+        victim = sorted((training / "gt_image_2").iterdir())[0]
+        write_image(victim, np.zeros((128, 160, 3), np.uint8))
+    capsys.readouterr()
+    assert main(["datasets", "info", "--dataset", "synth", "--root", str(root), "--no-progress"]) == 1
+    out = capsys.readouterr().out
+    frame = victim.stem.replace("_road", "")
+    assert frame in out and ("16-bit" in out if damage == "8-bit disparity" else "no road" in out), out
+
+
+# --------------------------------------------------------------------------------------- 9. smaller fixes
+def test_sgbm_on_a_narrow_image_says_why(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    left, right, label, _ = synthetic_pair((96, 100))
+    for name, img in (("L", left), ("R", right), ("M", (label.road & label.valid).astype(np.uint8) * 255)):
+        write_image(tmp_path / f"{name}.png", img)
+    err = refused(capsys, ["generate", "--reference", str(tmp_path / "L.png"), "--target", str(tmp_path / "R.png"),
+                           "--road-mask", str(tmp_path / "M.png"), "--out", str(tmp_path / "G.png")])
+    assert "width" in err and "--max-disparity" in err and "disparity file" not in err
+
+
+def test_killed_generate_leaves_no_workers(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    write_dataset(data, 40, seed=1, config=SMALL, progress=False)
+    proc = subprocess.Popen([sys.executable, "-m", "freespace.cli", "generate", "--dataset", "synth", "--root",
+                             str(data), "--out", str(tmp_path / "gen"), "--workers", "2", "--disparity-source",
+                             "sgbm", "--cache-dir", str(tmp_path / "cache")],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    children: list[int] = []
+    while time.time() < deadline and len(children) < 2:
+        time.sleep(0.2)
+        children = _children(proc.pid)
+    assert len(children) >= 2, "the workers never started"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    deadline = time.time() + 15
+    while time.time() < deadline and any(_alive(c) for c in children):
+        time.sleep(0.2)
+    alive = [c for c in children if _alive(c)]
+    for c in alive:
+        os.kill(c, signal.SIGKILL)
+    assert not alive, "worker processes outlived the killed command"
+
+
+def _children(pid: int) -> list[int]:
+    out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True).stdout
+    return [int(p) for p in out.split()]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split()[2] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+# ------------------------------------------------------------------------ 10. output when not on a terminal
+def test_training_off_a_terminal_prints_lines_not_bar_frames(trained: dict[str, Path], tmp_path: Path) -> None:
+    res = run_cli("train", "--dataset", "synth", "--root", str(trained["data"]), "--model", "segnet", "--epochs", "2",
+                  "--image-size", "64x64", "--out", str(tmp_path / "run"), timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    text = res.stdout + res.stderr
+    assert "\r" not in text
+    assert sum("epoch" in line.lower() for line in text.splitlines()) >= 2, text
