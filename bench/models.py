@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, write_section  # noqa: E402
 
 from freespace.models import create_model, list_models  # noqa: E402
-from freespace.models.smp_models import PRESETS  # noqa: E402
+from freespace.models.smp_models import PRESETS, smp_kwargs  # noqa: E402
 
 SIZE = (384, 1248)
 
@@ -54,7 +54,7 @@ def main() -> None:
             print(rows[-1], flush=True)
             if name in PRESETS:
                 cls = {"unet": smp.Unet, "deeplabv3plus": smp.DeepLabV3Plus}[name]
-                plain = cls(encoder_weights=None, classes=2, **PRESETS[name][preset]).eval()
+                plain = cls(encoder_weights=None, classes=2, **smp_kwargs(name, PRESETS[name][preset])).eval()
                 t_plain = seconds(plain, args.repeat)
                 ratios.append(f"| {name} | {preset} | {t:.3f} | {t_plain:.3f} | {t / t_plain:.2f} |")
                 print(ratios[-1], flush=True)

@@ -57,3 +57,7 @@ def check_seed(seed: int, flag: str = "--seed") -> int:
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise InvalidOptionError(f"{flag} must be an integer in 0…{MAX_SEED}, got {seed!r}")
     return seed
+
+
+class PretrainedWeightsError(FreespaceError, RuntimeError):
+    """Pretrained weights cannot be loaded (no network to download them, or none exist for that configuration)."""

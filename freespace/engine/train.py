@@ -27,6 +27,7 @@ from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
 from freespace.errors import CorruptFileError, InvalidOptionError
 from freespace.io import atomic_write_bytes, write_csv, write_json
 from freespace.log import on_terminal, quiet_lightning
+from freespace.models.registry import warn_if_below_intact_size
 
 log = logging.getLogger(__name__)
 
@@ -179,6 +180,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         config.image_size = tuple(data["size"])  # resolved
         config.save(run_dir / "config.yaml")
     ds, size = data["dataset"], tuple(data["size"])
+    warn_if_below_intact_size(config.model, config.preset, size)
     train, val, test = (RoadSegmentationDataset(ds, data[k], size=size, augment=k == "train", seed=config.seed,
                                                 cache=True, virtual=data["virtual"] if k == "train" else None)
                         for k in ("train", "val", "test"))
@@ -191,10 +193,8 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
     module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay,
                         image_size=list(size))
-    if config.model == "dupsampling" and not resume:
-        kept = module.net.fit_reconstruction(train[i]["label"] for i in range(len(data["train"])))
-        log.info("DUpsampling reconstruction fitted from %d training labels (%.1f%% of the variance kept)",
-                 len(data["train"]), 100 * kept)
+    if not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
+        module.net.prepare(train[i]["label"] for i in range(len(data["train"])))
     callbacks, ckpt = _callbacks(run_dir, config.patience)
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",

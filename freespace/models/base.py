@@ -1,4 +1,4 @@
-"""The base class and registry of the segmentation networks.
+"""The base class of the segmentation networks (the registry is :mod:`freespace.models.registry`).
 
 Every network takes ``N×3×H×W`` float images in [0, 1] (RGB) and normalises them itself (ImageNet
 mean and std live in buffers, so a checkpoint is self-contained). Any H and W work: the input is padded
@@ -10,18 +10,17 @@ outputs and a target into the training losses (cross-entropy plus the network's 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Iterable
 from typing import Any
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from freespace.errors import FreespaceError, InvalidOptionError
+from freespace.errors import InvalidOptionError, PretrainedWeightsError
 from freespace.io import IGNORE_INDEX
 
-__all__ = ["SegmentationModel", "register_model", "create_model", "list_models", "main_logits", "IGNORE_INDEX",
-           "load_smp_encoder"]
+__all__ = ["SegmentationModel", "main_logits", "IGNORE_INDEX", "load_smp_encoder"]
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -69,6 +68,18 @@ class SegmentationModel(nn.Module):
     def forward_features(self, x: torch.Tensor) -> Outputs:
         raise NotImplementedError
 
+    @torch.no_grad()
+    def prepare(self, train_labels: Iterable[torch.Tensor]) -> None:
+        """Fit what the network learns from the training labels before training (no-op by default).
+
+        The trainer calls it once, before the first epoch (not on resume: what it fits lives in buffers
+        and comes back with the checkpoint). DUpsampling fits its reconstruction here, SegNet its
+        median-frequency class weights.
+
+        Args:
+            train_labels: ``H×W`` (or ``N×H×W``) int64 class maps of the training frames (255 = don't care).
+        """
+
     def forward(self, x: torch.Tensor) -> Outputs:
         """``x``: ``N×3×H×W`` RGB in [0, 1]. Returns logits ``N×C×H×W`` (eval) or the train-mode outputs."""
         if x.dim() != 4 or x.shape[1] != 3:
@@ -92,47 +103,6 @@ class SegmentationModel(nn.Module):
         return {"total": seg, "seg": seg}
 
 
-_REGISTRY: dict[str, Callable[..., SegmentationModel]] = {}
-
-
-def register_model(name: str) -> Callable[[Callable[..., SegmentationModel]], Callable[..., SegmentationModel]]:
-    """Decorator: make a model factory available to :func:`create_model` under ``name``."""
-    def wrap(fn: Callable[..., SegmentationModel]) -> Callable[..., SegmentationModel]:
-        _REGISTRY[name] = fn
-        return fn
-    return wrap
-
-
-def list_models() -> list[str]:
-    """Names accepted by :func:`create_model`."""
-    _load()
-    return sorted(_REGISTRY)
-
-
-def create_model(name: str, num_classes: int = 2, **options: Any) -> SegmentationModel:
-    """Build the network called ``name``.
-
-    Args:
-        name: ``segnet``, ``unet``, ``deeplabv3plus``, ``denseaspp``, ``dupsampling`` or ``gscnn``.
-        num_classes: output classes (2: non-road, road).
-        options: the network's options; every network takes ``preset`` (``light``, the default, trains
-            on a CPU; ``paper``, the original papers' configuration) and, where an ImageNet encoder
-            exists, ``encoder_weights`` (None by default; ``"imagenet"`` needs the network).
-
-    Raises:
-        InvalidOptionError: unknown name (the message lists the choices) or option.
-    """
-    _load()
-    if name not in _REGISTRY:
-        raise InvalidOptionError(f"unknown model {name!r}; choose one of {', '.join(sorted(_REGISTRY))}")
-    try:
-        model = _REGISTRY[name](num_classes=num_classes, **options)
-    except TypeError as exc:
-        raise InvalidOptionError(f"bad option for model {name!r}: {exc}") from None
-    model.config = {"name": name, "num_classes": num_classes, **options}
-    return model
-
-
 def load_smp_encoder(encoder_name: str, weights: str | None, **kwargs: Any) -> nn.Module:
     """An encoder from segmentation-models-pytorch; a failed weight download is a one-line error."""
     import segmentation_models_pytorch as smp
@@ -144,10 +114,6 @@ def load_smp_encoder(encoder_name: str, weights: str | None, **kwargs: Any) -> n
     except Exception as exc:  # network errors from the weight download
         if weights is None:
             raise
-        raise FreespaceError(f"cannot load {weights!r} weights for encoder {encoder_name!r} "
-                             f"({type(exc).__name__}: {str(exc).splitlines()[0][:120]}); this needs the network "
-                             f"— train from scratch with encoder_weights=None") from None
-
-
-def _load() -> None:
-    from freespace.models import denseaspp, dupsampling, gscnn, segnet, smp_models  # noqa: F401
+        raise PretrainedWeightsError(f"cannot load {weights!r} weights for encoder {encoder_name!r} "
+                                     f"({type(exc).__name__}: {str(exc).splitlines()[0][:120]}); this needs the "
+                                     f"network — train from scratch with encoder_weights=None") from None

@@ -1,7 +1,9 @@
 """DenseASPP (Yang et al., CVPR 2018).
 
 A DenseNet backbone at output stride 8 (no pooling in the 2nd and 3rd transitions; dense blocks 3 and
-4 dilated by 2 and 4), then densely connected atrous convolutions with rates 3, 6, 12, 18, 24: each
+4 dilated by 2 and 4) ending, as the official network does, in *transition4* (BN-ReLU-1×1 convolution
+to half the channels, no pooling) and the final batch norm; then densely connected atrous convolutions
+with rates 3, 6, 12, 18, 24: each
 unit (BN-ReLU-1×1 conv to ``d_feature0``, BN-ReLU-3×3 atrous conv to ``d_feature1``, dropout) sees the
 backbone features and every earlier unit's output. A 1×1 classifier on the concatenation, upsampled ×8.
 Feature sizes follow the official configurations: DenseNet-121 128/64, -169 336/168, -161 512/128.
@@ -14,7 +16,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from freespace.errors import InvalidOptionError
-from freespace.models.base import SegmentationModel, load_smp_encoder, register_model
+from freespace.models.base import SegmentationModel, load_smp_encoder
+from freespace.models.registry import register_model
 
 __all__ = ["DenseASPP", "BACKBONES"]
 
@@ -58,8 +61,14 @@ class DenseASPP(SegmentationModel):
             for layer in block.children():
                 layer.conv2.dilation = (dilation, dilation)
                 layer.conv2.padding = (dilation, dilation)
+        # transition4 (official DenseASPP): BN-ReLU-1×1 conv to half the channels, stride 1; a new norm5
+        channels = features.norm5.num_features // 2
+        norm5 = nn.BatchNorm2d(channels)
+        del features.norm5
+        features.add_module("transition4", nn.Sequential(
+            nn.BatchNorm2d(channels * 2), nn.ReLU(inplace=True), nn.Conv2d(channels * 2, channels, 1, bias=False)))
+        features.add_module("norm5", norm5)
         self.features = features
-        channels = features.norm5.num_features
         self.units = nn.ModuleList(
             _AtrousUnit(channels + i * d1, d0, d1, rate, dropout0, bn_start=i > 0) for i, rate in enumerate(RATES))
         self.classifier = nn.Sequential(nn.Dropout2d(dropout1), nn.Conv2d(channels + len(RATES) * d1, num_classes, 1))
@@ -72,12 +81,11 @@ class DenseASPP(SegmentationModel):
         return F.interpolate(self.classifier(feature), size=(h, w), mode="bilinear", align_corners=False)
 
 
-@register_model("denseaspp")
-def denseaspp(num_classes: int = 2, preset: str = "light", backbone: str | None = None,
-              encoder_weights: str | None = None, **options: float) -> DenseASPP:
+@register_model("denseaspp", {"light": {"backbone": "light"}, "paper": {"backbone": "densenet121"}},
+                geometry=lambda o: (8, max(RATES)))
+def denseaspp(num_classes: int = 2, backbone: str = "light", dropout0: float = 0.1, dropout1: float = 0.1,
+              encoder_weights: str | None = None) -> DenseASPP:
     """DenseASPP. ``light``: a small DenseNet (growth 16, blocks 3-6-12-8) with 64/32 features;
     ``paper``: DenseNet-121 with the official 128/64. ``backbone`` picks any of :data:`BACKBONES`."""
-    presets = {"light": "light", "paper": "densenet121"}
-    if preset not in presets:
-        raise InvalidOptionError(f"unknown preset {preset!r}; choose one of {', '.join(presets)}")
-    return DenseASPP(num_classes, backbone=backbone or presets[preset], encoder_weights=encoder_weights, **options)
+    return DenseASPP(num_classes, backbone=backbone, dropout0=dropout0, dropout1=dropout1,
+                     encoder_weights=encoder_weights)
