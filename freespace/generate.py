@@ -444,7 +444,6 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     Returns:
         The summary (also written to ``summary.json``): counts, ``failed`` (frame → reason), means.
     """
-    global _DATASET
     options.check()
     if workers < 1:
         raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
@@ -459,13 +458,33 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     _claim_output(out_dir, settings, overwrite, None if shard is None else {f.name for f in dataset.frames},
                   (summary_name, report_name))
     write_json(out_dir / SETTINGS_NAME, settings)
-    report_dir = out_dir / "reports"
     frames = dataset.frames
+    records, jobs = _plan(frames, out_dir, options, settings)
+    log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
+    t0 = time.perf_counter()
+    records.update(_run_jobs(dataset, jobs, workers, progress))
+    ordered = [records[f.name] for f in frames]
+    for record in ordered:
+        if record["status"] == "failed":
+            log.warning("frame %s failed: %s", record["frame"], record["reason"])
+    _write_report_csv(out_dir / report_name, ordered)
+    summary = {"dataset": dataset.name, "root": str(dataset.root),
+               **({"shard": f"{shard[0]}/{shard[1]}"} if shard is not None else {}),
+               **_totals(ordered), "wall_seconds": round(time.perf_counter() - t0, 3), "workers": workers,
+               "options": {"robust": options.robust, "inlier_threshold": options.inlier_threshold,
+                           "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode}}
+    write_json(out_dir / summary_name, summary)
+    return summary
+
+
+def _plan(frames: list[Any], out_dir: Path, options: FitOptions,
+          settings: dict[str, Any]) -> tuple[dict[str, dict[str, Any]], list[tuple]]:
+    """The records of frames already generated with these settings, and the jobs of the others."""
     records: dict[str, dict[str, Any]] = {}
     jobs = []
     for i, frame in enumerate(frames):
         image_path = out_dir / f"{frame.name}.png"
-        report_path = report_dir / f"{frame.name}.json"
+        report_path = out_dir / "reports" / f"{frame.name}.json"
         if image_path.is_file() and report_path.is_file():
             try:
                 report = json.loads(report_path.read_text())
@@ -476,11 +495,16 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
             except (OSError, ValueError, AttributeError):
                 pass  # unreadable report: do the frame again
         jobs.append((i, image_path, report_path, options, settings))
-    log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
+    return records, jobs
+
+
+def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool) -> dict[str, dict[str, Any]]:
+    """Run :func:`_process_frame` over ``jobs`` in this process or in ``workers`` processes."""
+    global _DATASET
     from freespace.log import progress_bar
 
+    records: dict[str, dict[str, Any]] = {}
     bar = progress_bar(None, total=len(jobs), desc="generate", unit="frame", enabled=progress and bool(jobs))
-    t0 = time.perf_counter()
     if workers == 1 or len(jobs) <= 1:
         previous, _DATASET = _DATASET, dataset
         try:
@@ -494,42 +518,28 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
         # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
         with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset, os.getpid()),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(_process_frame, *job) for job in jobs]
-            for future in as_completed(futures):
+            for future in as_completed([pool.submit(_process_frame, *job) for job in jobs]):
                 record = future.result()
                 records[record["frame"]] = record
                 bar.update()
     bar.close()
-    wall = time.perf_counter() - t0
-    ordered = [records[f.name] for f in frames]
-    for record in ordered:
-        if record["status"] == "failed":
-            log.warning("frame %s failed: %s", record["frame"], record["reason"])
-    _write_report_csv(out_dir / report_name, ordered)
-    ok = [r for r in ordered if r["status"] != "failed"]
+    return records
+
+
+def _totals(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Counts, failures by frame and the mean fit statistics of a run's frame records."""
+    ok = [r for r in records if r["status"] != "failed"]
 
     def mean(key: str) -> float | None:
         vals = [r[key] for r in ok if r.get(key) is not None]
         return float(np.mean(vals)) if vals else None
 
-    summary = {
-        "dataset": dataset.name,
-        "root": str(dataset.root),
-        **({"shard": f"{shard[0]}/{shard[1]}"} if shard is not None else {}),
-        "frames": len(ordered),
-        "generated": sum(r["status"] == "done" for r in ordered),
-        "skipped": sum(r["status"] == "skipped" for r in ordered),
-        "failed": {r["frame"]: r["reason"] for r in ordered if r["status"] == "failed"},
-        "mean_roll_deg": mean("roll_deg"),
-        "mean_rms_px": mean("rms_px"),
-        "mean_inlier_fraction": float(np.mean([r["num_inliers"] / r["num_valid"] for r in ok])) if ok else None,
-        "wall_seconds": round(wall, 3),
-        "workers": workers,
-        "options": {"robust": options.robust, "inlier_threshold": options.inlier_threshold,
-                    "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode},
-    }
-    write_json(out_dir / summary_name, summary)
-    return summary
+    return {"frames": len(records),
+            "generated": sum(r["status"] == "done" for r in records),
+            "skipped": sum(r["status"] == "skipped" for r in records),
+            "failed": {r["frame"]: r["reason"] for r in records if r["status"] == "failed"},
+            "mean_roll_deg": mean("roll_deg"), "mean_rms_px": mean("rms_px"),
+            "mean_inlier_fraction": float(np.mean([r["num_inliers"] / r["num_valid"] for r in ok])) if ok else None}
 
 
 _CSV_FIELDS = ["frame", "status", "roll_deg", "kappa_hat", "kappa", "num_valid", "num_inliers", "rms_px",

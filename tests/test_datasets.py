@@ -382,7 +382,7 @@ def test_torch_dataset_training_options(tmp_path: Path) -> None:
     assert torch.equal(a["image"], torch.full((3, 40, 80), 200 / 255.0))  # the override image, resized
     full = RoadSegmentationDataset(kitti, items)[1]["label"]
     assert torch.equal(a["label"], full[::4, ::4])  # nearest (OpenCV: source pixel 4·i): no new values
-    assert torch.equal(a["label"], b["label"]) and set(cached._cache) == {1} and not plain._cache
+    assert torch.equal(a["label"], b["label"]) and set(cached._cache) == {(1, str(tmp_path / "view.png"))} and not plain._cache
     aug = RoadSegmentationDataset(kitti, items, size=(40, 80), augment=True, seed=3)
     again = RoadSegmentationDataset(kitti, items, size=(40, 80), augment=True, seed=3)
     draws = [aug[(e, 0)]["label"] for e in range(4)]

@@ -205,7 +205,7 @@ def test_evaluate_subset_names(tiny: Path, tmp_path: Path, capsys: pytest.Captur
 
 def test_ddp_two_cpu_processes(tiny: Path, tmp_path: Path) -> None:
     run = tmp_path / "ddp"
-    cmd = [sys.executable, "-m", "freespace.cli", "train", "--dataset", "synth", "--root", str(tiny), "--model",
+    cmd = [sys.executable, "-m", "freespace.cli", "-v", "train", "--dataset", "synth", "--root", str(tiny), "--model",
            "segnet", "--batch-size", "4", "--no-progress", "--epochs", "2", "--devices", "2", "--strategy", "ddp",
            "--out", str(run)]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONWARNINGS": "ignore"})

@@ -31,11 +31,6 @@ LAYERS: list[tuple[str, ...]] = [
     ("freespace.cli",),
 ]
 
-# Cycles that other branches of issue 11 remove (the integrator deletes each entry once they are merged:
-# the strict xfail below then fails as a reminder). Nothing else may be added here.
-PENDING_CYCLES_OTHER_BRANCH: dict[frozenset[str], str] = {}
-
-
 def _modules() -> dict[str, Path]:
     mods = {}
     for path in sorted(PACKAGE.rglob("*.py")):
@@ -122,10 +117,6 @@ def _cycles(graph: dict[str, dict[str, int]]) -> list[frozenset[str]]:
     return found
 
 
-def _pending(a: str, b: str) -> bool:
-    return any({a, b} <= cycle for cycle in PENDING_CYCLES_OTHER_BRANCH)
-
-
 def test_every_module_has_a_layer() -> None:
     assert [m for m in _modules() if _layer(m) is None] == [], "add new modules to LAYERS and to the README"
 
@@ -134,22 +125,13 @@ def test_no_upward_imports() -> None:
     graph = _graph()
     upward = [f"{m} (layer {_layer(m)}) imports {d} (layer {_layer(d)}) at line {line}"
               for m, deps in graph.items() for d, line in deps.items()
-              if (_layer(d) or 0) > (_layer(m) or 0) and not _pending(m, d)]
+              if (_layer(d) or 0) > (_layer(m) or 0)]
     assert upward == []
 
 
 def test_no_import_cycles() -> None:
-    cycles = [sorted(c) for c in _cycles(_graph()) if c not in PENDING_CYCLES_OTHER_BRANCH]
+    cycles = [sorted(c) for c in _cycles(_graph())]
     assert cycles == []
-
-
-@pytest.mark.parametrize("cycle", [
-    pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=reason), id="+".join(sorted(c)))
-    for c, reason in PENDING_CYCLES_OTHER_BRANCH.items()])
-def test_pending_cycle_is_gone(cycle: frozenset[str]) -> None:
-    graph = _graph()
-    assert cycle not in _cycles(graph)
-    assert not any(_layer(d) > _layer(m) for m in cycle for d in graph[m] if d in cycle)  # type: ignore[operator]
 
 
 def test_checker_sees_a_cycle_and_an_upward_import() -> None:
