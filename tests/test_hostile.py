@@ -127,6 +127,15 @@ def test_generate_dataset_out_inside_the_dataset(trained: dict[str, Path], tmp_p
     assert snapshot(root) == before
 
 
+def test_train_run_folder_inside_the_dataset(trained: dict[str, Path], tmp_path: Path,
+                                            capsys: pytest.CaptureFixture) -> None:
+    root = _kitti_root(trained, tmp_path)
+    before = snapshot(root)
+    refused(capsys, ["train", "--dataset", "synth", "--root", str(root), "--out", str(root / "run")], match="inside")
+    refused(capsys, ["train", "--dataset", "synth", "--root", str(root), "--out", str(tmp_path)], match="inside")
+    assert snapshot(root) == before
+
+
 def test_predict_out_is_the_input(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     images = tmp_path / "images"
     shutil.copytree(trained["data"] / "data_road" / "training" / "image_2", images)
