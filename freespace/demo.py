@@ -31,6 +31,16 @@ def _mae(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
     return float(np.abs(a.astype(np.float64) - b.astype(np.float64))[mask].mean())
 
 
+def _least_frames(frames_per_scenario: int, seed: int) -> int:
+    """The fewest rendered frames whose paper split (by drive) leaves train, val and test non-empty."""
+    from freespace.data.splits import make_splits
+
+    n = frames_per_scenario
+    while not all(make_splits([(f"{i:06d}", str(i // frames_per_scenario)) for i in range(n)], seed=seed).values()):
+        n += frames_per_scenario
+    return n
+
+
 def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthConfig | None = None,
              train: bool = True, full: bool = False, epochs: int | None = None, figures: int = 4) -> dict[str, Any]:
     """Render ``num_frames`` stereo frames, generate their augmented views, and report; then (``train``)
@@ -45,14 +55,14 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
     right image and of the generated image; and the results table.
     """
     config = config or SynthConfig(width=160, height=128, frames_per_scenario=4)
-    least = 3 * config.frames_per_scenario if train else 1  # train, val and test need a drive each
+    check_seed(seed)
+    least = _least_frames(config.frames_per_scenario, seed) if train else 1
     if not least <= num_frames <= MAX_FRAMES:
         raise InvalidOptionError(f"--num must be in {least}…{MAX_FRAMES:,}"
-                                 + (f" (training needs 3 drives of {config.frames_per_scenario} frames)" if train else "")
-                                 + f", got {num_frames}")
+                                 + (f" (training needs drives of {config.frames_per_scenario} frames for train, val "
+                                    f"and test)" if train else "") + f", got {num_frames}")
     if epochs is not None and epochs < 1:
         raise InvalidOptionError(f"--epochs must be ≥ 1, got {epochs}")
-    check_seed(seed)
     out = Path(out)
     t0 = time.perf_counter()
     log.info("rendering %d stereo frames into %s", num_frames, out / "dataset")

@@ -52,7 +52,7 @@ def test_demo_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
 
 def test_demo_mistake(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["demo", "--out", str(tmp_path), "--num", "0"]) == 2
-    assert "--num must be in 12…" in capsys.readouterr().err and list(tmp_path.iterdir()) == []
+    assert "--num must be in 16…" in capsys.readouterr().err and list(tmp_path.iterdir()) == []
 
 
 def test_viz() -> None:
