@@ -183,7 +183,8 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera-heights", type=_range, default=(1.4, 2.0), metavar="MIN,MAX",
                    help="camera height range above the road in metres (default 1.4,2.0)")
     p.add_argument("--pitches", type=_range, default=(-2.0, 2.0), metavar="MIN,MAX",
-                   help="rig pitch range in degrees, positive = looking up (default -2,2)")
+                   help="rig pitch range in degrees, positive = looking up; write --pitches=-5,5 when MIN is negative "
+                        "(default -2,2)")
     p.add_argument("--weather", help="comma-separated subset of clear,cloudy,rain,sunset,dusk,fog (default all)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.add_argument("--overwrite", action="store_true",
