@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import io as _io
 import logging
+import os
 import shutil
 import warnings
 import time
@@ -106,7 +107,7 @@ def _checkpoint_io(run_dir: Path):
                 raise CorruptFileError(f"{path} is not a freespace training checkpoint")
             for state in (checkpoint.get("callbacks") or {}).values():
                 if isinstance(state, dict) and "dirpath" in state:
-                    _confine_paths(state, run_dir / "checkpoints")
+                    _confine_paths(state, Path(os.path.realpath(run_dir / "checkpoints")))  # as Lightning keeps it
             return checkpoint
 
     return RunCheckpointIO()
