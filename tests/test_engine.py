@@ -162,17 +162,17 @@ def test_config_file_and_flags(tiny: Path, tmp_path: Path, monkeypatch: pytest.M
 
     monkeypatch.setattr(train_module, "run_training", fake_training)
     run = TrainConfig(dataset="synth", root=str(tiny), out=str(tmp_path / "a"), model="segnet", epochs=7,
-                      image_size=(64, 96), splits_dir=str(tmp_path), disparity_mode="sgbm", tensorboard=False)
+                      image_size=(64, 96), splits_dir=str(tmp_path / "lists"), disparity_mode="sgbm", tensorboard=False)
     run.save(tmp_path / "config.yaml")
     # a run's config.yaml, flags override it
     assert main(["train", "--config", str(tmp_path / "config.yaml"), "--epochs", "3", "--out", str(tmp_path / "b")]) == 0
     assert seen[-1] == dataclasses.replace(run, epochs=3, out=str(tmp_path / "b"))
     # flags alone: every field has one (names of the CLI kept: --splits, --disparity-source)
     assert main(["train", "--dataset", "synth", "--root", str(tiny), "--out", str(tmp_path / "c"), "--model", "segnet",
-                 "--epochs", "7", "--image-size", "64x96", "--splits", str(tmp_path), "--disparity-source", "sgbm"]) == 0
+                 "--epochs", "7", "--image-size", "64x96", "--splits", str(tmp_path / "lists"), "--disparity-source", "sgbm"]) == 0
     assert seen[-1] == dataclasses.replace(run, out=str(tmp_path / "c"))
     # a config.yaml written before the renames still reads
-    old = {**run.to_dict(), "splits": str(tmp_path), "disparity": "sgbm"}
+    old = {**run.to_dict(), "splits": str(tmp_path / "lists"), "disparity": "sgbm"}
     del old["splits_dir"], old["disparity_mode"]
     (tmp_path / "old.yaml").write_text(yaml.safe_dump(old))
     assert TrainConfig.load(tmp_path / "old.yaml") == run
