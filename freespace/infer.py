@@ -3,14 +3,11 @@
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import io as _io
 import itertools
 import json
 import logging
-import os
-import shutil
 import tempfile
 import time
 import zipfile
@@ -20,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import InputFileError, InvalidOptionError, OutputError
+from freespace.errors import InputFileError, InvalidOptionError
 from freespace.io import (
     PathLike,
     atomic_write_bytes,
@@ -84,33 +81,6 @@ def _predict_marker(out: Path) -> str:
     return "summary.json"
 
 
-@contextlib.contextmanager
-def _merged_folder(out: Path, marker: str) -> Iterator[Path]:
-    """Where a shard writes: a temporary folder beside ``out`` whose files are then moved into ``out``,
-    one atomic rename each, beside the other shards' (their frames never overlap). Nothing reaches
-    ``out`` when the block raises. The shard's summary ``marker`` goes first, so that a shard starting
-    meanwhile sees a folder that ``predict`` writes."""
-    if out.exists() and not out.is_dir():
-        raise InvalidOptionError(f"--out {out} is a file; give a folder")
-    if out.is_dir() and any(out.iterdir()) and _predict_marker(out) not in {p.name for p in out.iterdir()}:
-        raise InvalidOptionError(f"--out {out} holds files that freespace predict did not write; choose a new or "
-                                 f"empty folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
-    except OSError as exc:
-        raise OutputError(f"cannot write {out}: {exc.strerror}; choose a writable output folder") from None
-    try:
-        yield tmp
-        files = sorted((p for p in tmp.rglob("*") if p.is_file()), key=lambda p: (p.name != marker, str(p)))
-        for path in files:
-            target = out / path.relative_to(tmp)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(path, target)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-
-
 def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_size: int = 4,
                    progress: bool = True, shard: tuple[int, int] | None = None) -> dict[str, Any]:
     """Write ``OUT/<name>.png`` (8-bit road confidence, the input's size), ``OUT/overlays/<name>.png`` and
@@ -137,7 +107,7 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
     out = Path(out)
     if shard is not None:
         source = _shard_source(source, shard)
-        with _merged_folder(out, _shard_marker(shard)) as staging:
+        with staged_folder(out, _predict_marker(out), "predict", merge=True) as staging:
             return _predict_into(predictor, source, staging, batch_size, progress, shard)
     with staged_folder(out, _predict_marker(out), "predict") as staging:
         return _predict_into(predictor, source, staging, batch_size, progress, None)

@@ -161,7 +161,7 @@ def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str,
 
 
 @contextmanager
-def staged_folder(out: PathLike, marker: str, command: str) -> Iterator[Path]:
+def staged_folder(out: PathLike, marker: str, command: str, *, merge: bool = False) -> Iterator[Path]:
     """An output folder written all or nothing, never mixed with an earlier run's files.
 
     Yields a temporary folder beside ``out`` to write into. When the block ends normally the temporary
@@ -173,6 +173,9 @@ def staged_folder(out: PathLike, marker: str, command: str) -> Iterator[Path]:
         marker: a file name that the command always writes, by which an earlier output of it is known
             (e.g. ``summary.json``). A non-empty ``out`` without it is refused: it holds someone else's files.
         command: the command's name, for the message.
+        merge: move the files into ``out`` one atomic rename each, beside the files already there, instead
+            of replacing ``out`` (shards of one run that write disjoint files); ``.json`` files go first, so
+            that a run starting meanwhile sees a folder the command writes.
     """
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -187,6 +190,13 @@ def staged_folder(out: PathLike, marker: str, command: str) -> Iterator[Path]:
         raise OutputError(f"cannot write {out}: {exc.strerror}; choose a writable output folder") from None
     try:
         yield tmp
+        if merge:
+            for path in sorted((p for p in tmp.rglob("*") if p.is_file()), key=lambda p: (p.suffix != ".json", str(p))):
+                target = out / path.relative_to(tmp)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(path, target)
+            shutil.rmtree(tmp, ignore_errors=True)
+            return
         os.chmod(tmp, 0o777 & ~_UMASK)
         old = None
         if out.exists():

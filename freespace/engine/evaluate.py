@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError
@@ -20,7 +21,7 @@ from freespace.metrics import RoadEvaluator
 from freespace.predictor import Predictor
 from freespace.viz import overlay_errors, write_pr_curve
 
-__all__ = ["evaluate_checkpoint"]
+__all__ = ["evaluate_checkpoint", "evaluate_frames"]
 
 
 def _frames(ds, subset: str, checkpoint: Path, splits_dir: PathLike | None) -> list[str]:
@@ -30,6 +31,29 @@ def _frames(ds, subset: str, checkpoint: Path, splits_dir: PathLike | None) -> l
     if not (folder / f"{subset}.txt").is_file():
         raise InputFileError(f"no split lists at {folder}; give --splits DIR (train.txt, val.txt, test.txt) or --subset all")
     return read_splits(folder, known=[f.name for f in ds.frames])[subset]
+
+
+def evaluate_frames(predictor: Predictor, ds: StereoRoadDataset, names: list[str], *, overlays: Path | None = None,
+                    progress: bool = False) -> tuple[RoadEvaluator, float]:
+    """Predict the named labelled frames of ``ds`` and count them at each frame's own size.
+
+    Returns the filled :class:`RoadEvaluator` and the seconds spent in the network; with ``overlays``,
+    writes ``<overlays>/<frame>.png`` (TP green, FN red, FP blue) too.
+    """
+    from freespace.log import progress_bar
+
+    evaluator, seconds = RoadEvaluator(), 0.0
+    for name in progress_bar(names, desc="evaluate", unit="frame", enabled=progress):
+        sample = ds.load(ds.index(name), right=False, disparity=False)
+        t0 = time.perf_counter()
+        prob = predictor.predict([sample.left])[0]
+        seconds += time.perf_counter() - t0
+        label = sample.label
+        evaluator.process(prob, label.road, label.valid)
+        if overlays is not None:
+            write_image(overlays / f"{name}.png",
+                        overlay_errors(sample.left, prob >= evaluator.threshold, label.road, label.valid))
+    return evaluator, seconds
 
 
 def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out: PathLike, subset: str = "test",
@@ -46,20 +70,8 @@ def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out:
     names = _frames(ds, subset, checkpoint, splits_dir)
     if not names:
         raise DatasetError(f"subset {subset!r} has no labelled frames")
-    from freespace.log import progress_bar
-
-    evaluator, seconds = RoadEvaluator(), 0.0
     with staged_folder(out, "metrics.json", "evaluate") as staging:  # all or nothing
-        for name in progress_bar(names, desc="evaluate", unit="frame", enabled=progress):
-            sample = ds.load(ds.index(name), right=False, disparity=False)
-            t0 = time.perf_counter()
-            prob = predictor.predict([sample.left])[0]
-            seconds += time.perf_counter() - t0
-            label = sample.label
-            evaluator.process(prob, label.road, label.valid)
-            pred = prob >= evaluator.threshold
-            write_image(staging / "overlays" / f"{name}.png",
-                        overlay_errors(sample.left, pred, label.road, label.valid))
+        evaluator, seconds = evaluate_frames(predictor, ds, names, overlays=staging / "overlays", progress=progress)
         scores = evaluator.evaluate()
         metrics = {**{k: scores[k] for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap")},
                    "seconds_per_frame": seconds / len(names), "frames": len(names), "split": subset,

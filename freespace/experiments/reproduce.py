@@ -167,7 +167,7 @@ def evaluate_shifted(run_dir: PathLike, dataset: str, test_root: PathLike) -> di
     ``RUN/shifted/metrics.json`` (accuracy, precision, recall, f_score, iou at p ≥ 0.5, max_f, ap as
     fractions; frames; the resolved root). Skipped when that file exists for the same root."""
     from freespace.data.registry import get_dataset
-    from freespace.metrics import RoadEvaluator
+    from freespace.engine.evaluate import evaluate_frames
     from freespace.predictor import Predictor
 
     run_dir = Path(run_dir)
@@ -183,11 +183,7 @@ def evaluate_shifted(run_dir: PathLike, dataset: str, test_root: PathLike) -> di
     names = [f.name for f in ds.labelled().frames]
     if not names:
         raise DatasetError(f"--test-root {test_root} has no labelled frames to test on")
-    evaluator = RoadEvaluator()
-    for name in names:
-        sample = ds.load(ds.index(name), right=False, disparity=False)
-        evaluator.process(predictor.predict([sample.left])[0], sample.label.road, sample.label.valid)
-    scores = evaluator.evaluate()
+    scores = evaluate_frames(predictor, ds, names)[0].evaluate()
     metrics = {**{k: scores[k] for k in (*METRICS, "max_f", "ap")}, "frames": len(names), "dataset": dataset,
                "root": root, "checkpoint": checkpoint.relative_to(run_dir).as_posix()}
     write_json(path, metrics)
