@@ -27,7 +27,8 @@ def timeit(fn: Callable[[], object], repeat: int = 20, warmup: int = 2) -> float
 
 
 def machine() -> str:
-    """One line describing this machine."""
+    """One line describing this machine, with its load when the benchmark started (figures taken under load
+    are slower and noisier)."""
     cpu = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -39,8 +40,9 @@ def machine() -> str:
     import cv2
     import numpy
 
-    return (f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, NumPy {numpy.__version__}, "
-            f"OpenCV {cv2.__version__}")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return (f"{cpu}, {os.cpu_count()} cores (1-minute load average {load:.1f} at the start), Python "
+            f"{platform.python_version()}, NumPy {numpy.__version__}, OpenCV {cv2.__version__}")
 
 
 def write_section(name: str, body: str) -> None:

@@ -2,7 +2,7 @@
 size on the CPU, and the 2-process DDP speed-up of a whole `freespace train` epoch. Prints the figures and
 writes them to BENCHMARKS.md.
 
-    .venv/bin/python bench/train.py [--size 192x384] [--batch 4]
+    .venv/bin/python bench/train.py [--size 192x384] [--batch 4] [--label " — after"]
 """
 
 from __future__ import annotations
@@ -60,6 +60,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--size", default="192x384")
     parser.add_argument("--batch", type=int, default=4)
+    parser.add_argument("--label", default="", help="a note for the section title (e.g. before/after)")
     args = parser.parse_args()
     size = parse_size(args.size)
     rows = []
@@ -84,7 +85,7 @@ one process already keeps both cores busy with PyTorch's intra-op threads, so a 
 DDP pays off with more cores or GPUs.
 """
     print(body)
-    write_section("Training (bench/train.py)", body)
+    write_section(f"Training (bench/train.py){args.label}", body)
 
 
 if __name__ == "__main__":

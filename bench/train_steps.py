@@ -117,8 +117,7 @@ def main() -> None:
         epoch, steps, val = train_step(root, args.model, size, args.batch, args.epochs)
     total = sum(v for k, v in parts.items() if not k.startswith(("decode", "cached sample →")))
     rows = [f"| {k} | {1000 * v:.1f} |" for k, v in parts.items()]
-    body = f"""Machine: {machine()}, PyTorch {torch.__version__}, {torch.get_num_threads()} threads (shared with other
-jobs while measured: absolute times are noisy, the shares are what matter).
+    body = f"""Machine: {machine()}, PyTorch {torch.__version__}, {torch.get_num_threads()} threads.
 Command: `.venv/bin/python bench/train_steps.py --model {args.model} --size {args.size} --batch {args.batch} --frames {args.frames}`
 ({args.model} light, {args.frames} rendered 640×480 frames resized to {args.size}, medians of {args.repeat}).
 

@@ -224,7 +224,7 @@ def _datasets_parser(p: argparse.ArgumentParser) -> None:
     q.set_defaults(func=cmd_datasets_info)
     q = sub.add_parser("split", help="write the paper's train/val/test split by scenario as list files",
                        description="Split the labelled frames by scenario with the paper's sizes (289 → "
-                                   "173/58/58, 300 → 180/60/60, else 60/20/20 %%) and write train.txt, val.txt, "
+                                   "173/58/58, 300 → 180/60/60, else 60/20/20 %) and write train.txt, val.txt, "
                                    "test.txt (frame names).")
     _add_dataset_root(q)
     q.add_argument("--seed", type=int, default=0, help="shuffling seed (default 0)")

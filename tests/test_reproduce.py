@@ -137,6 +137,9 @@ def test_reproduce(experiment, shifted: Path, capsys: pytest.CaptureFixture) -> 
     r = rows[1]
     assert f"| segnet | HA-X | test | 2 | {float(r['accuracy_mean']):.2f} ± {float(r['accuracy_std']):.2f} |" in md
     assert "t-interval" in md and "| segnet | HA-X − X-dup | F-score | shifted | 2 |" in md
+    g = next(g for g in gains if (g["versus"], g["metric"], g["test_set"]) == ("HA-X - X-dup", "f_score", "shifted"))
+    lo, hi = float(g["ci_low"]), float(g["ci_high"])  # the half-width column: what "± 1.5 points" is read from
+    assert f"| {float(g['mean']):+.2f} | [{lo:+.2f}, {hi:+.2f}] | {(hi - lo) / 2:.2f} |" in md
     # three test frames of seed 0: image, X, HA-X, X-dup side by side at the data's size (96×128)
     assert read_image(out / "figures" / "segnet.png").shape == (3 * 96, 4 * 128, 3)
     assert read_image(out / "figures" / "gains_segnet.png").shape[2] == 3

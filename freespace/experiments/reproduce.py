@@ -378,12 +378,13 @@ def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[s
     md += ["", f"Paired gains in points (one difference per seed: the variants of a seed share the split and the "
            f"initial weights), mean and 95 % Student t-interval over the `n` seeds (no interval with one seed); "
            f"{PAPER_GAINS} (HA-X − X).", "",
-           "| Network | Gain | Metric | Test set | n | mean | 95 % t-interval | excludes 0 |",
-           "|---|---|---|---|---:|---:|---:|:---:|"]
+           "| Network | Gain | Metric | Test set | n | mean | 95 % t-interval | half-width | excludes 0 |",
+           "|---|---|---|---|---:|---:|---:|---:|:---:|"]
     for g in gains:
-        ci = "—" if math.isnan(g["ci_low"]) else f"[{g['ci_low']:+.2f}, {g['ci_high']:+.2f}]"
+        ci, half = ("—", "—") if math.isnan(g["ci_low"]) else \
+            (f"[{g['ci_low']:+.2f}, {g['ci_high']:+.2f}]", f"{(g['ci_high'] - g['ci_low']) / 2:.2f}")
         md.append(f"| {g['network']} | {g['versus'].replace(' - ', ' − ')} | {_NAMES[g['metric']]} | {g['test_set']} "
-                  f"| {g['n']} | {g['mean']:+.2f} | {ci} | {'yes' if g['excludes_zero'] else 'no'} |")
+                  f"| {g['n']} | {g['mean']:+.2f} | {ci} | {half} | {'yes' if g['excludes_zero'] else 'no'} |")
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
 
 
