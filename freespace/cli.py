@@ -447,8 +447,9 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variants", default="X,HA-X,X-dup", help="comma-separated arms: X, HA-X (DS-Generator views), "
                    "X-dup (the control: X with HA-X's number of steps), HV-X (road-plane virtual views), HAV-X "
                    "(both) (default X,HA-X,X-dup)")
-    p.add_argument("--test-root", metavar="DIR", help="also test every run on all labelled frames of this dataset "
-                   "(same --dataset layout; e.g. other rigs): rows with test_set = shifted")
+    p.add_argument("--test-root", metavar="[NAME=]DIR", action="append",
+                   help="also test every run on all labelled frames of this dataset (same --dataset layout; e.g. "
+                   "other rigs): rows with test_set = NAME, or shifted without one; repeat for more sets")
     p.add_argument("--only", metavar="NETWORK,VARIANT,SEED", help="run one cell of the protocol (e.g. unet,HA-X,0; "
                    "seed in 0…--seeds−1), writing only its run folder (cluster array jobs); collect with --tables")
     p.add_argument("--tables", action="store_true", help="train nothing: rebuild index.json, the tables and the "

@@ -39,14 +39,24 @@ def shifted(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def experiment(data: Path, shifted: Path, tmp_path_factory: pytest.TempPathFactory):
-    """One protocol run (segnet, X / HA-X / X-dup, 2 seeds, 1 epoch, with a shifted test set), with the
+def same_rigs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A further test set named on the command line: other drives of the training rigs."""
+    root = tmp_path_factory.mktemp("same")
+    write_dataset(root, 4, seed=12, config=SynthConfig(width=128, height=96, frames_per_scenario=2), progress=False)
+    return root
+
+
+@pytest.fixture(scope="module")
+def experiment(data: Path, shifted: Path, same_rigs: Path, tmp_path_factory: pytest.TempPathFactory):
+    """One protocol run (segnet, X / HA-X / X-dup, 2 seeds, 1 epoch, with a shifted test set and one named
+    `same`), with the
     initial weights of every run as the engine made them (seen when the optimiser is made)."""
     import freespace.engine.module as module
 
     out = tmp_path_factory.mktemp("exp") / "exp"
     args = ["reproduce", "--dataset", "synth", "--root", str(data), "--models", "segnet", "--seeds", "2",
-            "--variants", "X,HA-X,X-dup", "--test-root", str(shifted), "--epochs", "1", "--batch-size", "4",
+            "--variants", "X,HA-X,X-dup", "--test-root", str(shifted), "--test-root", f"same={same_rigs}",
+            "--epochs", "1", "--batch-size", "4",
             "--image-size", "64x96",
             "--no-progress", "--out", str(out)]
     weights = []
@@ -60,6 +70,11 @@ def experiment(data: Path, shifted: Path, tmp_path_factory: pytest.TempPathFacto
         mp.setattr(module.RoadModule, "configure_optimizers", recording)
         assert main(args) == 0
     return out, args, weights
+
+
+def _of(entry: dict, test_set: str) -> dict:
+    """An index entry's metrics on one test set."""
+    return entry["metrics"] if test_set == "test" else entry["test_sets"][test_set]
 
 
 def _same(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> bool:
@@ -88,7 +103,7 @@ def test_duplicate_matches_homography_training_list(data: Path, tmp_path: Path) 
 
 
 @pytest.mark.slow  # with its fixture: six short runs, about 1½ minutes on an idle 2-core machine
-def test_reproduce(experiment, shifted: Path, capsys: pytest.CaptureFixture) -> None:
+def test_reproduce(experiment, shifted: Path, same_rigs: Path, capsys: pytest.CaptureFixture) -> None:
     out, args, weights = experiment
     # runs in order X s0, X s1, HA-X s0, HA-X s1, X-dup s0, X-dup s1: one seed → one set of initial weights
     assert len(weights) == 6
@@ -106,28 +121,28 @@ def test_reproduce(experiment, shifted: Path, capsys: pytest.CaptureFixture) -> 
         assert entry["status"] == "done" and entry["metrics"] == {k: m[k] for k in entry["metrics"]}
         assert m["iou"] == pytest.approx(m["f_score"] / (2 - m["f_score"]), abs=1e-12)  # IoU = F/(2−F)
         assert 0.2 < m["f_score"] <= 1 and 0 < m["precision"] <= 1 and 0 < m["recall"] <= 1
-        s = json.loads((out / entry["run"] / "shifted" / "metrics.json").read_text())
-        assert s["frames"] == 4 and s["root"] == str(shifted.resolve()) and entry["shifted"]["f_score"] == s["f_score"]
+        for name, root in (("shifted", shifted), ("same", same_rigs)):
+            s = json.loads((out / entry["run"] / name / "metrics.json").read_text())
+            assert s["frames"] == 4 and s["root"] == str(root.resolve())
+            assert entry["test_sets"][name]["f_score"] == s["f_score"]
     rows = list(csv.DictReader((out / "results.csv").open()))
     assert list(rows[0])[:5] == ["network", "variant", "test_set", "n", "accuracy_mean"]
     assert [(r["network"], r["variant"], r["test_set"], r["n"]) for r in rows] == \
-        [("segnet", v, t, "2") for t in ("test", "shifted") for v in ("X", "HA-X", "X-dup")]
+        [("segnet", v, t, "2") for t in ("test", "shifted", "same") for v in ("X", "HA-X", "X-dup")]
     for row in rows:  # mean ± std (in %) over the seeds of the index
-        key = "metrics" if row["test_set"] == "test" else "shifted"
         for k in METRICS:
-            values = 100 * np.array([e[key][k] for e in index if e["variant"] == row["variant"]])
+            values = 100 * np.array([_of(e, row["test_set"])[k] for e in index if e["variant"] == row["variant"]])
             assert float(row[f"{k}_mean"]) == pytest.approx(values.mean(), abs=1e-4)
             assert float(row[f"{k}_std"]) == pytest.approx(values.std(ddof=1), abs=1e-4)
     gains = list(csv.DictReader((out / "gains.csv").open()))
     assert list(gains[0]) == ["network", "versus", "metric", "test_set", "mean", "ci_low", "ci_high", "n",
                               "excludes_zero"]
     assert {(g["versus"], g["test_set"]) for g in gains} == \
-        {(v, t) for v in ("HA-X - X", "HA-X - X-dup", "X-dup - X") for t in ("test", "shifted")}
+        {(v, t) for v in ("HA-X - X", "HA-X - X-dup", "X-dup - X") for t in ("test", "shifted", "same")}
     for g in gains:  # the paired t-interval of the per-seed differences, in points
         a, b = g["versus"].split(" - ")
-        key = "metrics" if g["test_set"] == "test" else "shifted"
-        va = [100 * e[key][g["metric"]] for e in index if e["variant"] == a]
-        vb = [100 * e[key][g["metric"]] for e in index if e["variant"] == b]
+        va = [100 * _of(e, g["test_set"])[g["metric"]] for e in index if e["variant"] == a]
+        vb = [100 * _of(e, g["test_set"])[g["metric"]] for e in index if e["variant"] == b]
         ref = paired_gain(va, vb)
         assert g["n"] == "2" and float(g["mean"]) == pytest.approx(ref.mean, abs=1e-4)
         assert float(g["ci_low"]) == pytest.approx(ref.ci_low, abs=1e-4) and float(g["ci_low"]) <= float(g["mean"])
@@ -169,7 +184,7 @@ def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, caps
     assert "| segnet | HA-X − X | F-score | test | 1 |" in capsys.readouterr().out
     rows = list(csv.DictReader((cells / "results.csv").open()))
     assert [(r["variant"], r["test_set"], r["n"]) for r in rows] == [("X", "test", "1"), ("HA-X", "test", "1"),
-                                                                     ("HA-X", "shifted", "1")]
+                                                                     ("HA-X", "shifted", "1"), ("HA-X", "same", "1")]
     assert rows[0]["f_score_std"] == "0.0000"
     gains = list(csv.DictReader((cells / "gains.csv").open()))
     assert [(g["versus"], g["metric"], g["n"], g["ci_low"], g["excludes_zero"]) for g in gains] == \
@@ -177,6 +192,11 @@ def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, caps
     index = json.loads((cells / "index.json").read_text())
     assert [(e["run"], e["status"]) for e in index] == [("runs/segnet-orig-s1", "done"), ("runs/segnet-ha-s1", "done")]
     assert not (cells / "figures" / "segnet.png").exists()  # the figure shows seed 0
+    shutil.copytree(out / "runs/segnet-dup-s1", cells / "runs/segnet-dup-s1")  # tested on another `same` folder:
+    moved = cells / "runs/segnet-dup-s1/same/metrics.json"                     # not mixed silently
+    moved.write_text(json.dumps({**json.loads(moved.read_text()), "root": "/elsewhere"}))
+    assert main(["reproduce", "--tables", "--out", str(cells)]) == 0
+    assert "**Warning: the runs differ in --test-root same: " in (cells / "results.md").read_text()
 
 
 @pytest.mark.parametrize("extra, message", [
@@ -187,6 +207,8 @@ def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, caps
     (["--only", "unet,X,3"], "--only: the seed must be an integer in 0…2"),
     (["--only", "unet,X"], "--only must be NETWORK,VARIANT,SEED"),
     (["--test-root", "/nonexistent/shifted"], "/nonexistent/shifted"),
+    (["--test-root", "test=/tmp"], "'test' cannot name a test set"),
+    (["--test-root", "/tmp", "--test-root", "shifted=/tmp"], "two test sets are named 'shifted'"),
     (["--tables", "--only", "unet,X,0"], "--tables collects the finished cells"),
 ])
 def test_reproduce_mistakes(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture, extra: list[str],

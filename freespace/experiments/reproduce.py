@@ -5,12 +5,13 @@ DS-Generator views (HA-X) and on the control X-dup (X with every frame that has 
 more, unchanged: as many optimiser steps per epoch as HA-X under the same early stopping, without the
 views' content) — or any variants of :data:`VARIANTS` (HV-X: road-plane virtual views, HAV-X: both) —
 with the same seeds and budget, and tested on the test split (``test_set = test``) and, with
-``test_root``, on every labelled frame of a second dataset (``test_set = shifted``, e.g. other rigs).
+``test_root``, on every labelled frame of further datasets (``test_set = shifted`` for a bare folder, e.g.
+other rigs, or the name given as ``NAME=DIR``, e.g. a large fixed set rendered with the training rigs).
 For one network and seed all variants share the split and the initial weights; HA-X and X-dup also share
 the data order and the conventional augmentation's draws (same number of samples).
 
-``OUT`` receives ``runs/<model>-<tag>-s<seed>/`` (training run folders; ``shifted/metrics.json`` in each
-with ``test_root``) and, built from the run folders on disk (:func:`write_tables`, ``reproduce --tables``):
+``OUT`` receives ``runs/<model>-<tag>-s<seed>/`` (training run folders; ``<name>/metrics.json`` in each
+for each further test set) and, built from the run folders on disk (:func:`write_tables`, ``reproduce --tables``):
 
 * ``results.csv``: one row per network × variant × test set: ``n`` seeds and each metric's mean and std
   over them (%);
@@ -31,6 +32,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -44,7 +46,8 @@ from freespace.io import PathLike, atomic_write_bytes, atomic_write_text, write_
 
 log = logging.getLogger(__name__)
 
-__all__ = ["reproduce", "run_cell", "write_tables", "parse_variants", "parse_cell", "Variant", "VARIANTS",
+__all__ = ["reproduce", "run_cell", "write_tables", "parse_variants", "parse_cell", "parse_test_roots",
+           "evaluate_test_set", "Variant", "VARIANTS",
            "DEFAULT_VARIANTS", "METRICS", "GAINS"]
 
 @dataclass(frozen=True)
@@ -73,7 +76,10 @@ DEFAULT_VARIANTS = ("X", "HA-X", "X-dup")
 #: the paired gains reported (variant, versus), when both were run
 GAINS = (("HA-X", "X"), ("HA-X", "X-dup"), ("X-dup", "X"), ("HV-X", "X"), ("HAV-X", "X"))
 GAIN_METRICS = ("f_score", "iou")
-TEST_SETS = ("test", "shifted")
+#: the name of a ``--test-root`` given without one
+DEFAULT_TEST_SET = "shifted"
+#: names a further test set cannot take: the test split's, and the run folder's own entries
+_RESERVED_TEST_SETS = {"test", "metrics", "config", "splits", "generated", "checkpoints", "tensorboard"}
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
 PAPER_GAINS = "HA gain in the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points"
 _BY_AUGMENT = {v.augment: v for v in VARIANTS.values()}
@@ -120,16 +126,44 @@ def parse_cell(text: str, seeds: int) -> tuple[str, str, int]:
     return model, VARIANTS[name].augment, int(seed_text)
 
 
-def _check_test_root(dataset: str, test_root: PathLike | None) -> None:
-    """Refuse a ``--test-root`` that is not a ``dataset`` tree with labelled frames, before any work."""
+def parse_test_roots(test_root: PathLike | list[PathLike] | tuple[PathLike, ...] | dict[str, PathLike] | None
+                     ) -> dict[str, Path]:
+    """``--test-root`` values → ``{name: folder}``: ``DIR`` is named ``shifted``, ``NAME=DIR`` ``NAME``
+    (lower-case letters, digits, ``-`` and ``_``; not ``test``, the test split's). A dict is taken as it is.
+
+    Raises:
+        InvalidOptionError: a bad or repeated name.
+    """
     if test_root is None:
-        return
+        return {}
+    if isinstance(test_root, dict):
+        pairs = list(test_root.items())
+    else:
+        pairs = []
+        for text in [test_root] if isinstance(test_root, (str, Path)) else test_root:
+            name, sep, folder = str(text).partition("=")
+            is_named = sep and re.fullmatch(r"[a-z][a-z0-9_-]*", name) is not None
+            pairs.append((name, folder) if is_named else (DEFAULT_TEST_SET, str(text)))
+    roots: dict[str, Path] = {}
+    for name, folder in pairs:
+        if not re.fullmatch(r"[a-z][a-z0-9_-]*", name) or name in _RESERVED_TEST_SETS:
+            raise InvalidOptionError(f"--test-root: {name!r} cannot name a test set; use lower-case letters, digits, "
+                                     f"- and _, and none of {', '.join(sorted(_RESERVED_TEST_SETS))} (NAME=DIR)")
+        if name in roots:
+            raise InvalidOptionError(f"--test-root: two test sets are named {name!r}; give the others NAME=DIR")
+        roots[name] = Path(folder)
+    return roots
+
+
+def _check_test_roots(dataset: str, roots: dict[str, Path]) -> None:
+    """Refuse a ``--test-root`` that is not a ``dataset`` tree with labelled frames, before any work."""
     from freespace.data.base import check_dataset_root
     from freespace.data.registry import get_dataset, get_dataset_class
 
-    check_dataset_root(test_root, get_dataset_class(dataset).name)
-    if not get_dataset(dataset, test_root, disparity_mode="none").labelled().frames:
-        raise DatasetError(f"--test-root {test_root} has no labelled frames to test on")
+    for root in roots.values():
+        check_dataset_root(root, get_dataset_class(dataset).name)
+        if not get_dataset(dataset, root, disparity_mode="none").labelled().frames:
+            raise DatasetError(f"--test-root {root} has no labelled frames to test on")
 
 
 def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, seed: int,
@@ -140,10 +174,11 @@ def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, s
     return config
 
 
-def run_cell(config: TrainConfig, *, test_root: PathLike | None = None, progress: bool = True) -> str:
+def run_cell(config: TrainConfig, *, test_root: PathLike | list[PathLike] | dict[str, PathLike] | None = None,
+             progress: bool = True) -> str:
     """Train and test one cell of the protocol (one network, variant and seed) in ``config.out`` — unless
-    its ``metrics.json`` is there — and, with ``test_root``, test it on every labelled frame of that
-    dataset (``RUN/shifted/metrics.json``). Writes nothing outside the run folder.
+    its ``metrics.json`` is there — and test it on every labelled frame of each further test set
+    (:func:`parse_test_roots`; ``RUN/<name>/metrics.json``). Writes nothing outside the run folder.
 
     Returns the status: ``"done"`` or ``"done (skipped)"``.
     """
@@ -157,21 +192,22 @@ def run_cell(config: TrainConfig, *, test_root: PathLike | None = None, progress
         log.info("training %s (%s)", run_dir.name, "resuming" if resume else "new")
         run_training(config, resume=resume, progress=progress)
         status = "done"
-    if test_root is not None:
-        evaluate_shifted(run_dir, config.dataset, test_root)
+    for name, root in parse_test_roots(test_root).items():
+        evaluate_test_set(run_dir, config.dataset, root, name)
     return status
 
 
-def evaluate_shifted(run_dir: PathLike, dataset: str, test_root: PathLike) -> dict[str, Any]:
+def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
+                      name: str = DEFAULT_TEST_SET) -> dict[str, Any]:
     """Test a finished run's checkpoint on every labelled frame of ``test_root`` (a ``dataset`` tree):
-    ``RUN/shifted/metrics.json`` (accuracy, precision, recall, f_score, iou at p ≥ 0.5, max_f, ap as
+    ``RUN/<name>/metrics.json`` (accuracy, precision, recall, f_score, iou at p ≥ 0.5, max_f, ap as
     fractions; frames; the resolved root). Skipped when that file exists for the same root."""
     from freespace.data.registry import get_dataset
     from freespace.engine.evaluate import evaluate_frames
     from freespace.predictor import Predictor
 
     run_dir = Path(run_dir)
-    path = run_dir / "shifted" / "metrics.json"
+    path = run_dir / name / "metrics.json"
     root = str(Path(test_root).resolve())
     if path.is_file():
         done = json.loads(path.read_text())
@@ -187,20 +223,22 @@ def evaluate_shifted(run_dir: PathLike, dataset: str, test_root: PathLike) -> di
     metrics = {**{k: scores[k] for k in (*METRICS, "max_f", "ap")}, "frames": len(names), "dataset": dataset,
                "root": root, "checkpoint": checkpoint.relative_to(run_dir).as_posix()}
     write_json(path, metrics)
-    log.info("%s on the shifted set (%d frames): F %.4f  IoU %.4f", run_dir.name, len(names), metrics["f_score"],
-             metrics["iou"])
+    log.info("%s on the %s set (%d frames): F %.4f  IoU %.4f", run_dir.name, name, len(names),
+             metrics["f_score"], metrics["iou"])
     return metrics
 
 
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str], seeds: int = 3, epochs: int = 50,
               image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4, workers: int = 0,
               max_frames: int | None = None, figures: int = 3, progress: bool = True,
-              variants: str | tuple[str, ...] = DEFAULT_VARIANTS, test_root: PathLike | None = None,
+              variants: str | tuple[str, ...] = DEFAULT_VARIANTS,
+              test_root: PathLike | list[PathLike] | dict[str, PathLike] | None = None,
               only: str | None = None) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
     "runs": index}``.
 
     ``variants``: table names from :data:`VARIANTS` (``X`` is always run: gains are against it).
+    ``test_root``: further test sets (:func:`parse_test_roots`).
     ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell (``models`` and ``variants`` are then not used)
     and writes only its run folder; the returned table and gains are then empty (collect the cells with
     :func:`write_tables`).
@@ -212,11 +250,12 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     options = dict(epochs=epochs, batch_size=batch_size, patience=patience, image_size=image_size, workers=workers,
                    max_frames=max_frames)
     out = Path(out)
+    roots = parse_test_roots(test_root)
     if only is not None:
         model, variant, seed = parse_cell(only, seeds)
         config = _config(dataset, root, out, model, variant, seed, options)
-        _check_test_root(dataset, test_root)
-        status = run_cell(config, test_root=test_root, progress=progress)
+        _check_test_roots(dataset, roots)
+        status = run_cell(config, test_root=roots, progress=progress)
         entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": _BY_AUGMENT[variant].name,
                  "augment": variant, "seed": seed, "status": status}
         return {"table": [], "gains": [], "runs": [entry]}
@@ -226,10 +265,10 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     chosen = parse_variants(variants)
     configs = [_config(dataset, root, out, model, variant, seed, options)  # every option checked before any work
                for model in models for variant in chosen for seed in range(seeds)]
-    _check_test_root(dataset, test_root)
+    _check_test_roots(dataset, roots)
     statuses: dict[str, str] = {}
     for config in configs:
-        statuses[Path(config.out).name] = run_cell(config, test_root=test_root, progress=progress)
+        statuses[Path(config.out).name] = run_cell(config, test_root=roots, progress=progress)
         write_tables(out, figures=0, statuses=statuses)  # the tables so far, after every run
     return write_tables(out, figures=figures, statuses=statuses)
 
@@ -238,7 +277,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
 
 def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[dict[str, Any]], list[str]]:
     """Every run folder under ``OUT/runs`` (its config.yaml names the network, variant and seed), in
-    network, :data:`VARIANTS` and seed order, with its test (and shifted) metrics when finished; and the
+    network, :data:`VARIANTS` and seed order, with its test metrics (and those of further test sets,
+    ``test_sets``) when finished; and the
     settings that differ between the runs (a table should compare like with like)."""
     from freespace.models import list_models
 
@@ -261,10 +301,12 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
             metrics = json.loads((run_dir / "metrics.json").read_text())
             entry["status"] = (statuses or {}).get(run_dir.name, "done")
             entry["metrics"] = {k: metrics[k] for k in (*METRICS, "max_f", "ap")}
-            shifted = run_dir / "shifted" / "metrics.json"
-            if shifted.is_file():
-                entry["shifted"] = {k: v for k, v in json.loads(shifted.read_text()).items()
-                                    if k in (*METRICS, "max_f", "ap")}
+            for path in sorted(run_dir.glob("*/metrics.json")):  # further test sets: RUN/<name>/metrics.json
+                name = path.parent.name
+                if name not in _RESERVED_TEST_SETS:
+                    extra = json.loads(path.read_text())
+                    entry.setdefault("test_sets", {})[name] = {k: extra[k] for k in (*METRICS, "max_f", "ap")}
+                    settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
         for key in ("dataset", "root", "epochs", "patience", "batch_size", "image_size", "max_frames", "preset"):
             settings.setdefault(key, set()).add(json.dumps(config.get(key)))
         entries.append(entry)
@@ -276,8 +318,15 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
 
 
 def _values(entries: list[dict[str, Any]], model: str, variant: str, test_set: str) -> dict[int, dict[str, float]]:
-    key = "metrics" if test_set == "test" else "shifted"
-    return {e["seed"]: e[key] for e in entries if e["model"] == model and e["variant"] == variant and key in e}
+    found = ((e["seed"], e.get("metrics") if test_set == "test" else e.get("test_sets", {}).get(test_set))
+             for e in entries if e["model"] == model and e["variant"] == variant)
+    return {seed: m for seed, m in found if m is not None}
+
+
+def _test_sets(entries: list[dict[str, Any]]) -> list[str]:
+    """``test``, then ``shifted``, then the other further test sets by name."""
+    names = sorted({n for e in entries for n in e.get("test_sets", {})}, key=lambda n: (n != DEFAULT_TEST_SET, n))
+    return ["test", *names]
 
 
 def _models(entries: list[dict[str, Any]]) -> list[str]:
@@ -289,7 +338,7 @@ def _table(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
     seeds and each metric's mean and std (ddof 1; 0 with one seed) in %."""
     rows = []
     for model in _models(entries):
-        for test_set in TEST_SETS:
+        for test_set in _test_sets(entries):
             for name in VARIANTS:
                 runs = list(_values(entries, model, name, test_set).values())
                 if not runs:
@@ -307,7 +356,7 @@ def _gains(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """``gains.csv`` rows: the paired gains of :data:`GAINS` in points, over the seeds both variants finished."""
     rows = []
     for model in _models(entries):
-        for test_set in TEST_SETS:
+        for test_set in _test_sets(entries):
             for a, b in GAINS:
                 va, vb = _values(entries, model, a, test_set), _values(entries, model, b, test_set)
                 seeds = sorted(set(va) & set(vb))
@@ -366,7 +415,8 @@ def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[s
                     gains: list[dict[str, Any]], differ: list[str]) -> None:
     finished = sum("metrics" in e for e in entries)
     md = [f"Results of {finished} finished run{'s' if finished != 1 else ''} ({len(entries) - finished} unfinished): "
-          f"test set `test` = the dataset's test split, `shifted` = every labelled frame of `--test-root`; "
+          f"test set `test` = the dataset's test split, any other = every labelled frame of the `--test-root` of "
+          f"that name (`shifted` when it was given none); "
           f"%, mean ± std over the `n` seeds finished.", ""]
     if differ:
         md += [f"**Warning: the runs differ in {'; '.join(differ)}.**", ""]
