@@ -197,6 +197,10 @@ def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, caps
     moved.write_text(json.dumps({**json.loads(moved.read_text()), "root": "/elsewhere"}))
     assert main(["reproduce", "--tables", "--out", str(cells)]) == 0
     assert "**Warning: the runs differ in --test-root same: " in (cells / "results.md").read_text()
+    (cells / "runs/segnet-orig-s1/bogus").mkdir()  # a crafted file where a test set's metrics would be: skipped
+    (cells / "runs/segnet-orig-s1/bogus/metrics.json").write_text('{"f_score": "x"}')
+    assert main(["reproduce", "--tables", "--out", str(cells)]) == 0
+    assert "bogus" not in (cells / "results.csv").read_text()
 
 
 @pytest.mark.parametrize("extra, message", [

@@ -47,8 +47,7 @@ from freespace.io import PathLike, atomic_write_bytes, atomic_write_text, write_
 log = logging.getLogger(__name__)
 
 __all__ = ["reproduce", "run_cell", "write_tables", "parse_variants", "parse_cell", "parse_test_roots",
-           "evaluate_test_set", "Variant", "VARIANTS",
-           "DEFAULT_VARIANTS", "METRICS", "GAINS"]
+           "evaluate_test_set", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "METRICS", "GAINS", "TestRoots"]
 
 @dataclass(frozen=True)
 class Variant:
@@ -83,6 +82,8 @@ _RESERVED_TEST_SETS = {"test", "metrics", "config", "splits", "generated", "chec
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
 PAPER_GAINS = "HA gain in the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points"
 _BY_AUGMENT = {v.augment: v for v in VARIANTS.values()}
+#: further test sets: a folder (named ``shifted``), ``NAME=DIR`` strings, or ``{name: folder}``
+TestRoots = PathLike | list[PathLike] | tuple[PathLike, ...] | dict[str, PathLike] | None
 
 
 def _name(model: str, variant: str, seed: int) -> str:
@@ -126,8 +127,7 @@ def parse_cell(text: str, seeds: int) -> tuple[str, str, int]:
     return model, VARIANTS[name].augment, int(seed_text)
 
 
-def parse_test_roots(test_root: PathLike | list[PathLike] | tuple[PathLike, ...] | dict[str, PathLike] | None
-                     ) -> dict[str, Path]:
+def parse_test_roots(test_root: TestRoots) -> dict[str, Path]:
     """``--test-root`` values → ``{name: folder}``: ``DIR`` is named ``shifted``, ``NAME=DIR`` ``NAME``
     (lower-case letters, digits, ``-`` and ``_``; not ``test``, the test split's). A dict is taken as it is.
 
@@ -174,8 +174,7 @@ def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, s
     return config
 
 
-def run_cell(config: TrainConfig, *, test_root: PathLike | list[PathLike] | dict[str, PathLike] | None = None,
-             progress: bool = True) -> str:
+def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool = True) -> str:
     """Train and test one cell of the protocol (one network, variant and seed) in ``config.out`` — unless
     its ``metrics.json`` is there — and test it on every labelled frame of each further test set
     (:func:`parse_test_roots`; ``RUN/<name>/metrics.json``). Writes nothing outside the run folder.
@@ -231,8 +230,7 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str], seeds: int = 3, epochs: int = 50,
               image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4, workers: int = 0,
               max_frames: int | None = None, figures: int = 3, progress: bool = True,
-              variants: str | tuple[str, ...] = DEFAULT_VARIANTS,
-              test_root: PathLike | list[PathLike] | dict[str, PathLike] | None = None,
+              variants: str | tuple[str, ...] = DEFAULT_VARIANTS, test_root: TestRoots = None,
               only: str | None = None) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
     "runs": index}``.
@@ -278,8 +276,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
 def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[dict[str, Any]], list[str]]:
     """Every run folder under ``OUT/runs`` (its config.yaml names the network, variant and seed), in
     network, :data:`VARIANTS` and seed order, with its test metrics (and those of further test sets,
-    ``test_sets``) when finished; and the
-    settings that differ between the runs (a table should compare like with like)."""
+    ``test_sets``) when finished; and the settings that differ between the runs (a table should compare
+    like with like)."""
     from freespace.models import list_models
 
     entries, settings = [], {}
@@ -303,10 +301,15 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
             entry["metrics"] = {k: metrics[k] for k in (*METRICS, "max_f", "ap")}
             for path in sorted(run_dir.glob("*/metrics.json")):  # further test sets: RUN/<name>/metrics.json
                 name = path.parent.name
-                if name not in _RESERVED_TEST_SETS:
+                if name in _RESERVED_TEST_SETS:
+                    continue
+                try:
                     extra = json.loads(path.read_text())
-                    entry.setdefault("test_sets", {})[name] = {k: extra[k] for k in (*METRICS, "max_f", "ap")}
-                    settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
+                    entry.setdefault("test_sets", {})[name] = {k: float(extra[k]) for k in (*METRICS, "max_f", "ap")}
+                except (ValueError, KeyError, TypeError) as exc:
+                    log.warning("%s skipped: not a test set's metrics (%s)", path, exc)
+                    continue
+                settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
         for key in ("dataset", "root", "epochs", "patience", "batch_size", "image_size", "max_frames", "preset"):
             settings.setdefault(key, set()).add(json.dumps(config.get(key)))
         entries.append(entry)
