@@ -4,8 +4,8 @@
 # Cells run in seed-major order, two at a time with one thread each (reproduce --only), so that whatever finished
 # is balanced over the networks; the last command collects them.
 # A third test set, same-rigs (200 frames of 40 new drives rendered with the training rigs, the same for every
-# seed), was added after 8 seeds had run, when the 20-frame test split's paired spread showed that +-1.5 points
-# was out of reach on it; it evaluates the same checkpoints and changes no training.
+# seed), was added once 7 of the 10 seeds had finished, when the 20-frame test split's paired spread showed that
+# +-1.5 points was out of reach on it; it evaluates the same checkpoints and changes no training.
 # Usage: bash run.sh WORK_DIR   (with the project's .venv active, or FREESPACE=/path/to/.venv/bin/freespace)
 set -euo pipefail
 FS=${FREESPACE:-freespace}
