@@ -288,9 +288,15 @@ def test_huge_image_size_in_a_checkpoint(trained: dict[str, Path], tmp_path: Pat
     ckpt["hyper_parameters"]["image_size"] = [100000, 100000]
     crafted = tmp_path / "huge.ckpt"
     torch.save(ckpt, crafted)
+    _predict_refused(capsys, trained, tmp_path, ["--checkpoint", str(crafted)], "image size")
+
+
+def _predict_refused(capsys: pytest.CaptureFixture, trained: dict[str, Path], tmp_path: Path, model: list[str],
+                     match: str) -> None:
+    """`predict` with this model on the training images is refused, and writes no output."""
     images = trained["data"] / "data_road" / "training" / "image_2"
-    refused(capsys, ["predict", "--checkpoint", str(crafted), "--input", str(images), "--out", str(tmp_path / "p"),
-                     "--no-progress"], match="image size")
+    refused(capsys, ["predict", *model, "--input", str(images), "--out", str(tmp_path / "p"), "--no-progress"],
+            match=match)
     assert not (tmp_path / "p").exists()
 
 
@@ -304,10 +310,7 @@ def test_foreign_onnx_model(tmp_path: Path, trained: dict[str, Path], capsys: py
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
     path = tmp_path / "foreign.onnx"
     onnx.save(model, path)
-    images = trained["data"] / "data_road" / "training" / "image_2"
-    refused(capsys, ["predict", "--onnx", str(path), "--input", str(images), "--out", str(tmp_path / "p"),
-                     "--no-progress"], match="input")
-    assert not (tmp_path / "p").exists()
+    _predict_refused(capsys, trained, tmp_path, ["--onnx", str(path)], "input")
 
 
 CALIB_KEYS = ("P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam", "Tr_imu_to_velo", "Tr_cam_to_road")

@@ -21,29 +21,30 @@ from freespace.io import read_image
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
 
 
+def _render(factory: pytest.TempPathFactory, name: str, num: int, seed: int, **rigs) -> Path:
+    """``num`` rendered 128×96 frames, 2 a drive, in a new temporary folder."""
+    root = factory.mktemp(name)
+    write_dataset(root, num, seed=seed, config=SynthConfig(width=128, height=96, frames_per_scenario=2, **rigs),
+                  progress=False)
+    return root
+
+
 @pytest.fixture(scope="module")
 def data(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("rep")
-    write_dataset(root, 16, seed=3, config=SynthConfig(width=128, height=96, frames_per_scenario=2), progress=False)
-    return root
+    return _render(tmp_path_factory, "rep", 16, 3)
 
 
 @pytest.fixture(scope="module")
 def shifted(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Other rigs: wider roll, other heights, pitches and baselines (the README's recipe, smaller)."""
-    root = tmp_path_factory.mktemp("shifted")
-    write_dataset(root, 4, seed=11, config=SynthConfig(width=128, height=96, frames_per_scenario=2, max_roll_deg=6,
-                                                       camera_heights=(1.0, 2.6), pitches_deg=(-5, 5),
-                                                       baselines=(0.2, 2.0)), progress=False)
-    return root
+    return _render(tmp_path_factory, "shifted", 4, 11, max_roll_deg=6, camera_heights=(1.0, 2.6), pitches_deg=(-5, 5),
+                   baselines=(0.2, 2.0))
 
 
 @pytest.fixture(scope="module")
 def same_rigs(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A further test set named on the command line: other drives of the training rigs."""
-    root = tmp_path_factory.mktemp("same")
-    write_dataset(root, 4, seed=12, config=SynthConfig(width=128, height=96, frames_per_scenario=2), progress=False)
-    return root
+    return _render(tmp_path_factory, "same", 4, 12)
 
 
 @pytest.fixture(scope="module")

@@ -79,6 +79,7 @@ GAIN_METRICS = ("f_score", "iou")
 DEFAULT_TEST_SET = "shifted"
 #: names a further test set cannot take: the test split's, and the run folder's own entries
 _RESERVED_TEST_SETS = {"test", "metrics", "config", "splits", "generated", "checkpoints", "tensorboard"}
+_TEST_SET_NAME = re.compile(r"[a-z][a-z0-9_-]*")
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
 PAPER_GAINS = "HA gain in the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points"
 _BY_AUGMENT = {v.augment: v for v in VARIANTS.values()}
@@ -142,11 +143,11 @@ def parse_test_roots(test_root: TestRoots) -> dict[str, Path]:
         pairs = []
         for text in [test_root] if isinstance(test_root, (str, Path)) else test_root:
             name, sep, folder = str(text).partition("=")
-            is_named = sep and re.fullmatch(r"[a-z][a-z0-9_-]*", name) is not None
-            pairs.append((name, folder) if is_named else (DEFAULT_TEST_SET, str(text)))
+            named = sep and _TEST_SET_NAME.fullmatch(name)  # else a folder, whatever its characters
+            pairs.append((name, folder) if named else (DEFAULT_TEST_SET, str(text)))
     roots: dict[str, Path] = {}
     for name, folder in pairs:
-        if not re.fullmatch(r"[a-z][a-z0-9_-]*", name) or name in _RESERVED_TEST_SETS:
+        if not _TEST_SET_NAME.fullmatch(name) or name in _RESERVED_TEST_SETS:
             raise InvalidOptionError(f"--test-root: {name!r} cannot name a test set; use lower-case letters, digits, "
                                      f"- and _, and none of {', '.join(sorted(_RESERVED_TEST_SETS))} (NAME=DIR)")
         if name in roots:
