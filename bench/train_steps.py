@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine, write_section  # noqa: E402
+from _common import machine, timeit, write_section  # noqa: E402
 
 from freespace.data.registry import get_dataset  # noqa: E402
 from freespace.data.synthetic import SynthConfig, write_dataset  # noqa: E402
@@ -29,15 +29,6 @@ from freespace.engine.config import TrainConfig, parse_size  # noqa: E402
 from freespace.engine.train import run_training  # noqa: E402
 from freespace.io import IGNORE_INDEX  # noqa: E402
 from freespace.models import create_model  # noqa: E402
-
-
-def _median(fn, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def components(root: Path, model_name: str, size: tuple[int, int], batch: int, repeat: int) -> dict[str, float]:
@@ -53,12 +44,12 @@ def components(root: Path, model_name: str, size: tuple[int, int], batch: int, r
         plain.decoded(i)
     idx = list(range(batch))
     out = {
-        "decode (PNG read + resize), once per frame": _median(lambda: [cold.decoded(i) for i in idx], repeat),
-        "cached sample → tensors (no augmentation)": _median(lambda: [plain[(0, i)] for i in idx], repeat),
-        "cached sample + augmentation → tensors": _median(lambda: [warm[(1, i)] for i in idx], repeat),
+        "decode (PNG read + resize), once per frame": timeit(lambda: [cold.decoded(i) for i in idx], repeat, warmup=0),
+        "cached sample → tensors (no augmentation)": timeit(lambda: [plain[(0, i)] for i in idx], repeat, warmup=0),
+        "cached sample + augmentation → tensors": timeit(lambda: [warm[(1, i)] for i in idx], repeat, warmup=0),
     }
     samples = [warm[(1, i)] for i in idx]
-    out["collate"] = _median(lambda: torch.utils.data.default_collate(samples), repeat)
+    out["collate"] = timeit(lambda: torch.utils.data.default_collate(samples), repeat, warmup=0)
     torch.manual_seed(0)
     model = create_model(model_name).train()
     opt = torch.optim.SGD(model.parameters(), lr=0.001, momentum=0.9)
@@ -69,19 +60,20 @@ def components(root: Path, model_name: str, size: tuple[int, int], batch: int, r
     def forward() -> torch.Tensor:
         return model.loss(model(x), y, IGNORE_INDEX)["total"]
 
+    backward_seconds = []
+
     def backward() -> None:
         loss = forward()
         opt.zero_grad()
         t0 = time.perf_counter()
         loss.backward()
         opt.step()
-        backward.seconds.append(time.perf_counter() - t0)
+        backward_seconds.append(time.perf_counter() - t0)
 
-    backward.seconds = []
-    out["forward + losses"] = _median(forward, repeat)
+    out["forward + losses"] = timeit(forward, repeat, warmup=0)
     for _ in range(repeat):
         backward()
-    out["backward + SGD step"] = float(np.median(backward.seconds))
+    out["backward + SGD step"] = float(np.median(backward_seconds))
     return out
 
 

@@ -192,13 +192,6 @@ class RoadPlane:
         normal = tuple(float(x) for x in pose.R @ self.n)
         return RoadPlane(normal, self.height - float(self.n @ pose.C))  # type: ignore[arg-type]
 
-    def road_model(self, fx: float, baseline: float, cx: float, cy: float, fy: float | None = None) -> RoadModel:
-        """The disparity plane this road gives on a rig (the inverse of :meth:`from_road_model`)."""
-        fy = fx if fy is None else fy
-        w = self.n / self.height * fx * baseline  # a·fx, b·fy, a·cx + b·cy + c
-        a, b = w[0] / fx, w[1] / fy
-        return RoadModel.from_affine(a, b, w[2] - a * cx - b * cy)
-
 
 def _check_K(K: np.ndarray) -> np.ndarray:
     K = np.asarray(K, dtype=np.float64)

@@ -158,6 +158,8 @@ class _ResBlock(nn.Module):
         return F.relu(x + self.body(x))
 
 
+#: the ASPP rates at output stride 8 (the official code's 12, 24, 36)
+ASPP_RATES = (12, 24, 36)
 SHAPE_STRIDES = (1, 2, 4)
 CLASS_WEIGHTING = ("image", "none")
 
@@ -196,7 +198,7 @@ class GSCNN(SegmentationModel):
         self.edge_out = nn.Conv2d(c4, 1, 1, bias=False)
         self.fuse = nn.Conv2d(2, 1, 1, bias=False)
         self.image_gradient = Sobel(1)
-        self.aspp = ASPP(ch[5], aspp_channels, rates=(12, 24, 36), extra=True)
+        self.aspp = ASPP(ch[5], aspp_channels, rates=ASPP_RATES, extra=True)
         self.low = ConvBNReLU(ch[2], 48, 1)
         self.decoder = nn.Sequential(ConvBNReLU(aspp_channels + 48, aspp_channels),
                                      ConvBNReLU(aspp_channels, aspp_channels), nn.Conv2d(aspp_channels, num_classes, 1))
@@ -257,7 +259,7 @@ class GSCNN(SegmentationModel):
 @register_model("gscnn",
                 {"light": {"encoder_name": "resnet18", "aspp_channels": 128, "shape_stride": 2},
                  "paper": {"encoder_name": "resnet50", "aspp_channels": 256, "shape_stride": 1}},
-                geometry=lambda o: (8, 36))
+                geometry=lambda o: (8, max(ASPP_RATES)))
 def gscnn(num_classes: int = 2, encoder_name: str = "resnet18", aspp_channels: int = 128, shape_stride: int = 1,
           shape_channels: tuple[int, int, int, int] = (64, 32, 16, 8), edge_weight: float = 20.0,
           attention_weight: float = 1.0, dual_weight: float = 1.0, class_weighting: str = "image",
