@@ -247,6 +247,7 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     from freespace.data.registry import get_dataset
     from freespace.data.splits import make_splits, write_splits
     from freespace.io import check_outputs
+    from freespace.outdir import claim_folder
 
     check_outputs({"--out": args.out}, {"--root": args.root})
     dataset = get_dataset(args.dataset, args.root, args.split, disparity_mode="none")
@@ -254,7 +255,8 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     if not labelled:
         raise InvalidOptionError(f"split {dataset.split!r} of {args.root} has no labelled frames to split")
     splits = make_splits(labelled, seed=args.seed)
-    write_splits(args.out, splits)
+    with claim_folder(args.out, "datasets split") as folder, folder.staged() as staging:
+        write_splits(staging, splits)
     print(" ".join(f"{k} {len(v)}" for k, v in splits.items()) + f" → {args.out}/{{train,val,test}}.txt")
     return 0
 

@@ -14,7 +14,6 @@ import csv
 import io as _io
 import logging
 import os
-import shutil
 import warnings
 import time
 from pathlib import Path
@@ -29,6 +28,7 @@ from freespace.errors import CorruptFileError, InvalidOptionError
 from freespace.io import atomic_write_bytes, write_csv, write_json
 from freespace.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
+from freespace.outdir import claim_folder
 
 log = logging.getLogger(__name__)
 
@@ -74,8 +74,9 @@ def _callbacks(run_dir: Path, patience: int):
     return [ckpt, stop, EpochCSV()], ckpt
 
 
-#: what a run writes into its folder (removed when a plain rerun takes over a start that never checkpointed)
-RUN_FILES = ("config.yaml", "splits", "generated", "metrics.csv", "metrics.json", "checkpoints", "tensorboard")
+#: what a run writes into its folder, as :mod:`freespace.outdir` entries (removed when a plain rerun takes
+#: over a start that never checkpointed)
+RUN_ENTRIES = ("config.yaml", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/", "tensorboard/")
 
 
 def _checkpoint_io(run_dir: Path):
@@ -140,6 +141,44 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
 
 
 def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
+    run_dir = Path(config.out)
+    if not is_rank_zero():  # DDP children re-run the command inside the folder their launcher holds
+        return _train(config, resume, progress)
+    with claim_folder(run_dir, "train", entries=RUN_ENTRIES) as folder:
+        last = run_dir / "checkpoints" / "last.ckpt"
+        if resume:
+            _check_resume(config, run_dir, last)
+        elif (run_dir / "config.yaml").is_file():
+            if last.is_file():
+                raise InvalidOptionError(f"{run_dir} already holds a run; add --resume to continue it or choose "
+                                         f"another --out")
+            config.check()
+            log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
+            folder.forget(RUN_ENTRIES)
+        return _train(config, resume, progress)
+
+
+def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> None:
+    """Refuse ``--resume`` of a folder with no checkpoint, a damaged one, or other options than the run's."""
+    if (run_dir / "config.yaml").is_file() and not last.is_file():
+        raise InvalidOptionError(f"{run_dir} never reached its first checkpoint, so there is nothing to resume; "
+                                 f"run the same command without --resume to start it again")
+    if not (run_dir / "config.yaml").is_file():
+        raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
+                                 f"{run_dir} has none")
+    saved = TrainConfig.load(run_dir / "config.yaml")
+    _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
+    if config.image_size is None:
+        config.image_size = saved.image_size  # "auto" was resolved when the run started
+    changed = [k for k, v in saved.to_dict().items()
+               if k not in ("epochs", "out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
+               and config.to_dict()[k] != v]
+    if changed:
+        raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
+                                 f"resume with the same options (only --epochs may grow)")
+
+
+def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     import lightning.pytorch as pl
 
     quiet_lightning()
@@ -148,32 +187,6 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
 
     run_dir = Path(config.out)
     last = run_dir / "checkpoints" / "last.ckpt"
-    if resume:
-        if (run_dir / "config.yaml").is_file() and not last.is_file():
-            raise InvalidOptionError(f"{run_dir} never reached its first checkpoint, so there is nothing to resume; "
-                                     f"run the same command without --resume to start it again")
-        if not (run_dir / "config.yaml").is_file():
-            raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
-                                     f"{run_dir} has none")
-        saved = TrainConfig.load(run_dir / "config.yaml")
-        _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
-        if config.image_size is None:
-            config.image_size = saved.image_size  # "auto" was resolved when the run started
-        changed = [k for k, v in saved.to_dict().items()
-                   if k not in ("epochs", "out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
-                   and config.to_dict()[k] != v]
-        if changed:
-            raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
-                                     f"resume with the same options (only --epochs may grow)")
-    elif (run_dir / "config.yaml").is_file() and is_rank_zero():  # DDP children re-run the command: skip
-        if last.is_file():
-            raise InvalidOptionError(f"{run_dir} already holds a run; add --resume to continue it or choose another "
-                                     f"--out")
-        config.check()
-        log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
-        for name in RUN_FILES:
-            path = run_dir / name
-            shutil.rmtree(path) if path.is_dir() else path.unlink(missing_ok=True)
     config.check()
     pl.seed_everything(config.seed, workers=True, verbose=False)
     data = prepare_data(config, run_dir)

@@ -43,6 +43,7 @@ from freespace.engine.config import TrainConfig, read_config_yaml
 from freespace.errors import DatasetError, FreespaceError, InvalidOptionError
 from freespace.experiments.stats import paired_gain
 from freespace.io import PathLike, atomic_write_bytes, atomic_write_text, write_csv, write_image, write_json
+from freespace.outdir import claim_folder
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +86,10 @@ PAPER_GAINS = "HA gain in the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 poin
 _BY_AUGMENT = {v.augment: v for v in VARIANTS.values()}
 #: further test sets: a folder (named ``shifted``), ``NAME=DIR`` strings, or ``{name: folder}``
 TestRoots = PathLike | list[PathLike] | tuple[PathLike, ...] | dict[str, PathLike] | None
+
+
+#: what ``reproduce`` writes into OUT (:mod:`freespace.outdir` entries)
+OUT_ENTRIES = ("runs/", "index.json", "results.csv", "gains.csv", "results.md", "figures/")
 
 
 def _name(model: str, variant: str, seed: int) -> str:
@@ -175,16 +180,42 @@ def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, s
     return config
 
 
+#: TrainConfig keys that may differ between two runs of one cell (where its files go, how it is spread)
+_CELL_FREE = ("out", "workers", "devices", "num_nodes", "strategy", "tensorboard")
+
+
+def _cell_changes(config: TrainConfig, run_dir: Path) -> list[str]:
+    """The settings of ``config`` that differ from those the cell in ``run_dir`` was started with
+    (``key old → new``); ``[]`` when it has no config.yaml yet. ``root`` compares resolved; an
+    ``image_size`` of None ("the first frame's size") matches the size it was resolved to."""
+    saved_path = run_dir / "config.yaml"
+    if not saved_path.is_file():
+        return []
+    saved, new = TrainConfig.load(saved_path).to_dict(), config.to_dict()
+    for d in (saved, new):
+        d["root"] = str(Path(d["root"]).expanduser().resolve())
+    if new.get("image_size") is None:
+        new["image_size"] = saved.get("image_size")
+    return [f"{k} {saved.get(k)!r} → {v!r}" for k, v in new.items() if k not in _CELL_FREE and saved.get(k) != v]
+
+
 def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool = True) -> str:
     """Train and test one cell of the protocol (one network, variant and seed) in ``config.out`` — unless
     its ``metrics.json`` is there — and test it on every labelled frame of each further test set
     (:func:`parse_test_roots`; ``RUN/<name>/metrics.json``). Writes nothing outside the run folder.
+
+    A cell started with other settings (its ``config.yaml``: every training option but where the files go
+    and how the work is spread) is refused, finished or not, so a campaign never mixes regimes.
 
     Returns the status: ``"done"`` or ``"done (skipped)"``.
     """
     from freespace.engine.train import run_training
 
     run_dir = Path(config.out)
+    changes = _cell_changes(config, run_dir)
+    if changes:
+        raise InvalidOptionError(f"{run_dir} was started with other settings ({'; '.join(changes)}); rerun with its "
+                                 f"settings, or give another --out for the new ones")
     if (run_dir / "metrics.json").is_file():
         status = "done (skipped)"
     else:
@@ -219,10 +250,11 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     names = [f.name for f in ds.labelled().frames]
     if not names:
         raise DatasetError(f"--test-root {test_root} has no labelled frames to test on")
-    scores = evaluate_frames(predictor, ds, names)[0].evaluate()
-    metrics = {**{k: scores[k] for k in (*METRICS, "max_f", "ap")}, "frames": len(names), "dataset": dataset,
-               "root": root, "checkpoint": checkpoint.relative_to(run_dir).as_posix()}
-    write_json(path, metrics)
+    with claim_folder(run_dir, "train", entries=[f"{name}/"]):  # the run folder's own entry, under its lock
+        scores = evaluate_frames(predictor, ds, names)[0].evaluate()
+        metrics = {**{k: scores[k] for k in (*METRICS, "max_f", "ap")}, "frames": len(names), "dataset": dataset,
+                   "root": root, "checkpoint": checkpoint.relative_to(run_dir).as_posix()}
+        write_json(path, metrics)
     log.info("%s on the %s set (%d frames): F %.4f  IoU %.4f", run_dir.name, name, len(names),
              metrics["f_score"], metrics["iou"])
     return metrics
@@ -254,7 +286,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
         model, variant, seed = parse_cell(only, seeds)
         config = _config(dataset, root, out, model, variant, seed, options)
         _check_test_roots(dataset, roots)
-        status = run_cell(config, test_root=roots, progress=progress)
+        with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
+            status = run_cell(config, test_root=roots, progress=progress)
         entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": _BY_AUGMENT[variant].name,
                  "augment": variant, "seed": seed, "status": status}
         return {"table": [], "gains": [], "runs": [entry]}
@@ -264,12 +297,17 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     chosen = parse_variants(variants)
     configs = [_config(dataset, root, out, model, variant, seed, options)  # every option checked before any work
                for model in models for variant in chosen for seed in range(seeds)]
+    changed = next(((c, ch) for c in configs if (ch := _cell_changes(c, Path(c.out)))), None)
+    if changed is not None:
+        raise InvalidOptionError(f"{changed[0].out} was started with other settings ({'; '.join(changed[1])}); rerun "
+                                 f"with its settings, or give another --out for the new ones")
     _check_test_roots(dataset, roots)
     statuses: dict[str, str] = {}
-    for config in configs:
-        statuses[Path(config.out).name] = run_cell(config, test_root=roots, progress=progress)
-        write_tables(out, figures=0, statuses=statuses)  # the tables so far, after every run
-    return write_tables(out, figures=figures, statuses=statuses)
+    with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
+        for config in configs:
+            statuses[Path(config.out).name] = run_cell(config, test_root=roots, progress=progress)
+            write_tables(out, figures=0, statuses=statuses)  # the tables so far, after every run
+        return write_tables(out, figures=figures, statuses=statuses)
 
 
 # --- collecting the run folders ------------------------------------------------------------------------
@@ -396,6 +434,11 @@ def write_tables(out: PathLike, *, figures: int = 3, statuses: dict[str, str] | 
     entries, differ = _collect(out, statuses)
     if not entries:
         raise InvalidOptionError(f"{out / 'runs'} holds no run folders of `freespace reproduce`; nothing to collect")
+    with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
+        return _write_tables(out, entries, differ, figures)
+
+
+def _write_tables(out: Path, entries: list[dict[str, Any]], differ: list[str], figures: int) -> dict[str, Any]:
     if differ:
         log.warning("the runs differ in %s", "; ".join(differ))
     table, gains = _table(entries), _gains(entries)
