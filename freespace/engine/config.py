@@ -123,6 +123,8 @@ class TrainConfig:
     momentum: float = _option("SGD momentum", 0.9)
     weight_decay: float = _option("SGD weight decay", 0.0)
     patience: int = _option("early-stopping patience in epochs", 10)
+    val_window: int = _option("early stopping and the best checkpoint follow the validation F-score averaged over "
+                              "the last N epochs (1: each epoch's own)", 1, metavar="N")
     image_size: tuple[int, int] | None = _option("HxW all frames are resized to (default: the first frame's size)",
                                                  None, metavar="HxW", parse=parse_size)
     seed: int = _option("seed of the split, the data order, the augmentation and the weights", 0)
@@ -159,7 +161,7 @@ class TrainConfig:
         parse_ranges(self.virtual_rotate, "--virtual-rotate ROLL,PITCH,YAW (degrees)")
         if not 0 <= self.virtual_prob <= 1:
             raise InvalidOptionError(f"--virtual-prob must be in [0, 1], got {self.virtual_prob}")
-        for name in ("epochs", "batch_size", "patience", "devices", "num_nodes"):
+        for name in ("epochs", "batch_size", "patience", "val_window", "devices", "num_nodes"):
             if getattr(self, name) < 1:
                 raise InvalidOptionError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(self, name)}")
         if self.workers < 0:

@@ -65,8 +65,9 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
 
     With ``--augment virtual`` it finds the road plane of every training frame (:class:`VirtualAugment`).
 
-    Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`), ``"size"`` (H, W) and
-    ``"virtual"`` (a :class:`VirtualAugment`, or None).
+    Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`; ``train`` starts with the
+    training frames themselves, ``"frames"`` of them, and the views or duplicates follow), ``"size"``
+    (H, W) and ``"virtual"`` (a :class:`VirtualAugment`, or None).
     """
     ds = get_dataset(config.dataset, config.root, config.split, disparity_mode=config.disparity_mode,
                      cache_dir=config.cache_dir)
@@ -103,7 +104,7 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
                                  rotate=parse_ranges(config.virtual_rotate, "--virtual-rotate"),
                                  prob=config.virtual_prob)
     size = config.image_size or tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
-    return {"dataset": ds, **items, "size": size, "virtual": virtual}
+    return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
 
 
 def _road_planes(ds: StereoRoadDataset, indices: list[int]) -> dict[int, tuple[np.ndarray, Any]]:

@@ -35,10 +35,16 @@ log = logging.getLogger(__name__)
 __all__ = ["run_training"]
 
 CSV_FIELDS = ["epoch", "train_loss", "val_accuracy", "val_precision", "val_recall", "val_f_score", "val_iou",
-              "val_max_f", "val_ap", "lr", "seconds"]
+              "val_max_f", "val_ap", "val_f_window", "lr", "seconds"]
 
 
-def _callbacks(run_dir: Path, patience: int):
+def monitored(val_window: int) -> str:
+    """The metric that early stopping and the best checkpoint follow: the epoch's validation F-score, or
+    with ``val_window`` > 1 its mean over the last ``val_window`` epochs."""
+    return "val_f_score" if val_window == 1 else "val_f_window"
+
+
+def _callbacks(run_dir: Path, patience: int, monitor: str):
     import lightning.pytorch as pl
     from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 
@@ -68,9 +74,9 @@ def _callbacks(run_dir: Path, patience: int):
                          trainer.max_epochs, row.get("train_loss", "—"), row.get("val_f_score", "—"),
                          row.get("val_iou", "—"), row["seconds"])
 
-    ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor="val_f_score", mode="max",
+    ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor=monitor, mode="max",
                            save_top_k=1, save_last=True, enable_version_counter=False)
-    stop = EarlyStopping(monitor="val_f_score", mode="max", patience=patience, check_finite=True)
+    stop = EarlyStopping(monitor=monitor, mode="max", patience=patience, check_finite=True)
     return [ckpt, stop, EpochCSV()], ckpt
 
 
@@ -206,10 +212,12 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
 
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
     module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay,
-                        image_size=list(size))
+                        image_size=list(size), seed=config.seed, val_window=config.val_window)
     if not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
-        module.net.prepare(train[i]["label"] for i in range(len(data["train"])))
-    callbacks, ckpt = _callbacks(run_dir, config.patience)
+        # from the training frames themselves (the first items; views and duplicates follow), so that every
+        # variant of the protocol fits it from the same labels
+        module.net.prepare(train[i]["label"] for i in range(data["frames"]))
+    callbacks, ckpt = _callbacks(run_dir, config.patience, monitored(config.val_window))
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
         devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",
@@ -222,7 +230,8 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     best = run_dir / "checkpoints" / "best.ckpt"  # this folder's, whatever a resumed checkpoint recorded
     best = best if best.is_file() else last
     trainer.test(module, loader(test, False), ckpt_path=str(best), verbose=False)
-    metrics = {**module.test_metrics, "best_epoch": _best_epoch(run_dir), "epochs_run": trainer.current_epoch,
+    metrics = {**module.test_metrics, "best_epoch": _best_epoch(run_dir, monitored(config.val_window)),
+               "epochs_run": trainer.current_epoch,
                "frames": {k: len(data[k]) for k in ("train", "val", "test")}, "image_size": list(size),
                "checkpoint": best.relative_to(run_dir).as_posix()}
     if trainer.is_global_zero:
@@ -239,10 +248,11 @@ def _logger(config: TrainConfig, run_dir: Path):
     return TensorBoardLogger(str(run_dir), name="tensorboard", version="")
 
 
-def _best_epoch(run_dir: Path) -> int | None:
+def _best_epoch(run_dir: Path, monitor: str) -> int | None:
+    """The (0-based) epoch whose ``monitor`` in ``metrics.csv`` is highest (the first of equals)."""
     path = run_dir / "metrics.csv"
     if not path.is_file():
         return None
     rows = list(csv.DictReader(path.open()))
-    scored = [r for r in rows if r.get("val_f_score")]
-    return int(max(scored, key=lambda r: float(r["val_f_score"]))["epoch"]) if scored else None
+    scored = [r for r in rows if r.get(monitor)]
+    return int(max(scored, key=lambda r: float(r[monitor]))["epoch"]) if scored else None
