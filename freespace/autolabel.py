@@ -389,3 +389,205 @@ def autolabel(disparity: np.ndarray, *, baseline: float | None = None,
              "coverage": round(float(label.valid.mean()), 4), "road_fraction": round(float(road.mean()), 4),
              "valid_disparity": round(float(valid.mean()), 4)}
     return AutolabelResult(label=label, confidence=conf, model=model, stats=stats)
+
+
+# ---------------------------------------------------------------------------------------------------
+# files: one pair, or a whole dataset
+
+
+def _size(shape: tuple[int, ...]) -> str:
+    return f"{shape[1]}×{shape[0]}"
+
+
+def _lossless_png(path: PathLike, flag: str) -> Path:
+    path = Path(path)
+    if path.suffix.lower() != ".png" or path.is_dir():
+        raise InvalidOptionError(f"{flag} {path} must be a .png file name (labels and confidences must stay exact)")
+    return path
+
+
+def _baseline_from_calib(calib: PathLike) -> float:
+    from freespace.geometry.depth import rig_from_kitti
+
+    try:
+        return float(rig_from_kitti(read_kitti_calib(calib)).baseline)
+    except KeyError as exc:
+        raise CorruptFileError(f"calibration file {calib} has no {exc.args[0]}; it needs P2 and P3 (KITTI)") from None
+
+
+def write_label_files(result: AutolabelResult, out: PathLike, confidence: PathLike | None = None,
+                      report: PathLike | None = None, extra: dict[str, Any] | None = None) -> list[Path]:
+    """Write the label (KITTI colours PNG), its confidence (8-bit grey PNG, ``round(255·c)``) and a JSON
+    report (:meth:`AutolabelResult.report` plus ``extra``), each atomically; all or nothing (what was
+    written is removed when a later write fails). Returns the paths written."""
+    data = [(out, encode_image(result.kitti(), ".png"))]
+    if confidence is not None:
+        data.append((confidence, encode_image(result.confidence_u8(), ".png")))
+    written: list[Path] = []
+    try:
+        for path, payload in data:
+            written.append(atomic_write_bytes(path, payload))
+        if report is not None:
+            written.append(write_json(report, {**result.report(), **(extra or {})}))
+    except FreespaceError:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+    return written
+
+
+def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparity: PathLike | None = None, *,
+                   out: PathLike, confidence: PathLike | None = None, calib: PathLike | None = None,
+                   baseline: float | None = None, model_json: PathLike | None = None,
+                   options: AutolabelOptions = AutolabelOptions()) -> AutolabelResult:
+    """Autolabel one left image from files (``freespace autolabel --reference ...``).
+
+    Args:
+        reference: the left image (its size is checked against the disparity; SGBM input with ``target``).
+        target: the right image: the disparity is computed with SGBM (``options.max_disparity``). Exactly
+            one of ``target`` and ``disparity``.
+        disparity: the left disparity (KITTI uint16 .png, .npy, .pfm).
+        out: the label, KITTI colours (.png). confidence: its confidence, 8-bit grey (.png), optional.
+        calib: a KITTI calibration (the baseline from P2/P3), or ``baseline`` in metres; with neither,
+            the camera height is ``options.camera_height``.
+        model_json: optional JSON report (road model, noise, coverage, ...).
+
+    Every input is read and the label computed before anything is written; outputs are written
+    atomically, all or nothing, and may not be any input.
+    """
+    options.check()
+    if (target is None) == (disparity is None):
+        raise InvalidOptionError("give the right image (--target) or the left disparity (--disparity), one of them")
+    if calib is not None and baseline is not None:
+        raise InvalidOptionError("give the baseline once: --calib or --baseline, not both")
+    _lossless_png(out, "--out")
+    if confidence is not None:
+        _lossless_png(confidence, "--confidence")
+    check_outputs({"--out": out, "--confidence": confidence, "--model-json": model_json},
+                  {"--reference": reference, "--target": target, "--disparity": disparity, "--calib": calib})
+    t0 = time.perf_counter()
+    left = read_image(reference, what="reference image")
+    if calib is not None:
+        baseline = _baseline_from_calib(calib)
+    if target is not None:
+        right = read_image(target, what="target image")
+        if right.shape != left.shape:
+            raise ShapeMismatchError(f"reference is {_size(left.shape)} but target is {_size(right.shape)}; give the "
+                                     f"two images of one rectified stereo pair")
+        disp = compute_disparity(left, right, max_disparity=options.max_disparity)
+        source = "sgbm"
+    else:
+        disp = read_disparity(disparity)  # type: ignore[arg-type]
+        source = "file"
+        if disp.shape != left.shape[:2]:
+            raise ShapeMismatchError(f"disparity is {_size(disp.shape)} but the reference image is "
+                                     f"{_size(left.shape)}; give the disparity of the reference image")
+    if not np.isfinite(disp).any():
+        raise RoadFitError("the disparity map has no valid value (all 0, NaN or inf); check the "
+                           + ("stereo pair" if source == "sgbm" else "disparity file"))
+    result = autolabel(disp, baseline=baseline, options=options)
+    result.stats.update(disparity_source=source, seconds=round(time.perf_counter() - t0, 4))
+    write_label_files(result, out, confidence, model_json)
+    return result
+
+
+_CSV_FIELDS = ["frame", "status", "coverage", "road_fraction", "noise_px", "roughness_m", "camera_height_m",
+               "roll_deg", "num_inliers", "rms_px", "disparity_source", "seconds", "reason"]
+
+
+def _settings(dataset: Any, options: AutolabelOptions) -> dict[str, Any]:
+    """What an autolabel tree depends on (``OUT/settings.json``; never the shard)."""
+    settings = {"command": "autolabel", "dataset": dataset.name, "root": str(Path(dataset.root).resolve()),
+                "split": dataset.split, "disparity": dataset.disparity_mode, **options.to_dict()}
+    if dataset.disparity_mode == "lidar":
+        settings["lidar_densify"] = getattr(dataset, "lidar_densify", 0.0)
+    return settings
+
+
+def _label_frame(dataset: Any, index: int, out: Path, report: Path, options: AutolabelOptions,
+                 settings: dict[str, Any]) -> dict[str, Any]:
+    """Autolabel frame ``index`` of ``dataset`` into ``out`` (+ ``confidence/``, ``report``); never raises
+    (a failure's reason goes into the record)."""
+    t0 = time.perf_counter()
+    frame = dataset.frames[index]
+    record: dict[str, Any] = {"frame": frame.name}
+    try:
+        sample = dataset.load(index, label=False)
+        if sample.disparity is None:
+            raise DatasetError("no disparity (no disparity file, depth map or right image for SGBM)")
+        calib = sample.calibration
+        baseline = calib.baseline if calib is not None and calib.baseline > 0 else None
+        result = autolabel(sample.disparity, baseline=baseline, options=options)
+        result.stats.update(disparity_source=sample.disparity_source, seconds={"total": time.perf_counter() - t0})
+        record.update(status="done", **result.report(), settings=settings)
+        write_label_files(result, out, out.parent / "confidence" / out.name, report, record)
+    except FreespaceError as exc:
+        record.update(status="failed", reason=str(exc))
+    except Exception as exc:  # a bad frame must not stop the run; the reason is reported
+        log.debug("frame %s failed", frame.name, exc_info=True)
+        record.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
+    return record
+
+
+def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
+                      options: AutolabelOptions = AutolabelOptions(), progress: bool = True,
+                      overwrite: bool = False, shard: tuple[int, int] | None = None) -> dict[str, Any]:
+    """Autolabel every frame of a dataset (labelled or not) into a label tree that ``train --labels`` reads.
+
+    Writes ``OUT/<frame>.png`` (KITTI colours), ``OUT/confidence/<frame>.png`` (8-bit), ``OUT/reports/
+    <frame>.json`` (road model, noise, coverage, settings), ``OUT/report.csv`` and ``OUT/summary.json``
+    (``.shard-K-of-N`` names with ``shard``), and ``OUT/settings.json``. Disparities come from the
+    dataset's disparity setting (file, depth, LiDAR or cached SGBM); the baseline from each frame's
+    calibration. Resumable, sharded and refusing a folder made with other settings (unless
+    ``overwrite``) exactly as :func:`freespace.generate.generate_dataset`, whose machinery it shares.
+
+    Returns:
+        The summary: counts, ``failed`` (frame → reason), mean coverage and road fraction.
+    """
+    from freespace.generate import SETTINGS_NAME, _claim_output, _plan, _run_jobs, _totals_names, _write_report_csv
+    from freespace.shard import select_shard
+
+    options.check()
+    if workers < 1:
+        raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the label tree")
+    check_outputs({"--out": out_dir}, {"--root": dataset.root})
+    settings = _settings(dataset, options)
+    recorded = out_dir / SETTINGS_NAME
+    if recorded.is_file():
+        try:
+            command = json.loads(recorded.read_text()).get("command")
+        except (OSError, ValueError, AttributeError):
+            command = None
+        if command != "autolabel":
+            raise InvalidOptionError(f"--out {out_dir} holds files that freespace autolabel did not write; choose "
+                                     f"a new or empty folder")
+    if shard is not None:
+        dataset = dataset.subset(select_shard((f.name for f in dataset.frames), *shard))
+    summary_name, report_name = _totals_names(shard)
+    _claim_output(out_dir, settings, overwrite, None if shard is None else {f.name for f in dataset.frames},
+                  (summary_name, report_name), command="autolabel", extra=("confidence",))
+    write_json(out_dir / SETTINGS_NAME, settings)
+    frames = dataset.frames
+    records, jobs = _plan(frames, out_dir, options, settings)
+    log.info("%d frames: %d to label, %d already done", len(frames), len(jobs), len(records))
+    t0 = time.perf_counter()
+    records.update(_run_jobs(dataset, jobs, workers, progress, process=_label_frame, desc="autolabel"))
+    ordered = [records[f.name] for f in frames]
+    for record in ordered:
+        if record["status"] == "failed":
+            log.warning("frame %s failed: %s", record["frame"], record["reason"])
+    _write_report_csv(out_dir / report_name, ordered, _CSV_FIELDS)
+    ok = [r for r in ordered if r["status"] != "failed"]
+    summary = {"dataset": dataset.name, "root": str(dataset.root),
+               **({"shard": f"{shard[0]}/{shard[1]}"} if shard is not None else {}),
+               "frames": len(ordered), "labelled": sum(r["status"] == "done" for r in ordered),
+               "skipped": sum(r["status"] == "skipped" for r in ordered),
+               "failed": {r["frame"]: r["reason"] for r in ordered if r["status"] == "failed"},
+               "mean_coverage": float(np.mean([r["coverage"] for r in ok])) if ok else None,
+               "mean_road_fraction": float(np.mean([r["road_fraction"] for r in ok])) if ok else None,
+               "wall_seconds": round(time.perf_counter() - t0, 3), "workers": workers, "settings": settings}
+    write_json(out_dir / summary_name, summary)
+    return summary

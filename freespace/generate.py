@@ -317,20 +317,20 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
 _DATASET: Any = None  # the dataset of this worker process (set by _init_worker)
 
 
-def _process_frame(index: int, out: Path, report: Path, options: FitOptions,
+def _process_frame(dataset: Any, index: int, out: Path, report: Path, options: FitOptions,
                    settings: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record).
+    """Generate one frame of ``dataset``; never raises (the reason of a failure goes into the record).
     ``settings`` (the run's, :func:`_settings`) are kept in the frame's report, so a resumed run redoes a
     frame made with other settings."""
     t0 = time.perf_counter()
-    frame = _DATASET.frames[index]
+    frame = dataset.frames[index]
     record: dict[str, Any] = {"frame": frame.name}
     try:
         if frame.right is None:
             raise DatasetError("missing right image")
         if frame.label is None:
             raise DatasetError("missing road label")
-        sample = _DATASET.load(index)
+        sample = dataset.load(index)
         result = generate_arrays(sample.left, sample.right, sample.label.road & sample.label.valid,
                                  sample.disparity, options)
         if sample.disparity is not None:
@@ -383,9 +383,11 @@ def _totals_names(shard: tuple[int, int] | None) -> tuple[str, str]:
 
 
 def _claim_output(out_dir: Path, settings: dict[str, Any], overwrite: bool, frames: set[str] | None = None,
-                  totals: tuple[str, str] = ("summary.json", "report.csv")) -> None:
+                  totals: tuple[str, str] = ("summary.json", "report.csv"), command: str = "generate",
+                  extra: tuple[str, ...] = ()) -> None:
     """Make ``out_dir`` this run's. A folder generated with other settings is refused unless ``overwrite``,
-    which removes what the earlier run wrote; a non-empty folder that ``generate`` did not write is refused.
+    which removes what the earlier run wrote; a non-empty folder that ``command`` did not write is refused.
+    ``extra``: subfolders that hold a further ``<frame>.png`` of each frame (removed with it).
 
     A shard (``frames``: its frame names, ``totals``: its summary and report names) removes with
     ``overwrite`` only its own frames and totals (and the whole-run totals, now stale), so shards running
@@ -399,18 +401,19 @@ def _claim_output(out_dir: Path, settings: dict[str, Any], overwrite: bool, fram
     except (OSError, ValueError, KeyError, TypeError):
         pass
     if not isinstance(recorded, dict):
-        raise InvalidOptionError(f"--out {out_dir} holds files that freespace generate did not write; choose a "
+        raise InvalidOptionError(f"--out {out_dir} holds files that freespace {command} did not write; choose a "
                                  f"new or empty folder")
     differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
     if differ and not overwrite:
         what = ", ".join(f"{k} {recorded[k]!r} → {settings[k]!r}" for k in differ)
-        raise InvalidOptionError(f"--out {out_dir} holds frames generated with other settings ({what}); choose "
+        raise InvalidOptionError(f"--out {out_dir} holds frames made with other settings ({what}); choose "
                                  f"another --out, or add --overwrite to replace them")
     if overwrite:
         reports = out_dir / "reports"
         for report in sorted(reports.glob("*.json")) if reports.is_dir() else []:
             if frames is None or report.stem in frames:
-                (out_dir / f"{report.stem}.png").unlink(missing_ok=True)
+                for folder in (out_dir, *(out_dir / e for e in extra)):
+                    (folder / f"{report.stem}.png").unlink(missing_ok=True)
                 report.unlink(missing_ok=True)
         for name in {SETTINGS_NAME, "summary.json", "report.csv", *totals}:
             (out_dir / name).unlink(missing_ok=True)
@@ -498,27 +501,29 @@ def _plan(frames: list[Any], out_dir: Path, options: FitOptions,
     return records, jobs
 
 
-def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool) -> dict[str, dict[str, Any]]:
-    """Run :func:`_process_frame` over ``jobs`` in this process or in ``workers`` processes."""
-    global _DATASET
+def _in_worker(process: Any, *job: Any) -> dict[str, Any]:
+    """``process(dataset, *job)`` with this worker process's dataset."""
+    return process(_DATASET, *job)
+
+
+def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool, process: Any = _process_frame,
+              desc: str = "generate") -> dict[str, dict[str, Any]]:
+    """Run ``process(dataset, *job)`` (a module-level function returning the frame's record, default
+    :func:`_process_frame`) over ``jobs`` in this process or in ``workers`` processes."""
     from freespace.log import progress_bar
 
     records: dict[str, dict[str, Any]] = {}
-    bar = progress_bar(None, total=len(jobs), desc="generate", unit="frame", enabled=progress and bool(jobs))
+    bar = progress_bar(None, total=len(jobs), desc=desc, unit="frame", enabled=progress and bool(jobs))
     if workers == 1 or len(jobs) <= 1:
-        previous, _DATASET = _DATASET, dataset
-        try:
-            for job in jobs:
-                record = _process_frame(*job)
-                records[record["frame"]] = record
-                bar.update()
-        finally:
-            _DATASET = previous
+        for job in jobs:
+            record = process(dataset, *job)
+            records[record["frame"]] = record
+            bar.update()
     else:
         # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
         with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset, os.getpid()),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
-            for future in as_completed([pool.submit(_process_frame, *job) for job in jobs]):
+            for future in as_completed([pool.submit(_in_worker, process, *job) for job in jobs]):
                 record = future.result()
                 records[record["frame"]] = record
                 bar.update()
@@ -546,11 +551,11 @@ _CSV_FIELDS = ["frame", "status", "roll_deg", "kappa_hat", "kappa", "num_valid",
                "disparity_source", "seconds", "reason"]
 
 
-def _write_report_csv(path: Path, records: list[dict[str, Any]]) -> None:
+def _write_report_csv(path: Path, records: list[dict[str, Any]], fields: list[str] = _CSV_FIELDS) -> None:
     rows = []
     for record in records:
         row = dict(record)
         seconds = record.get("seconds") or {}
         row["seconds"] = round(seconds.get("total", math.nan), 4) if seconds else ""
         rows.append(row)
-    write_csv(path, _CSV_FIELDS, rows, extra="ignore")
+    write_csv(path, fields, rows, extra="ignore")
