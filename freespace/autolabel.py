@@ -13,14 +13,17 @@ The method (all in disparity pixels, so it needs neither the focal length nor, b
    disparity ``m``, has disparity ``m·H/(H − h) ≈ m (1 + h/H)`` (H: camera height above the road,
    ``B/ϰ`` when the baseline ``B`` is known, else :attr:`AutolabelOptions.camera_height`): a curb of height
    ``h_c`` leaves a residual of about ``c(m) = h_c·m/H`` pixels, which shrinks with distance, while the
-   disparity noise ``σ`` does not. The residual ``r = d − m`` is averaged over a small window (valid
-   pixels only), ``σ`` is the robust spread (1.4826·MAD) of that averaged residual on the fit's inliers,
-   floored at :attr:`AutolabelOptions.min_noise`.
+   disparity noise does not. The residual ``r = d − m``, less each row's median road residual (a running
+   median over rows: the v-disparity profile of a road that is not quite planar), is averaged over a small
+   window (valid pixels only). Its noise is modelled as ``σ(m) = σ_px + s·m`` — a matcher's constant noise
+   and a road roughness of ``s·H`` metres, which grows with ``m`` as a height does — fitted to the robust
+   spread (1.4826·MAD) of the averaged residual on the road, in disparity bins; ``σ_px`` is floored at
+   :attr:`AutolabelOptions.min_noise`.
 3. **The label.** With ``t(m) = max(curb_fraction·c(m), noise_factor·σ)`` — a tolerance in pixels that,
    as a height above the road (``H·t/m`` metres), grows with distance — a pixel is road when
    ``|r| ≤ t``, non-road when ``|r| ≥ band·t``, and don't care in between (residual near the threshold).
 4. **Don't care where the evidence is weak:** no disparity; a residual near the threshold; far rows, where
-   a curb's residual ``curb_fraction·c(m)`` is below the noise term ``noise_factor·σ`` (there only a
+   a whole curb's residual ``c(m)`` is below ``noise_factor·σ(m)`` (there only a
    clearly off-plane pixel, ``|r| ≥ band·t``, is labelled, as non-road); road-plane regions not connected
    to the seed; specks smaller than :attr:`AutolabelOptions.min_speck` of the image.
 5. **Above the horizon.** The band from the far limit up to as many rows above the plane's horizon
@@ -91,8 +94,8 @@ class AutolabelOptions:
         camera_height: metres above the road, used for ``H`` when the baseline is not known (default 1.65,
             KITTI's rig); with a baseline, ``H = B/ϰ`` from the fit.
         curb_fraction: the road tolerance as a share of a curb's residual (default 0.5: half-way).
-        noise_factor: the road tolerance's floor in units of the disparity noise σ (default 3).
-        noise: σ in pixels, or None to estimate it from the fit (default).
+        noise_factor: the road tolerance's floor in units of the disparity noise σ (default 2).
+        noise: σ in pixels, constant, or None to estimate ``σ_px`` and the roughness from the fit (default).
         min_noise: floor of the estimated σ in pixels (default 0.05: exact disparities are not exact
             on a pixel grid).
         band: non-road from ``band·t`` on; between ``t`` and ``band·t`` don't care (default 2).
