@@ -13,7 +13,9 @@ import math
 import multiprocessing
 import os
 import time
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -311,20 +313,20 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
 _DATASET: Any = None  # the dataset of this worker process (set by _init_worker)
 
 
-def _process_frame(index: int, out: Path, report: Path, options: FitOptions,
+def _process_frame(dataset: Any, index: int, out: Path, report: Path, options: FitOptions,
                    settings: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record).
+    """Generate one frame of ``dataset``; never raises (the reason of a failure goes into the record).
     ``settings`` (the run's, :func:`_settings`) are kept in the frame's report, so a resumed run redoes a
     frame made with other settings."""
     t0 = time.perf_counter()
-    frame = _DATASET.frames[index]
+    frame = dataset.frames[index]
     record: dict[str, Any] = {"frame": frame.name}
     try:
         if frame.right is None:
             raise DatasetError("missing right image")
         if frame.label is None:
             raise DatasetError("missing road label")
-        sample = _DATASET.load(index)
+        sample = dataset.load(index)
         result = generate_arrays(sample.left, sample.right, sample.label.road & sample.label.valid,
                                  sample.disparity, options)
         if sample.disparity is not None:
@@ -357,19 +359,25 @@ def _init_worker(dataset: Any, parent: int) -> None:
 SETTINGS_NAME = "settings.json"
 
 
-def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
-    """What a generated dataset depends on (written to ``OUT/settings.json``; never the shard, so that the
-    shards of one run share an output folder)."""
+def dataset_settings(dataset: Any) -> dict[str, Any]:
+    """What a per-frame output depends on in the dataset: its layout, root, split and where its
+    disparities come from (the source, ``--disparity-dir``, LiDAR densification)."""
     disparity_dir = getattr(dataset, "disparity_dir", None)
     spec = getattr(dataset, "spec", None)
     settings = {"dataset": dataset.name, "root": str(Path(dataset.root).resolve()), "split": dataset.split,
-                "robust": options.robust, "inlier_threshold": options.inlier_threshold,
-                "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode,
+                "disparity": dataset.disparity_mode,
                 "disparity_dir": str(Path(disparity_dir).resolve()) if disparity_dir is not None else None,
                 "layout": json.loads(json.dumps(asdict(spec), default=str)) if is_dataclass(spec) else None}
     if dataset.disparity_mode == "lidar":
         settings["lidar_densify"] = getattr(dataset, "lidar_densify", 0.0)
     return settings
+
+
+def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
+    """What a generated dataset depends on (written to ``OUT/settings.json``; never the shard, so that the
+    shards of one run share an output folder)."""
+    return {**dataset_settings(dataset), "robust": options.robust, "inlier_threshold": options.inlier_threshold,
+            "max_disparity": options.max_disparity}
 
 
 def _totals_names(shard: tuple[int, int] | None) -> tuple[str, str]:
@@ -439,16 +447,29 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     if shard is not None:
         dataset = dataset.subset(select_shard((f.name for f in dataset.frames), *shard))
     summary_name, report_name = _totals_names(shard)
-    frames = dataset.frames
+    with frames_folder(out_dir, "generate", settings, overwrite, [f.name for f in dataset.frames], shard):
+        return _generate_frames(dataset, out_dir, settings, options, workers, progress, shard)
+
+
+@contextmanager
+def frames_folder(out_dir: Path, command: str, settings: dict[str, Any], overwrite: bool, names: list[str],
+                  shard: tuple[int, int] | None, extra: tuple[str, ...] = ()) -> Iterator[None]:
+    """Hold ``out_dir`` for a per-frame dataset output of ``command`` (``generate``, ``autolabel``): the
+    folder rule of :mod:`freespace.outdir` (shards share it), the recorded ``settings`` (a folder made with
+    other ones is refused unless ``overwrite``, which first removes what this run or shard would write),
+    and every file of the frames ``names`` listed in the manifest before it is written: ``<frame>.png``,
+    ``reports/<frame>.json``, ``<extra>/<frame>.png``, the totals and ``settings.json``."""
+    summary_name, report_name = _totals_names(shard)
     mine = {SETTINGS_NAME, "summary.json", "report.csv", summary_name, report_name,
-            *(f"{f.name}.png" for f in frames), *(f"reports/{f.name}.json" for f in frames)}
-    with claim_folder(out_dir, "generate", shared=shard is not None) as folder:
+            *(f"{n}.png" for n in names), *(f"reports/{n}.json" for n in names),
+            *(f"{e}/{n}.png" for e in extra for n in names)}
+    with claim_folder(out_dir, command, shared=shard is not None) as folder:
         _check_settings(out_dir, settings, overwrite)
         if overwrite:  # only what this run (or shard) would write, and the whole run's totals, now stale
             folder.forget(mine & folder.entries())
         folder.record(mine)
         write_json(out_dir / SETTINGS_NAME, settings)
-        return _generate_frames(dataset, out_dir, settings, options, workers, progress, shard)
+        yield
 
 
 def _generate_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options: FitOptions, workers: int,
@@ -495,27 +516,29 @@ def _plan(frames: list[Any], out_dir: Path, options: FitOptions,
     return records, jobs
 
 
-def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool) -> dict[str, dict[str, Any]]:
-    """Run :func:`_process_frame` over ``jobs`` in this process or in ``workers`` processes."""
-    global _DATASET
+def _in_worker(process: Any, *job: Any) -> dict[str, Any]:
+    """``process(dataset, *job)`` with this worker process's dataset."""
+    return process(_DATASET, *job)
+
+
+def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool, process: Any = _process_frame,
+              desc: str = "generate") -> dict[str, dict[str, Any]]:
+    """Run ``process(dataset, *job)`` (a module-level function returning the frame's record, default
+    :func:`_process_frame`) over ``jobs`` in this process or in ``workers`` processes."""
     from freespace.log import progress_bar
 
     records: dict[str, dict[str, Any]] = {}
-    bar = progress_bar(None, total=len(jobs), desc="generate", unit="frame", enabled=progress and bool(jobs))
+    bar = progress_bar(None, total=len(jobs), desc=desc, unit="frame", enabled=progress and bool(jobs))
     if workers == 1 or len(jobs) <= 1:
-        previous, _DATASET = _DATASET, dataset
-        try:
-            for job in jobs:
-                record = _process_frame(*job)
-                records[record["frame"]] = record
-                bar.update()
-        finally:
-            _DATASET = previous
+        for job in jobs:
+            record = process(dataset, *job)
+            records[record["frame"]] = record
+            bar.update()
     else:
         # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
         with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset, os.getpid()),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
-            for future in as_completed([pool.submit(_process_frame, *job) for job in jobs]):
+            for future in as_completed([pool.submit(_in_worker, process, *job) for job in jobs]):
                 record = future.result()
                 records[record["frame"]] = record
                 bar.update()
@@ -543,11 +566,11 @@ _CSV_FIELDS = ["frame", "status", "roll_deg", "kappa_hat", "kappa", "num_valid",
                "disparity_source", "seconds", "reason"]
 
 
-def _write_report_csv(path: Path, records: list[dict[str, Any]]) -> None:
+def _write_report_csv(path: Path, records: list[dict[str, Any]], fields: list[str] = _CSV_FIELDS) -> None:
     rows = []
     for record in records:
         row = dict(record)
         seconds = record.get("seconds") or {}
         row["seconds"] = round(seconds.get("total", math.nan), 4) if seconds else ""
         rows.append(row)
-    write_csv(path, _CSV_FIELDS, rows, extra="ignore")
+    write_csv(path, fields, rows, extra="ignore")

@@ -20,7 +20,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("freespace.video",),
     ("freespace.geometry",),
     ("freespace.data",),
-    ("freespace.generate",),
+    ("freespace.generate", "freespace.autolabel"),
     ("freespace.models", "freespace.metrics", "freespace.bev", "freespace.viz"),
     ("freespace.kitti_eval",),
     ("freespace.predictor",),

@@ -135,6 +135,10 @@ class TrainConfig:
     splits_dir: str | None = _option("train.txt/val.txt/test.txt to use (default: the paper's split)", None,
                                      flag="--splits", metavar="DIR")
     max_frames: int | None = _option("use only the first N labelled frames (quick runs)", None, metavar="N")
+    labels: str | None = _option("road labels of the training frames from this label tree (`freespace autolabel "
+                                 "--dataset ... --out DIR`: DIR/<frame>.png, KITTI colours) instead of the dataset's "
+                                 "own; validation and test keep the dataset's labels; training frames without a "
+                                 "label there are left out", None, metavar="DIR")
     disparity_mode: str = _option("disparities for the DS-Generator: auto = file, else depth + camera, else cached "
                                   "SGBM", "auto", choices=_disparity_modes, flag="--disparity-source")
     cache_dir: str | None = _option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
@@ -177,7 +181,10 @@ class TrainConfig:
             except ImportError:
                 raise InvalidOptionError("--tensorboard needs the tensorboard package: pip install tensorboard") from None
         check_dataset_root(self.root, get_dataset_class(self.dataset).name)
-        check_outputs({"--out": self.out}, {"--root": self.root, "--splits": self.splits_dir})
+        if self.labels is not None and not Path(self.labels).is_dir():
+            raise InputFileError(f"--labels {self.labels} not found; give the folder `freespace autolabel --dataset` "
+                                 f"wrote")
+        check_outputs({"--out": self.out}, {"--root": self.root, "--splits": self.splits_dir, "--labels": self.labels})
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

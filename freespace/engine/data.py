@@ -89,6 +89,16 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     if not all(splits[k] for k in ("train", "val", "test")):
         raise DatasetError(f"a split is empty ({', '.join(f'{k} {len(v)}' for k, v in splits.items())}); use more "
                            f"frames or scenarios, or give --splits")
+    if config.labels is not None:  # the training frames' labels from a label tree; val and test keep their own
+        train = [n for n in splits["train"] if (Path(config.labels) / f"{n}.png").is_file()]
+        if not train:
+            raise DatasetError(f"--labels {config.labels} has no label of any of the {len(splits['train'])} training "
+                               f"frames (<frame>.png); label them with `freespace autolabel --dataset`")
+        if len(train) < len(splits["train"]):
+            log.warning("--labels: %d of %d training frames have no label in %s and are left out",
+                        len(splits["train"]) - len(train), len(splits["train"]), config.labels)
+        ds = ds.with_labels(config.labels, train)
+        splits = {**splits, "train": train}
     index = {f.name: ds.index(f.name) for f in labelled}
     items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
     augments = parse_augment(config.augment)
