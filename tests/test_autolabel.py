@@ -200,7 +200,8 @@ def test_dataset_tree_resumes_refuses_other_settings_and_shards(rendered: Path, 
         assert (out / "confidence" / f"{name}.png").is_file()
         assert json.loads((out / "reports" / f"{name}.json").read_text())["status"] == "done"
     settings = json.loads((out / "settings.json").read_text())
-    assert settings["command"] == "autolabel" and settings["curb_height"] == 0.1
+    assert settings["curb_height"] == 0.1
+    assert json.loads((out / ".freespace" / "manifest.json").read_text())["command"] == "autolabel"
     capsys.readouterr()
     assert main(args) == 0
     assert "0 labelled, 4 already done" in capsys.readouterr().out
@@ -213,12 +214,16 @@ def test_dataset_tree_resumes_refuses_other_settings_and_shards(rendered: Path, 
                      "--shard", f"{k}/2"]) == 0
     assert sorted(p.stem for p in sharded.glob("*.png")) == sorted(names)
     assert (sharded / "summary.shard-2-of-2.json").is_file()
-    # a folder another command wrote is refused
+    # a folder of someone else's files, and one another command wrote, are refused
     other = tmp_path / "other"
     other.mkdir()
     (other / "settings.json").write_text(json.dumps({"dataset": "synth"}))
     _one_line_error(["autolabel", "--dataset", "synth", "--root", str(rendered), "--out", str(other)], capsys,
                     "did not write")
+    generated = tmp_path / "generated"
+    assert main(["generate", "--dataset", "synth", "--root", str(rendered), "--out", str(generated)]) == 0
+    _one_line_error(["autolabel", "--dataset", "synth", "--root", str(rendered), "--out", str(generated)], capsys,
+                    "output of freespace generate")
 
 
 def test_train_labels_view_reads_the_tree_for_the_named_frames(rendered: Path, tmp_path: Path) -> None:
