@@ -435,7 +435,8 @@ def cmd_kitti_submit(args: argparse.Namespace) -> int:
 
 # --- reproduce, demo -----------------------------------------------------------------------------------
 
-REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "batch_size", "image_size", "workers", "max_frames")
+REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "batch_size", "image_size", "workers", "max_frames",
+                     "encoder_name", "encoder_weights")
 
 
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:

@@ -19,13 +19,19 @@ __all__ = ["RoadModule", "TrainingError"]
 
 class RoadModule(pl.LightningModule):
     """Trains ``create_model(model, **model_options)``; validation and test metrics are computed from
-    confusion counts summed over the whole split (and over DDP ranks), never averaged per batch."""
+    confusion counts summed over the whole split (and over DDP ranks), never averaged per batch.
+
+    ``encoder_weights`` (``"imagenet"`` or a file) initialise the encoder; they are kept out of
+    ``model_options``, so that a checkpoint rebuilds the network without them and loads its own tensors.
+    """
 
     def __init__(self, model: str, model_options: dict[str, Any], lr: float, momentum: float,
-                 weight_decay: float, image_size: tuple[int, int] | list[int] | None = None) -> None:
+                 weight_decay: float, image_size: tuple[int, int] | list[int] | None = None,
+                 encoder_weights: str | None = None) -> None:
         super().__init__()
         self.save_hyperparameters()
-        self.net = create_model(model, **model_options)
+        weights = {"encoder_weights": encoder_weights} if encoder_weights is not None else {}
+        self.net = create_model(model, **model_options, **weights)
         self._reset()
 
     def _reset(self) -> None:

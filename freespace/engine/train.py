@@ -192,8 +192,8 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                                            num_workers=config.workers, persistent_workers=config.workers > 0)
 
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
-    module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay,
-                        image_size=list(size))
+    module = RoadModule(config.model, config.model_options(), config.lr, config.momentum, config.weight_decay,
+                        image_size=list(size), encoder_weights=config.encoder_weights)
     if not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
         module.net.prepare(train[i]["label"] for i in range(len(data["train"])))
     callbacks, ckpt = _callbacks(run_dir, config.patience)

@@ -232,7 +232,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
               image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4, workers: int = 0,
               max_frames: int | None = None, figures: int = 3, progress: bool = True,
               variants: str | tuple[str, ...] = DEFAULT_VARIANTS, test_root: TestRoots = None,
-              only: str | None = None) -> dict[str, Any]:
+              only: str | None = None, encoder_name: str | None = None,
+              encoder_weights: str | None = None) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
     "runs": index}``.
 
@@ -247,7 +248,7 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     if not 1 <= seeds <= MAX_SEEDS:
         raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
     options = dict(epochs=epochs, batch_size=batch_size, patience=patience, image_size=image_size, workers=workers,
-                   max_frames=max_frames)
+                   max_frames=max_frames, encoder_name=encoder_name, encoder_weights=encoder_weights)
     out = Path(out)
     roots = parse_test_roots(test_root)
     if only is not None:
@@ -311,7 +312,8 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
                     log.warning("%s skipped: not a test set's metrics (%s)", path, exc)
                     continue
                 settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
-        for key in ("dataset", "root", "epochs", "patience", "batch_size", "image_size", "max_frames", "preset"):
+        for key in ("dataset", "root", "epochs", "patience", "batch_size", "image_size", "max_frames", "preset",
+                    "encoder_name", "encoder_weights"):
             settings.setdefault(key, set()).add(json.dumps(config.get(key)))
         entries.append(entry)
     order = {m: i for i, m in enumerate(list_models())}
