@@ -1,11 +1,12 @@
 """The base class of the segmentation networks (the registry is :mod:`freespace.models.registry`).
 
 Every network takes ``N×3×H×W`` float images in [0, 1] (RGB) and normalises them itself (ImageNet
-mean and std, or what its encoder's weights expect, live in buffers, so a checkpoint is self-contained). Any H and W work: the input is padded
-(replicate) to a multiple of ``divisor`` (32) inside the model and the logits are cropped back, so
-``model(x)`` in eval mode returns ``N×C×H×W`` logits at the input size. In train mode a network with
-auxiliary outputs returns a dict whose first entry, ``"logits"``, is those logits; :meth:`loss` turns
-outputs and a target into the training losses (cross-entropy plus the network's own auxiliary terms).
+mean and std, or what its encoder's weights expect, live in buffers, so a checkpoint is self-contained).
+Any H and W work: the input is padded (replicate) to a multiple of ``divisor`` (32) inside the model and
+the logits are cropped back, so ``model(x)`` in eval mode returns ``N×C×H×W`` logits at the input size.
+In train mode a network with auxiliary outputs returns a dict whose first entry, ``"logits"``, is those
+logits; :meth:`loss` turns outputs and a target into the training losses (cross-entropy plus the
+network's own auxiliary terms).
 """
 
 from __future__ import annotations
@@ -121,14 +122,11 @@ def load_smp_encoder(encoder_name: str, weights: str | None, **kwargs: Any) -> n
     """
     import segmentation_models_pytorch as smp
 
-    from freespace.models.lite import register_lite_encoders
-    from freespace.models.weights import check_encoder_name, load_encoder_weights, loads_locally
+    from freespace.models.weights import load_encoder_weights, smp_weights
 
-    register_lite_encoders()
-    check_encoder_name(encoder_name)
-    local = loads_locally(encoder_name, weights)
+    downloaded = smp_weights(encoder_name, weights)
     try:
-        encoder = smp.encoders.get_encoder(encoder_name, weights=None if local else weights, **kwargs)
+        encoder = smp.encoders.get_encoder(encoder_name, weights=downloaded, **kwargs)
     except FreespaceError:
         raise
     except KeyError as exc:
@@ -137,8 +135,8 @@ def load_smp_encoder(encoder_name: str, weights: str | None, **kwargs: Any) -> n
         if weights is None:
             raise
         raise network_error(encoder_name, weights, exc) from None
-    if local:
-        load_encoder_weights(encoder, encoder_name, weights)  # type: ignore[arg-type]
+    if weights is not None and downloaded is None:
+        load_encoder_weights(encoder, encoder_name, weights)
     return encoder
 
 

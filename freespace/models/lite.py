@@ -74,7 +74,8 @@ def is_lite(encoder_name: str) -> bool:
 
 def _variant(name: str) -> tuple[float, float]:
     if name not in LITE_VARIANTS:
-        raise InvalidOptionError(f"unknown EfficientNet-Lite variant {name!r}; choose one of {', '.join(LITE_VARIANTS)}")
+        raise InvalidOptionError(f"unknown EfficientNet-Lite variant {name!r}; choose one of "
+                                 f"{', '.join(LITE_VARIANTS)}")
     return LITE_VARIANTS[name]
 
 

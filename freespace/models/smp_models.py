@@ -57,15 +57,12 @@ def smp_kwargs(arch: str, options: dict[str, Any]) -> dict[str, Any]:
 def _build(arch: str, num_classes: int, encoder_weights: str | None, **options: Any) -> SmpModel:
     import segmentation_models_pytorch as smp
 
-    from freespace.models.lite import register_lite_encoders
-    from freespace.models.weights import check_encoder_name, load_encoder_weights, loads_locally
+    from freespace.models.weights import load_encoder_weights, smp_weights
 
-    register_lite_encoders()
-    check_encoder_name(options["encoder_name"])
     cls = {"unet": smp.Unet, "deeplabv3plus": smp.DeepLabV3Plus}[arch]
-    local = loads_locally(options["encoder_name"], encoder_weights)
+    downloaded = smp_weights(options["encoder_name"], encoder_weights)
     try:
-        net = cls(encoder_weights=None if local else encoder_weights, classes=num_classes, **smp_kwargs(arch, options))
+        net = cls(encoder_weights=downloaded, classes=num_classes, **smp_kwargs(arch, options))
     except FreespaceError:
         raise
     except (KeyError, ValueError, TypeError) as exc:
@@ -74,8 +71,8 @@ def _build(arch: str, num_classes: int, encoder_weights: str | None, **options: 
         if encoder_weights is None:
             raise
         raise network_error(options["encoder_name"], encoder_weights, exc) from None
-    if local:
-        load_encoder_weights(net.encoder, options["encoder_name"], encoder_weights)  # type: ignore[arg-type]
+    if encoder_weights is not None and downloaded is None:
+        load_encoder_weights(net.encoder, options["encoder_name"], encoder_weights)
     model = SmpModel(net, num_classes)
     model.normalise_for(net.encoder)
     return model

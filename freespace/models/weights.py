@@ -23,15 +23,24 @@ from torch import nn
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, PretrainedWeightsError
 from freespace.models.lite import (LITE_VARIANTS, convert_reference_state, is_lite, is_reference_layout,
-                                   shipped_weights)
+                                   register_lite_encoders, shipped_weights)
 
-__all__ = ["check_encoder_name", "loads_locally", "read_state_dict", "load_encoder_weights", "apply_state"]
+__all__ = ["smp_weights", "read_state_dict", "load_encoder_weights", "apply_state"]
 
 #: ImageNet classifiers' tensors that a backbone's weight file may carry and an encoder does not have
 _CLASSIFIER_MODULES = ("fc", "classifier", "_fc")
 
 
-def check_encoder_name(encoder_name: str) -> None:
+def smp_weights(encoder_name: str, weights: str | None) -> str | None:
+    """Before smp builds encoder ``encoder_name``: make the Lite encoders known to it, refuse an unknown
+    name, and return the weights smp is to load itself — ``weights``, or None where
+    :func:`load_encoder_weights` loads them into the built encoder (:func:`_loads_locally`)."""
+    register_lite_encoders()
+    _check_encoder_name(encoder_name)
+    return None if _loads_locally(encoder_name, weights) else weights
+
+
+def _check_encoder_name(encoder_name: str) -> None:
     """Refuse an encoder name that is neither EfficientNet-Lite nor segmentation-models-pytorch's (the
     message lists a few choices, not smp's hundred-odd)."""
     import segmentation_models_pytorch as smp
@@ -42,7 +51,7 @@ def check_encoder_name(encoder_name: str) -> None:
                                  f"smp.encoders.get_encoder_names() lists them)")
 
 
-def loads_locally(encoder_name: str, weights: str | None) -> bool:
+def _loads_locally(encoder_name: str, weights: str | None) -> bool:
     """Whether :func:`load_encoder_weights` loads ``weights`` (a Lite encoder's, or a file) rather than
     smp's download: true unless ``weights`` is None or one of the names smp knows for that encoder."""
     if weights is None:
