@@ -239,6 +239,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
 
     ``variants``: table names from :data:`VARIANTS` (``X`` is always run: gains are against it).
     ``test_root``: further test sets (:func:`parse_test_roots`).
+    ``encoder_name``, ``encoder_weights``: every run's encoder and its initial weights (``"imagenet"`` or a
+    state-dict file; see :mod:`freespace.models.weights`), for the networks that take them.
     ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell (``models`` and ``variants`` are then not used)
     and writes only its run folder; the returned table and gains are then empty (collect the cells with
     :func:`write_tables`).
