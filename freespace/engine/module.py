@@ -24,17 +24,23 @@ def epoch_seed(seed: int, epoch: int) -> int:
 
 class RoadModule(pl.LightningModule):
     """Trains ``create_model(model, **model_options)``; validation and test metrics are computed from
-    confusion counts summed over the whole split (and over DDP ranks), never averaged per batch."""
+    confusion counts summed over the whole split (and over DDP ranks), never averaged per batch.
+
+    ``encoder_weights`` (``"imagenet"`` or a file) initialise the encoder; they are kept out of
+    ``model_options``, so that a checkpoint rebuilds the network without them and loads its own tensors.
+    """
 
     def __init__(self, model: str, model_options: dict[str, Any], lr: float, momentum: float,
                  weight_decay: float, image_size: tuple[int, int] | list[int] | None = None, seed: int = 0,
-                 val_window: int = 1) -> None:
+                 val_window: int = 1, encoder_weights: str | None = None) -> None:
         """``seed``: the run's seed, from which dropout draws (with the epoch); ``val_window``: the epochs
         over which ``val_f_window`` (the early-stopping and checkpoint criterion when > 1) averages the
-        validation F-score."""
+        validation F-score; ``encoder_weights``: the encoder's initial weights ("imagenet" or a file; a
+        checkpoint rebuilds the network without them and loads its own tensors)."""
         super().__init__()
         self.save_hyperparameters()
-        self.net = create_model(model, **model_options)
+        weights = {"encoder_weights": encoder_weights} if encoder_weights is not None else {}
+        self.net = create_model(model, **model_options, **weights)
         self._val_f: list[float] = []  # each epoch's validation F-score (kept in checkpoints)
         self._reset()
 

@@ -211,8 +211,9 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                                            num_workers=config.workers, persistent_workers=config.workers > 0)
 
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
-    module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay,
-                        image_size=list(size), seed=config.seed, val_window=config.val_window)
+    module = RoadModule(config.model, config.model_options(), config.lr, config.momentum, config.weight_decay,
+                        image_size=list(size), seed=config.seed, val_window=config.val_window,
+                        encoder_weights=config.encoder_weights)
     if not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
         # from the training frames themselves (the first items; views and duplicates follow), so that every
         # variant of the protocol fits it from the same labels

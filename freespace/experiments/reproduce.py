@@ -279,13 +279,16 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
               batch_size: int = 4, workers: int = 0,
               max_frames: int | None = None, figures: int = 3, progress: bool = True,
               variants: str | tuple[str, ...] = DEFAULT_VARIANTS, test_root: TestRoots = None,
-              only: str | None = None) -> dict[str, Any]:
+              only: str | None = None, encoder_name: str | None = None,
+              encoder_weights: str | None = None) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
     "runs": index}``.
 
     ``variants``: table names from :data:`VARIANTS` (``X`` is always run: gains are against it); a variant's
     ``budget`` multiplies ``epochs`` and ``patience`` (X-long).
     ``test_root``: further test sets (:func:`parse_test_roots`).
+    ``encoder_name``, ``encoder_weights``: every run's encoder and its initial weights (``"imagenet"`` or a
+    state-dict file; see :mod:`freespace.models.weights`), for the networks that take them.
     ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell (``models`` and ``variants`` are then not used)
     and writes only its run folder; the returned table and gains are then empty (collect the cells with
     :func:`write_tables`).
@@ -295,7 +298,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     if not 1 <= seeds <= MAX_SEEDS:
         raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
     options = dict(epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window,
-                   image_size=image_size, workers=workers, max_frames=max_frames)
+                   image_size=image_size, workers=workers, max_frames=max_frames, encoder_name=encoder_name,
+                   encoder_weights=encoder_weights)
     out = Path(out)
     roots = parse_test_roots(test_root)
     if only is not None:
@@ -369,7 +373,7 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
                     continue
                 settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
         for key in ("dataset", "root", "epochs", "patience", "val_window", "batch_size", "image_size", "max_frames",
-                    "preset"):
+                    "preset", "encoder_name", "encoder_weights"):
             value = config.get(key)
             if key in ("epochs", "patience") and isinstance(value, int):
                 value //= variant.budget  # X-long's budget is part of the variant
