@@ -535,8 +535,12 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--models", default="all", help="all or a comma-separated list (default all)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
     p.add_argument("--variants", default="X,HA-X,X-dup", help="comma-separated arms: X, HA-X (DS-Generator views), "
-                   "X-dup (the control: X with HA-X's number of steps), HV-X (road-plane virtual views), HAV-X "
-                   "(both) (default X,HA-X,X-dup)")
+                   "X-dup (the control: X with HA-X's number of steps), X-long (X with twice the epochs and "
+                   "patience), HV-X (road-plane virtual views), HAV-X (both), X-auto (training labels from "
+                   "--autolabels), X-mix (the dataset's labels on 20%% of the training drives, --autolabels' on the "
+                   "rest) (default X,HA-X,X-dup)")
+    p.add_argument("--autolabels", metavar="DIR", help="for X-auto and X-mix: the label tree of --root that "
+                   "`freespace autolabel --dataset` wrote")
     p.add_argument("--test-root", metavar="[NAME=]DIR", action="append",
                    help="also test every run on all labelled frames of this dataset (same --dataset layout; e.g. "
                    "other rigs): rows with test_set = NAME, or shifted without one; repeat for more sets")
@@ -567,7 +571,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         options = config_from_args(args, REPRODUCE_OPTIONS)
         r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=models, seeds=args.seeds,
                       progress=not args.no_progress, variants=args.variants, test_root=args.test_root,
-                      only=args.only, **options)
+                      only=args.only, autolabels=args.autolabels, **options)
         if args.only:
             print(f"{r['runs'][0]['run']}: {r['runs'][0]['status']} (collect the cells with --tables)")
             return 0

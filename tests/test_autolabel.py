@@ -251,3 +251,29 @@ def test_autolabel_never_imports_torch() -> None:
             "print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_human_share_keeps_the_datasets_labels_on_whole_drives(tmp_path: Path) -> None:
+    """X-mix (--human-share P): every frame of round(P · drives) training drives keeps its own label, the
+    others read the label tree; the drives depend on the seed only."""
+    from freespace.engine.config import TrainConfig
+    from freespace.engine.data import _human_drives, prepare_data
+
+    root = tmp_path / "syn"
+    write_dataset(root, 20, seed=1, config=SynthConfig(width=160, height=128, frames_per_scenario=2), progress=False)
+    labels = tmp_path / "labels"
+    assert main(["autolabel", "--dataset", "synth", "--root", str(root), "--out", str(labels)]) == 0
+    ds = get_dataset("synth", root)
+    config = TrainConfig(dataset="synth", root=str(root), out=str(tmp_path / "run"), model="segnet", seed=4,
+                         labels=str(labels), human_share=0.5)
+    config.check()
+    data = prepare_data(config, tmp_path / "run")
+    train = [it.name for it in data["train"]]
+    human = _human_drives(ds.frames, train, 0.5, 4)
+    drives = {f.name: f.scenario for f in ds.frames}
+    assert human and len({drives[n] for n in human}) == round(0.5 * len({drives[n] for n in train}))
+    assert all(drives[n] not in {drives[h] for h in human} for n in set(train) - human)  # whole drives
+    assert set(data["dataset"].label_files) == {n for n in train if n not in human}
+    assert _human_drives(ds.frames, train, 0.5, 4) == human and _human_drives(ds.frames, train, 0.0, 4) == set()
+    with pytest.raises(InvalidOptionError, match="--labels"):
+        TrainConfig(dataset="synth", root=str(root), out=str(tmp_path / "r2"), human_share=0.2).check()

@@ -216,6 +216,8 @@ def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, caps
     (["--test-root", "test=/tmp"], "'test' cannot name a test set"),
     (["--test-root", "/tmp", "--test-root", "shifted=/tmp"], "two test sets are named 'shifted'"),
     (["--tables", "--only", "unet,X,0"], "--tables collects the finished cells"),
+    (["--only", "unet,X-auto,0"], "give --autolabels DIR"),
+    (["--variants", "X,X-mix"], "give --autolabels DIR"),
 ])
 def test_reproduce_mistakes(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture, extra: list[str],
                             message: str) -> None:

@@ -145,6 +145,9 @@ class TrainConfig:
                                  "--dataset ... --out DIR`: DIR/<frame>.png, KITTI colours) instead of the dataset's "
                                  "own; validation and test keep the dataset's labels; training frames without a "
                                  "label there are left out", None, metavar="DIR")
+    human_share: float = _option("with --labels: the share of the training drives (scenarios, drawn from --seed) "
+                                 "that keep the dataset's own labels; the others take the label tree's", 0.0,
+                                 metavar="P")
     disparity_mode: str = _option("disparities for the DS-Generator: auto = file, else depth + camera, else cached "
                                   "SGBM", "auto", choices=_disparity_modes, flag="--disparity-source")
     cache_dir: str | None = _option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
@@ -188,6 +191,11 @@ class TrainConfig:
                 raise InvalidOptionError("--tensorboard needs the tensorboard package: pip install tensorboard") from None
         _check_encoder(self.model, self.preset, self.encoder_name, self.encoder_weights)
         check_dataset_root(self.root, get_dataset_class(self.dataset).name)
+        if not 0 <= self.human_share <= 1:
+            raise InvalidOptionError(f"--human-share must be in [0, 1], got {self.human_share}")
+        if self.human_share > 0 and self.labels is None:
+            raise InvalidOptionError("--human-share splits the training drives between the dataset's labels and "
+                                     "--labels DIR; give --labels too")
         if self.labels is not None and not Path(self.labels).is_dir():
             raise InputFileError(f"--labels {self.labels} not found; give the folder `freespace autolabel --dataset` "
                                  f"wrote")

@@ -90,14 +90,15 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
         raise DatasetError(f"a split is empty ({', '.join(f'{k} {len(v)}' for k, v in splits.items())}); use more "
                            f"frames or scenarios, or give --splits")
     if config.labels is not None:  # the training frames' labels from a label tree; val and test keep their own
-        train = [n for n in splits["train"] if (Path(config.labels) / f"{n}.png").is_file()]
+        human = _human_drives(labelled, splits["train"], config.human_share, config.seed)
+        train = [n for n in splits["train"] if n in human or (Path(config.labels) / f"{n}.png").is_file()]
         if not train:
             raise DatasetError(f"--labels {config.labels} has no label of any of the {len(splits['train'])} training "
                                f"frames (<frame>.png); label them with `freespace autolabel --dataset`")
         if len(train) < len(splits["train"]):
             log.warning("--labels: %d of %d training frames have no label in %s and are left out",
                         len(splits["train"]) - len(train), len(splits["train"]), config.labels)
-        ds = ds.with_labels(config.labels, train)
+        ds = ds.with_labels(config.labels, [n for n in train if n not in human])
         splits = {**splits, "train": train}
     index = {f.name: ds.index(f.name) for f in labelled}
     items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
@@ -115,6 +116,15 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
                                  prob=config.virtual_prob)
     size = config.image_size or tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
     return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
+
+
+def _human_drives(frames: list[Any], train: list[str], share: float, seed: int) -> set[str]:
+    """The training frames that keep their own labels under ``--human-share``: every frame of
+    ``round(share · drives)`` training drives (scenarios), drawn from ``seed``."""
+    scenario = {f.name: f.scenario for f in frames}
+    drives = sorted({scenario[n] for n in train})
+    keep = {drives[i] for i in np.random.default_rng([seed, 29]).permutation(len(drives))[:round(share * len(drives))]}
+    return {n for n in train if scenario[n] in keep}
 
 
 def _road_planes(ds: StereoRoadDataset, indices: list[int]) -> dict[int, tuple[np.ndarray, Any]]:

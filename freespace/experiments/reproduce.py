@@ -53,13 +53,16 @@ __all__ = ["reproduce", "run_cell", "write_tables", "parse_variants", "parse_cel
 @dataclass(frozen=True)
 class Variant:
     """One arm of the protocol: its table name (``X`` stands for the network), the training ``--augment``,
-    the tag of its run folders (``runs/<model>-<tag>-s<seed>``) and ``budget``, the factor on the epoch cap
-    and on the early-stopping patience (X-long: 2, as many optimiser steps as HA-X)."""
+    the tag of its run folders (``runs/<model>-<tag>-s<seed>``), ``budget``, the factor on the epoch cap
+    and on the early-stopping patience (X-long: 2, as many optimiser steps as HA-X), and where the training
+    labels come from: ``human`` (the dataset's), ``auto`` (the ``--autolabels`` tree) or ``mix`` (the
+    dataset's on :data:`MIX_HUMAN_SHARE` of the training drives, the tree's on the rest)."""
 
     name: str
     augment: str
     tag: str
     budget: int = 1
+    labels: str = "human"
 
     def label(self, model: str) -> str:
         """The table row of ``model``: ``X`` replaced by the network's name (``HA-X`` → ``HA-unet``)."""
@@ -74,11 +77,15 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in (
     Variant("HAV-X", "homography,virtual", "hav"),     # + both
     Variant("X-dup", "duplicate", "dup"),              # control: HA-X's step count, the frames' own images
     Variant("X-long", "none", "long", budget=2),       # control: HA-X's step count, each frame once per epoch
+    Variant("X-auto", "none", "auto", labels="auto"),  # labels nobody drew (freespace autolabel)
+    Variant("X-mix", "none", "mix", labels="mix"),     # people's labels on a fifth of the drives, autolabels after
 )}
+#: the share of the training drives that keep the dataset's labels in X-mix
+MIX_HUMAN_SHARE = 0.2
 DEFAULT_VARIANTS = ("X", "HA-X", "X-dup")
 #: the paired gains reported (variant, versus), when both were run
 GAINS = (("HA-X", "X"), ("HA-X", "X-dup"), ("HA-X", "X-long"), ("X-dup", "X"), ("X-long", "X"), ("HV-X", "X"),
-         ("HAV-X", "X"))
+         ("HAV-X", "X"), ("X-auto", "X"), ("X-mix", "X"), ("X-mix", "X-auto"))
 #: the primary endpoint, named before the converged run: HA-X − X-dup in F-score points on ``same-rigs``,
 #: averaged over the networks (one mean per seed), with an equivalence margin of ±1 point
 PRIMARY = {"versus": "HA-X - X-dup", "metric": "f_score", "test_set": "same-rigs", "margin": 1.0}
@@ -183,11 +190,16 @@ def _check_test_roots(dataset: str, roots: dict[str, Path]) -> None:
 
 
 def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, seed: int,
-            options: dict[str, Any]) -> TrainConfig:
+            options: dict[str, Any], autolabels: PathLike | None = None) -> TrainConfig:
     """The training configuration of one cell (``variant``: a table name; its budget scales the epoch cap
-    and the patience)."""
+    and the patience; X-auto and X-mix read ``autolabels``)."""
     arm = VARIANTS[variant]
     options = {**options, "epochs": options["epochs"] * arm.budget, "patience": options["patience"] * arm.budget}
+    if arm.labels != "human":
+        if autolabels is None:
+            raise InvalidOptionError(f"{variant} trains on labels nobody drew: give --autolabels DIR, the tree that "
+                                     f"`freespace autolabel --dataset {dataset} --root {root} --out DIR` wrote")
+        options.update(labels=str(autolabels), human_share=MIX_HUMAN_SHARE if arm.labels == "mix" else 0.0)
     config = TrainConfig(dataset=dataset, root=str(root), out=str(out / "runs" / _name(model, variant, seed)),
                          model=model, augment=arm.augment, seed=seed, **options)
     config.check()
@@ -280,13 +292,14 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
               max_frames: int | None = None, figures: int = 3, progress: bool = True,
               variants: str | tuple[str, ...] = DEFAULT_VARIANTS, test_root: TestRoots = None,
               only: str | None = None, encoder_name: str | None = None,
-              encoder_weights: str | None = None) -> dict[str, Any]:
+              encoder_weights: str | None = None, autolabels: PathLike | None = None) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
     "runs": index}``.
 
     ``variants``: table names from :data:`VARIANTS` (``X`` is always run: gains are against it); a variant's
     ``budget`` multiplies ``epochs`` and ``patience`` (X-long).
-    ``test_root``: further test sets (:func:`parse_test_roots`).
+    ``test_root``: further test sets (:func:`parse_test_roots`). ``autolabels``: the label tree of ``root``
+    that X-auto and X-mix train on (``freespace autolabel --dataset``).
     ``encoder_name``, ``encoder_weights``: every run's encoder and its initial weights (``"imagenet"`` or a
     state-dict file; see :mod:`freespace.models.weights`), for the networks that take them.
     ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell (``models`` and ``variants`` are then not used)
@@ -304,7 +317,7 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     roots = parse_test_roots(test_root)
     if only is not None:
         model, variant, seed = parse_cell(only, seeds)
-        config = _config(dataset, root, out, model, variant, seed, options)
+        config = _config(dataset, root, out, model, variant, seed, options, autolabels)
         _check_test_roots(dataset, roots)
         with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
             status = run_cell(config, test_root=roots, progress=progress)
@@ -315,7 +328,7 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     if unknown or not models:
         raise InvalidOptionError(f"unknown models {unknown}; choose from {', '.join(list_models())} or all")
     chosen = parse_variants(variants)
-    configs = [_config(dataset, root, out, model, variant, seed, options)  # every option checked before any work
+    configs = [_config(dataset, root, out, model, variant, seed, options, autolabels)  # all checked before any work
                for model in models for variant in chosen for seed in range(seeds)]
     changed = next(((c, ch) for c in configs if (ch := _cell_changes(c, Path(c.out)))), None)
     if changed is not None:
