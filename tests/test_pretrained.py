@@ -265,11 +265,12 @@ def test_bad_encoder_options_fail_before_any_work(tiny: Path, tmp_path: Path, co
 def test_reproduce_passes_the_encoder_to_every_run(tiny: Path, tmp_path: Path) -> None:
     from freespace.experiments.reproduce import _config
 
-    config = _config("synth", tiny, tmp_path / "out", "dupsampling", "none", 0,
-                     {"epochs": 1, "encoder_name": LITE0, "encoder_weights": None})
+    config = _config("synth", tiny, tmp_path / "out", "dupsampling", "X", 0,
+                     {"epochs": 1, "patience": 1, "encoder_name": LITE0, "encoder_weights": None})
     assert config.encoder_name == LITE0 and config.model_options() == {"preset": "light", "encoder_name": LITE0}
     with pytest.raises(InvalidOptionError, match="--encoder-name: denseaspp takes none"):
-        _config("synth", tiny, tmp_path / "out", "denseaspp", "none", 0, {"encoder_name": LITE0})
+        _config("synth", tiny, tmp_path / "out", "denseaspp", "X", 0, {"epochs": 1, "patience": 1,
+                                                                        "encoder_name": LITE0})
 
 
 def test_model_options_are_unchanged_without_an_encoder() -> None:
