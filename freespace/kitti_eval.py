@@ -92,5 +92,10 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLik
         evaluators.setdefault(cat, RoadEvaluator()).process(conf, label.road, label.valid)
     order = [c for c in KITTI_CATEGORIES if c in evaluators] + ["all"]
     evaluators["all"] = RoadEvaluator.from_vector(sum(ev.to_vector() for ev in evaluators.values()))
+    if evaluators["all"].kitti.pos + evaluators["all"].kitti.neg == 0:
+        where = " in the bird's-eye view" if calib_dir is not None else ""
+        raise DatasetError(f"the ground truth in {gt_dir} has no evaluated pixel{where} (every file all black: don't "
+                           f"care everywhere), so there is nothing to score; give KITTI road ground truth (road "
+                           f"magenta, non-road red)")
     keys = ("max_f", "ap", "pre", "rec", "fpr", "fnr", "threshold", "images")
     return {k: {m: v for m, v in evaluators[k].evaluate().items() if m in keys} for k in order}

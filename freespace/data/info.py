@@ -66,7 +66,10 @@ def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[li
                 elif kind == "label":
                     label = dataset.read_label(frame)
                     sizes[kind] = label.road.shape  # type: ignore[assignment]
-                    if not (label.road & label.valid).any():
+                    if not label.valid.any():
+                        problems.append(Problem(frame.name, f"label {path} has no evaluated pixel (all black: don't "
+                                                            f"care everywhere), so no road to fit or score"))
+                    elif not (label.road & label.valid).any():
                         problems.append(Problem(frame.name, f"label {path} marks no road pixel (the DS-Generator "
                                                             f"needs road to fit)"))
                 else:

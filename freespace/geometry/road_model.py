@@ -114,21 +114,23 @@ class RoadModel:
         """``self`` when the fit is one a stereo rig on a road can give, else a :class:`RoadFitError` that
         names the bound crossed and by how much.
 
-        Bounds: ``|Φ| ≤`` :data:`MAX_ROLL_DEG`; at least :data:`MIN_INLIER_SHARE` of the valid road pixels
-        are inliers (fitted models only); and ``camera_height``, when given (metres, e.g. the height of
-        :meth:`freespace.geometry.RoadPlane.from_road_model`), within :data:`CAMERA_HEIGHT_RANGE_M`.
+        Bounds, in this order: at least :data:`MIN_INLIER_SHARE` of the valid road pixels are inliers
+        (fitted models only); ``|Φ| ≤`` :data:`MAX_ROLL_DEG`; and ``camera_height``, when given (metres,
+        e.g. the height of :meth:`freespace.geometry.RoadPlane.from_road_model`), within
+        :data:`CAMERA_HEIGHT_RANGE_M`.
         """
         hint = ("check that the disparity (file, depth map or LiDAR scan) belongs to this reference image and is "
                 "the right way up (a PFM's rows run bottom to top), and that the label marks the road")
-        if abs(self.roll_deg) > MAX_ROLL_DEG:
-            raise RoadFitError(f"implausible road fit: roll {self.roll_deg:+.1f}° is "
-                               f"{abs(self.roll_deg) - MAX_ROLL_DEG:.1f}° beyond the ±{MAX_ROLL_DEG:g}° a stereo rig on a road can have; {hint}")
         if self.num_valid and self.num_inliers < MIN_INLIER_SHARE * self.num_valid:
             share = self.num_inliers / self.num_valid
             raise RoadFitError(f"implausible road fit: only {100 * share:.1f} % of the {self.num_valid} valid road "
                                f"pixels agree with the plane, {100 * (MIN_INLIER_SHARE - share):.1f} points below "
                                f"the {100 * MIN_INLIER_SHARE:g} % a road gives; raise --inlier-threshold if it is "
                                f"below the disparity's noise, else {hint}")
+        if abs(self.roll_deg) > MAX_ROLL_DEG:
+            raise RoadFitError(f"implausible road fit: roll {self.roll_deg:+.1f}° is "
+                               f"{abs(self.roll_deg) - MAX_ROLL_DEG:.1f}° beyond the ±{MAX_ROLL_DEG:g}° a stereo rig on "
+                               f"a road can have; {hint}")
         lo, hi = CAMERA_HEIGHT_RANGE_M
         if camera_height is not None and not lo <= camera_height <= hi:
             off = f"{camera_height - hi:.2f} m above the highest" if camera_height > hi else \
