@@ -68,6 +68,7 @@ __all__ = [
     "road_label_to_kitti",
     "read_kitti_calib",
     "check_outputs",
+    "missing_input",
 ]
 
 
@@ -212,6 +213,18 @@ def staged_folder(out: PathLike, marker: str, command: str, *, merge: bool = Fal
 
 # ---------------------------------------------------------------------------------------------------
 # images
+
+
+def missing_input(path: PathLike, what: str, kind: Literal["file", "folder"] = "file") -> InputFileError:
+    """The one-line error for an input ``path`` that is not the ``kind`` asked for: that it is a folder
+    where a file is wanted (or the other way round), else that it is not found. ``what`` names it
+    ("checkpoint", "ground-truth folder", ...)."""
+    path = Path(path)
+    if kind == "file" and path.is_dir():
+        return InputFileError(f"{what} {path} is a folder; name a file")
+    if kind == "folder" and path.exists():
+        return InputFileError(f"{what} {path} is a file; give a folder")
+    return InputFileError(f"{what} not found: {path}")
 
 
 def _read_bytes(path: PathLike, what: str) -> bytes:

@@ -17,7 +17,7 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, ShapeMismatchError
 from freespace.bev import to_bev
-from freespace.io import PathLike, read_image, read_kitti_calib, road_label_from_image
+from freespace.io import PathLike, missing_input, read_image, read_kitti_calib, road_label_from_image
 from freespace.metrics import KITTI_CATEGORIES, RoadEvaluator
 
 __all__ = ["evaluate_kitti_dirs", "read_confidence"]
@@ -62,7 +62,7 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLik
         folders.append((calib_dir, "calibration"))
     for d, what in folders:
         if not d.is_dir():
-            raise InputFileError(f"{what} folder not found: {d}")
+            raise missing_input(d, f"{what} folder", "folder")
     gts = [p for p in sorted(gt_dir.glob("*.png")) if _GT.match(p.stem)]
     if not gts:
         raise DatasetError(f"no KITTI road ground truth (<cat>_road_<id>.png) in {gt_dir}")

@@ -80,6 +80,9 @@ def read_splits(folder: PathLike, known: Sequence[str] | None = None) -> dict[st
         InputFileError: a list is missing. DatasetError: unknown or repeated names.
     """
     folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputFileError(f"split lists {folder} is a file; give the folder that holds train.txt, val.txt and "
+                             f"test.txt")
     out = {}
     for k in SPLIT_NAMES:
         path = folder / f"{k}.txt"
