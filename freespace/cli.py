@@ -169,6 +169,93 @@ def cmd_generate(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+# --- autolabel -----------------------------------------------------------------------------------------
+
+
+def _autolabel_parser(p: argparse.ArgumentParser) -> None:
+    from freespace.autolabel import AutolabelOptions
+    from freespace.data.disparity import DISPARITY_MODES
+    from freespace.geometry import SGBM_MAX_DISPARITY
+
+    one = p.add_argument_group("one image")
+    one.add_argument("--reference", metavar="L.png", help="left image")
+    one.add_argument("--target", metavar="R.png", help="right image (the disparity is computed with SGBM)")
+    one.add_argument("--disparity", metavar="D", help="left disparity (KITTI uint16 .png, .npy, .pfm) instead of "
+                                                      "--target")
+    one.add_argument("--confidence", metavar="C.png", help="also write the label's confidence (8-bit grey PNG)")
+    one.add_argument("--model-json", metavar="M.json", help="also write the road model and statistics as JSON")
+    one.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration: the baseline from P2/P3")
+    one.add_argument("--baseline", type=float, metavar="B", help="the baseline in metres (instead of --calib)")
+    g = p.add_argument_group("dataset")
+    _add_dataset_root(g, required=False)
+    g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
+    g.add_argument("--disparity-source", dest="disparity_mode", choices=DISPARITY_MODES, default="auto",
+                   help="auto: file, else depth + camera, else cached SGBM (default); depth, lidar, sgbm: only that")
+    g.add_argument("--lidar-densify", type=float, metavar="PX", help="--disparity-source lidar: fill holes within "
+                                                                      "PX pixels of a point")
+    g.add_argument("--cache-dir", metavar="DIR", help="SGBM disparity cache (default ~/.cache/freespace/sgbm)")
+    g.add_argument("--shard", metavar="K/N", help="only the K-th of N disjoint parts of the frames (K from 1)")
+    g.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    g.add_argument("--overwrite", action="store_true",
+                   help="replace what an earlier run with other settings labelled in --out")
+    p.add_argument("--out", required=True, help="label image LABEL.png (one image) or folder (dataset)")
+    d = AutolabelOptions()
+    g = p.add_argument_group("method")
+    g.add_argument("--curb-height", type=float, default=d.curb_height, metavar="M",
+                   help="smallest step off the road to tell apart, metres (default %(default)s)")
+    g.add_argument("--camera-height", type=float, default=d.camera_height, metavar="M",
+                   help="camera height above the road when the baseline is unknown (default %(default)s)")
+    g.add_argument("--noise", type=float, metavar="PX", help="disparity noise in pixels (default: estimated)")
+    g.add_argument("--max-disparity", type=int, default=SGBM_MAX_DISPARITY, metavar="PX",
+                   help="SGBM search range (default %(default)s)")
+    p.set_defaults(func=cmd_autolabel)
+
+
+def cmd_autolabel(args: argparse.Namespace) -> int:
+    """``freespace autolabel``: a road label from disparity, for one left image or a whole dataset."""
+    from freespace.autolabel import AutolabelOptions, autolabel_dataset, autolabel_pair
+
+    options = AutolabelOptions(curb_height=args.curb_height, camera_height=args.camera_height, noise=args.noise,
+                               max_disparity=args.max_disparity)
+    one = {"--reference": args.reference, "--target": args.target, "--disparity": args.disparity,
+           "--confidence": args.confidence, "--model-json": args.model_json, "--calib": args.calib,
+           "--baseline": args.baseline is not None}
+    if args.dataset is None:
+        if not args.reference:
+            raise InvalidOptionError("give --reference and --target or --disparity (one image), or --dataset and "
+                                     "--root (a dataset)")
+        many = [n for n, v in (("--root", args.root), ("--disparity-dir", args.disparity_dir), ("--shard", args.shard),
+                               ("--lidar-densify", args.lidar_densify is not None), ("--overwrite", args.overwrite),
+                               ("--cache-dir", args.cache_dir), ("--split", args.split)) if v]
+        if many or args.disparity_mode != "auto" or args.workers != 1:
+            raise InvalidOptionError(f"{', '.join(many) or '--disparity-source/--workers'} are for --dataset")
+        result = autolabel_pair(args.reference, args.target, args.disparity, out=args.out, confidence=args.confidence,
+                                calib=args.calib, baseline=args.baseline, model_json=args.model_json, options=options)
+        s = result.stats
+        print(f"road {100 * s['road_fraction']:.1f}%  labelled {100 * s['coverage']:.1f}%  roll "
+              f"{result.model.roll_deg:+.2f}°  noise {s['noise_px']:.2f} px  → {args.out}")
+        return 0
+    given = [n for n, v in one.items() if v]
+    if given:
+        raise InvalidOptionError(f"--dataset labels a whole dataset; {', '.join(given)} are for one image, leave "
+                                 f"them out")
+    if args.root is None:
+        raise InvalidOptionError("--dataset needs --root DIR, the dataset's folder")
+    if args.lidar_densify is not None and args.disparity_mode != "lidar":
+        raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
+    from freespace.shard import parse_shard
+
+    shard = parse_shard(args.shard) if args.shard is not None else None
+    summary = autolabel_dataset(_open_dataset(args), args.out, workers=args.workers, options=options,
+                                overwrite=args.overwrite, shard=shard)
+    failed = summary["failed"]
+    print(f"{summary['labelled']} labelled, {summary['skipped']} already done, {len(failed)} failed of "
+          f"{summary['frames']} frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
+    for name, reason in failed.items():
+        print(f"  failed {name}: {reason}")
+    return 1 if failed else 0
+
+
 # --- synth ---------------------------------------------------------------------------------------------
 
 
@@ -259,6 +346,7 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     from freespace.data.registry import get_dataset
     from freespace.data.splits import make_splits, write_splits
     from freespace.io import check_outputs
+    from freespace.outdir import claim_folder
 
     check_outputs({"--out": args.out}, {"--root": args.root})
     dataset = get_dataset(args.dataset, args.root, args.split, disparity_mode="none")
@@ -266,7 +354,8 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     if not labelled:
         raise InvalidOptionError(f"split {dataset.split!r} of {args.root} has no labelled frames to split")
     splits = make_splits(labelled, seed=args.seed)
-    write_splits(args.out, splits)
+    with claim_folder(args.out, "datasets split") as folder, folder.staged() as staging:
+        write_splits(staging, splits)
     print(" ".join(f"{k} {len(v)}" for k, v in splits.items()) + f" → {args.out}/{{train,val,test}}.txt")
     return 0
 
@@ -447,7 +536,8 @@ def cmd_kitti_submit(args: argparse.Namespace) -> int:
 
 # --- reproduce, demo -----------------------------------------------------------------------------------
 
-REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "batch_size", "image_size", "workers", "max_frames")
+REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "val_window", "batch_size", "image_size", "workers",
+                     "max_frames", "encoder_name", "encoder_weights")
 
 
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:
@@ -535,6 +625,11 @@ COMMANDS: dict[str, tuple[str, str, Callable[..., None]]] = {
                  "image into the reference (left) view with the road homography; for one pair or every labelled "
                  "frame of a dataset. With --virtual: the reference image and its label from another camera pose, "
                  "through the road plane (no right image).", _generate_parser),
+    "autolabel": ("road labels from disparity alone (no people): one left image or a whole dataset",
+                  "Fit the road disparity model to the whole frame and label the pixels that agree with it (KITTI "
+                  "colours: road magenta, non-road red, don't care black where the evidence is weak), with an 8-bit "
+                  "confidence; for one left image (from --disparity, or SGBM with --target) or every frame of a "
+                  "dataset, as a label tree that `train --labels` reads.", _autolabel_parser),
     "synth": ("render the built-in stereo road dataset (KITTI road layout)",
               "Render stereo road scenes (left, right, exact disparity, road label, calibration) as a KITTI road "
               "tree. Frame i depends only on the seed and i.", _synth_parser),

@@ -20,11 +20,15 @@ from freespace.errors import FreespaceError, InvalidOptionError, check_seed
 from freespace.generate import generate_dataset
 from freespace.geometry import compute_disparity, fit_road_model
 from freespace.io import PathLike, read_disparity, read_image, read_road_label, write_image, write_json
+from freespace.outdir import claim_folder
 from freespace.viz import caption, colorize_disparity, grid, overlay_road
 
 log = logging.getLogger(__name__)
 
 __all__ = ["run_demo"]
+
+#: what the demo writes into OUT (:mod:`freespace.outdir` entries)
+OUT_ENTRIES = ("dataset/", "generated/", "figures/", "experiment/", "demo_summary.json")
 
 
 def _mae(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
@@ -63,7 +67,12 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
                                     f"and test)" if train else "") + f", got {num_frames}")
     if epochs is not None and epochs < 1:
         raise InvalidOptionError(f"--epochs must be ≥ 1, got {epochs}")
-    out = Path(out)
+    with claim_folder(out, "demo", entries=OUT_ENTRIES):
+        return _demo(Path(out), num_frames, seed, config, train, full, epochs, figures)
+
+
+def _demo(out: Path, num_frames: int, seed: int, config: SynthConfig, train: bool, full: bool,
+          epochs: int | None, figures: int) -> dict[str, Any]:
     t0 = time.perf_counter()
     log.info("rendering %d stereo frames into %s", num_frames, out / "dataset")
     rows = write_dataset(out / "dataset", num_frames, seed=seed, config=config)

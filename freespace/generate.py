@@ -13,8 +13,10 @@ import math
 import multiprocessing
 import os
 import time
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +47,7 @@ from freespace.io import (
     PathLike,
     check_outputs,
     encode_image,
+    encode_json,
     atomic_write_bytes,
     RoadLabel,
     read_disparity,
@@ -56,6 +59,7 @@ from freespace.io import (
     write_json,
 )
 from freespace.geometry.stereo import check_search_range
+from freespace.outdir import check_writable, claim_folder, write_files_together
 from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)
@@ -206,23 +210,20 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
         check_output_image_path(out)
     check_outputs({"--out": out, "--model-json": model_json},
                   {"--reference": reference, "--target": target, "--road-mask": road_mask, "--disparity": disparity})
+    check_writable({"--out": out, "--model-json": model_json})
     t_start = time.perf_counter()
     ref = read_image(reference, what="reference image")
     tgt = read_image(target, what="target image")
     label = read_road_label(road_mask)
     disp = read_disparity(disparity) if disparity is not None else None
     result = generate_arrays(ref, tgt, road_to_fit(label), disp, options)
-    data = encode_image(result.image, Path(out).suffix.lower()) if out is not None else None
-    result.timings["total"] = time.perf_counter() - t_start
+    files: dict[PathLike, bytes] = {}
     if out is not None:
-        atomic_write_bytes(out, data)  # type: ignore[arg-type]
+        files[out] = encode_image(result.image, Path(out).suffix.lower())
+    result.timings["total"] = time.perf_counter() - t_start
     if model_json is not None:
-        try:
-            write_json(model_json, result.report())
-        except FreespaceError:
-            if out is not None:
-                Path(out).unlink(missing_ok=True)  # all or nothing
-            raise
+        files[model_json] = encode_json(result.report())
+    write_files_together(files)  # all or nothing; earlier files stay when it fails
     return result
 
 
@@ -300,6 +301,7 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
     check_output_image_path(out)
     check_outputs({"--out": out, "--label-out": label_out, "--model-json": model_json},
                   {"--reference": reference, "--road-mask": road_mask, "--calib": calib, "--disparity": disparity})
+    check_writable({"--out": out, "--label-out": label_out, "--model-json": model_json})
     t_start = time.perf_counter()
     image = read_image(reference, what="reference image")
     label = read_road_label(road_mask)
@@ -335,16 +337,10 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
     data = [encode_image(view, Path(out).suffix.lower()), encode_image(road_label_to_kitti(view_label),
                                                                           Path(label_out).suffix.lower())]
     result.timings["total"] = time.perf_counter() - t_start
-    written: list[Path] = []
-    try:
-        written.append(atomic_write_bytes(out, data[0]))
-        written.append(atomic_write_bytes(label_out, data[1]))
-        if model_json is not None:
-            written.append(write_json(model_json, result.report()))
-    except FreespaceError:
-        for path in written:
-            path.unlink(missing_ok=True)  # all or nothing
-        raise
+    files: dict[PathLike, bytes] = {out: data[0], label_out: data[1]}
+    if model_json is not None:
+        files[model_json] = encode_json(result.report())
+    write_files_together(files)  # all or nothing; earlier files stay when it fails
     return result
 
 
@@ -355,20 +351,20 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
 _DATASET: Any = None  # the dataset of this worker process (set by _init_worker)
 
 
-def _process_frame(index: int, out: Path, report: Path, options: FitOptions,
+def _process_frame(dataset: Any, index: int, out: Path, report: Path, options: FitOptions,
                    settings: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Generate one frame of ``_DATASET``; never raises (the reason of a failure goes into the record).
+    """Generate one frame of ``dataset``; never raises (the reason of a failure goes into the record).
     ``settings`` (the run's, :func:`_settings`) are kept in the frame's report, so a resumed run redoes a
     frame made with other settings."""
     t0 = time.perf_counter()
-    frame = _DATASET.frames[index]
+    frame = dataset.frames[index]
     record: dict[str, Any] = {"frame": frame.name}
     try:
         if frame.right is None:
             raise DatasetError("missing right image")
         if frame.label is None:
             raise DatasetError("missing road label")
-        sample = _DATASET.load(index)
+        sample = dataset.load(index)
         result = generate_arrays(sample.left, sample.right, road_to_fit(sample.label), sample.disparity, options,
                                  disparity_source=sample.disparity_source, calibration=sample.calibration)
         atomic_write_bytes(out, encode_image(result.image, ".png"))
@@ -399,15 +395,25 @@ def _init_worker(dataset: Any, parent: int) -> None:
 SETTINGS_NAME = "settings.json"
 
 
-def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
-    """What a generated dataset depends on (written to ``OUT/settings.json``; never the shard, so that the
-    shards of one run share an output folder)."""
+def dataset_settings(dataset: Any) -> dict[str, Any]:
+    """What a per-frame output depends on in the dataset: its layout, root, split and where its
+    disparities come from (the source, ``--disparity-dir``, LiDAR densification)."""
+    disparity_dir = getattr(dataset, "disparity_dir", None)
+    spec = getattr(dataset, "spec", None)
     settings = {"dataset": dataset.name, "root": str(Path(dataset.root).resolve()), "split": dataset.split,
-                "robust": options.robust, "inlier_threshold": options.inlier_threshold,
-                "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode}
+                "disparity": dataset.disparity_mode,
+                "disparity_dir": str(Path(disparity_dir).resolve()) if disparity_dir is not None else None,
+                "layout": json.loads(json.dumps(asdict(spec), default=str)) if is_dataclass(spec) else None}
     if dataset.disparity_mode == "lidar":
         settings["lidar_densify"] = getattr(dataset, "lidar_densify", 0.0)
     return settings
+
+
+def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
+    """What a generated dataset depends on (written to ``OUT/settings.json``; never the shard, so that the
+    shards of one run share an output folder)."""
+    return {**dataset_settings(dataset), "robust": options.robust, "inlier_threshold": options.inlier_threshold,
+            "max_disparity": options.max_disparity}
 
 
 def _totals_names(shard: tuple[int, int] | None) -> tuple[str, str]:
@@ -418,38 +424,24 @@ def _totals_names(shard: tuple[int, int] | None) -> tuple[str, str]:
     return f"summary.shard-{shard[0]}-of-{shard[1]}.json", f"report.shard-{shard[0]}-of-{shard[1]}.csv"
 
 
-def _claim_output(out_dir: Path, settings: dict[str, Any], overwrite: bool, frames: set[str] | None = None,
-                  totals: tuple[str, str] = ("summary.json", "report.csv")) -> None:
-    """Make ``out_dir`` this run's. A folder generated with other settings is refused unless ``overwrite``,
-    which removes what the earlier run wrote; a non-empty folder that ``generate`` did not write is refused.
-
-    A shard (``frames``: its frame names, ``totals``: its summary and report names) removes with
-    ``overwrite`` only its own frames and totals (and the whole-run totals, now stale), so shards running
-    at once never delete each other's work. Hidden files (another shard's writes in progress) are ignored."""
-    if not out_dir.is_dir() or not any(not p.name.startswith(".") for p in out_dir.iterdir()):
+def _check_settings(out_dir: Path, settings: dict[str, Any], overwrite: bool) -> None:
+    """Refuse a folder generated with other settings (its ``settings.json``), unless ``overwrite``."""
+    try:
+        recorded = json.loads((out_dir / SETTINGS_NAME).read_text())
+    except FileNotFoundError:
         return
-    recorded: Any = None
-    try:  # summary.json's "options": folders written before settings.json existed
-        recorded = json.loads((out_dir / SETTINGS_NAME).read_text()) if (out_dir / SETTINGS_NAME).is_file() \
-            else json.loads((out_dir / "summary.json").read_text())["options"]
-    except (OSError, ValueError, KeyError, TypeError):
-        pass
+    except (OSError, ValueError):
+        recorded = None
     if not isinstance(recorded, dict):
-        raise InvalidOptionError(f"--out {out_dir} holds files that freespace generate did not write; choose a "
-                                 f"new or empty folder")
-    differ = [k for k in settings if k in recorded and recorded[k] != settings[k]]
+        if overwrite:
+            return
+        raise InvalidOptionError(f"--out {out_dir} has an unreadable {SETTINGS_NAME}, so its frames' settings are "
+                                 f"unknown; add --overwrite to generate them again, or choose another --out")
+    differ = [k for k in settings if recorded.get(k) != settings[k]]
     if differ and not overwrite:
-        what = ", ".join(f"{k} {recorded[k]!r} → {settings[k]!r}" for k in differ)
+        what = ", ".join(f"{k} {recorded.get(k)!r} → {settings[k]!r}" for k in differ)
         raise InvalidOptionError(f"--out {out_dir} holds frames generated with other settings ({what}); choose "
                                  f"another --out, or add --overwrite to replace them")
-    if overwrite:
-        reports = out_dir / "reports"
-        for report in sorted(reports.glob("*.json")) if reports.is_dir() else []:
-            if frames is None or report.stem in frames:
-                (out_dir / f"{report.stem}.png").unlink(missing_ok=True)
-                report.unlink(missing_ok=True)
-        for name in {SETTINGS_NAME, "summary.json", "report.csv", *totals}:
-            (out_dir / name).unlink(missing_ok=True)
 
 
 def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
@@ -492,9 +484,35 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     if shard is not None:
         dataset = dataset.subset(select_shard((f.name for f in dataset.frames), *shard))
     summary_name, report_name = _totals_names(shard)
-    _claim_output(out_dir, settings, overwrite, None if shard is None else {f.name for f in dataset.frames},
-                  (summary_name, report_name))
-    write_json(out_dir / SETTINGS_NAME, settings)
+    with frames_folder(out_dir, "generate", settings, overwrite, [f.name for f in dataset.frames], shard):
+        return _generate_frames(dataset, out_dir, settings, options, workers, progress, shard)
+
+
+@contextmanager
+def frames_folder(out_dir: Path, command: str, settings: dict[str, Any], overwrite: bool, names: list[str],
+                  shard: tuple[int, int] | None, extra: tuple[str, ...] = ()) -> Iterator[None]:
+    """Hold ``out_dir`` for a per-frame dataset output of ``command`` (``generate``, ``autolabel``): the
+    folder rule of :mod:`freespace.outdir` (shards share it), the recorded ``settings`` (a folder made with
+    other ones is refused unless ``overwrite``, which first removes what this run or shard would write),
+    and every file of the frames ``names`` listed in the manifest before it is written: ``<frame>.png``,
+    ``reports/<frame>.json``, ``<extra>/<frame>.png``, the totals and ``settings.json``."""
+    summary_name, report_name = _totals_names(shard)
+    mine = {SETTINGS_NAME, "summary.json", "report.csv", summary_name, report_name,
+            *(f"{n}.png" for n in names), *(f"reports/{n}.json" for n in names),
+            *(f"{e}/{n}.png" for e in extra for n in names)}
+    with claim_folder(out_dir, command, shared=shard is not None) as folder:
+        _check_settings(out_dir, settings, overwrite)
+        if overwrite:  # only what this run (or shard) would write, and the whole run's totals, now stale
+            folder.forget(mine & folder.entries())
+        folder.record(mine)
+        write_json(out_dir / SETTINGS_NAME, settings)
+        yield
+
+
+def _generate_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options: FitOptions, workers: int,
+                     progress: bool, shard: tuple[int, int] | None) -> dict[str, Any]:
+    """Generate the frames of ``dataset`` not yet done into ``out_dir`` and write the totals."""
+    summary_name, report_name = _totals_names(shard)
     frames = dataset.frames
     records, jobs = _plan(frames, out_dir, options, settings)
     log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
@@ -553,27 +571,29 @@ def _plan(frames: list[Any], out_dir: Path, options: FitOptions,
     return records, jobs
 
 
-def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool) -> dict[str, dict[str, Any]]:
-    """Run :func:`_process_frame` over ``jobs`` in this process or in ``workers`` processes."""
-    global _DATASET
+def _in_worker(process: Any, *job: Any) -> dict[str, Any]:
+    """``process(dataset, *job)`` with this worker process's dataset."""
+    return process(_DATASET, *job)
+
+
+def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool, process: Any = _process_frame,
+              desc: str = "generate") -> dict[str, dict[str, Any]]:
+    """Run ``process(dataset, *job)`` (a module-level function returning the frame's record, default
+    :func:`_process_frame`) over ``jobs`` in this process or in ``workers`` processes."""
     from freespace.log import progress_bar
 
     records: dict[str, dict[str, Any]] = {}
-    bar = progress_bar(None, total=len(jobs), desc="generate", unit="frame", enabled=progress and bool(jobs))
+    bar = progress_bar(None, total=len(jobs), desc=desc, unit="frame", enabled=progress and bool(jobs))
     if workers == 1 or len(jobs) <= 1:
-        previous, _DATASET = _DATASET, dataset
-        try:
-            for job in jobs:
-                record = _process_frame(*job)
-                records[record["frame"]] = record
-                bar.update()
-        finally:
-            _DATASET = previous
+        for job in jobs:
+            record = process(dataset, *job)
+            records[record["frame"]] = record
+            bar.update()
     else:
         # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
         with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset, os.getpid()),
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
-            for future in as_completed([pool.submit(_process_frame, *job) for job in jobs]):
+            for future in as_completed([pool.submit(_in_worker, process, *job) for job in jobs]):
                 record = future.result()
                 records[record["frame"]] = record
                 bar.update()
@@ -601,11 +621,11 @@ _CSV_FIELDS = ["frame", "status", "roll_deg", "kappa_hat", "kappa", "num_valid",
                "disparity_source", "seconds", "reason"]
 
 
-def _write_report_csv(path: Path, records: list[dict[str, Any]]) -> None:
+def _write_report_csv(path: Path, records: list[dict[str, Any]], fields: list[str] = _CSV_FIELDS) -> None:
     rows = []
     for record in records:
         row = dict(record)
         seconds = record.get("seconds") or {}
         row["seconds"] = round(seconds.get("total", math.nan), 4) if seconds else ""
         rows.append(row)
-    write_csv(path, _CSV_FIELDS, rows, extra="ignore")
+    write_csv(path, fields, rows, extra="ignore")

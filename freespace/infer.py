@@ -23,11 +23,11 @@ from freespace.io import (
     atomic_write_bytes,
     check_outputs,
     read_kitti_calib,
-    staged_folder,
     write_image,
     write_json,
 )
 from freespace.metrics import to_confidence
+from freespace.outdir import claim_folder
 from freespace.predictor import Predictor, load_checkpoint
 from freespace.shard import select_shard
 from freespace.video import FrameSource, VideoFrame, VideoWriter, open_frames
@@ -71,16 +71,6 @@ def _shard_marker(shard: tuple[int, int]) -> str:
     return f"summary.shard-{shard[0]}-of-{shard[1]}.json"
 
 
-def _predict_marker(out: Path) -> str:
-    """The summary by which an earlier ``predict`` output in ``out`` is known: ``summary.json``, else a
-    shard's ``summary.shard-K-of-N.json``."""
-    if out.is_dir() and not (out / "summary.json").is_file():
-        shards = sorted(out.glob("summary.shard-*-of-*.json"))
-        if shards:
-            return shards[0].name
-    return "summary.json"
-
-
 def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_size: int = 4,
                    progress: bool = True, shard: tuple[int, int] | None = None) -> dict[str, Any]:
     """Write ``OUT/<name>.png`` (8-bit road confidence, the input's size), ``OUT/overlays/<name>.png`` and
@@ -89,9 +79,9 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
     Args:
         inputs: an image, a folder of images, a glob of images or a video (frames named
             ``<video stem>_<index>``; :func:`freespace.video.open_frames`), decoded one batch at a time.
-        out: the output folder, written all or nothing: it replaces an earlier ``predict`` output there
-            whole. With ``shard`` only that shard's frames are written, beside the other shards' in the same
-            folder, and its summary is ``summary.shard-K-of-N.json``.
+        out: the output folder (:mod:`freespace.outdir`), written all or nothing: it replaces the files of
+            an earlier ``predict`` output there. With ``shard`` only that shard's frames are written, beside
+            the other shards' in the same folder, and its summary is ``summary.shard-K-of-N.json``.
         batch_size: frames per network call (≥ 1). shard: ``(K, N)``, 1-based (:mod:`freespace.shard`);
             images only.
 
@@ -104,13 +94,11 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
     check_outputs({"--out": out}, {"--input": inputs})
     source = open_frames(inputs)
     check_outputs({"--out": out}, _input_paths(source))
-    out = Path(out)
     if shard is not None:
         source = _shard_source(source, shard)
-        with staged_folder(out, _predict_marker(out), "predict", merge=True) as staging:
-            return _predict_into(predictor, source, staging, batch_size, progress, shard)
-    with staged_folder(out, _predict_marker(out), "predict") as staging:
-        return _predict_into(predictor, source, staging, batch_size, progress, None)
+    with claim_folder(out, "predict", shared=shard is not None) as folder, \
+            folder.staged(replace=shard is None) as staging:
+        return _predict_into(predictor, source, staging, batch_size, progress, shard)
 
 
 def _summary(predictor: Predictor, frames: int, seconds: float, wall: float, **extra: Any) -> dict[str, Any]:
@@ -247,7 +235,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
     (``OUT/<cat>_road_<id>.png``, 800×400) and ``OUT/submission.zip`` holding them.
 
     Every calibration file is read before any prediction; the folder is written all or nothing and
-    replaces an earlier submission there whole."""
+    replaces the files of an earlier submission there (:mod:`freespace.outdir`)."""
     from freespace.data.kitti_road import KittiRoad
 
     check_outputs({"--out": out}, {"--checkpoint": checkpoint, "--root": root})
@@ -258,7 +246,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
                              f"transform needs data_road/testing/calib/<frame>.txt")
     calibs = [read_kitti_calib(f.calib) for f in ds.frames]  # type: ignore[arg-type]  # every file checked first
     predictor = Predictor(checkpoint=checkpoint)
-    with staged_folder(out, "submission.zip", "kitti-submit") as staging:
+    with claim_folder(out, "kitti-submit") as folder, folder.staged() as staging:
         names = _submit_into(predictor, ds, calibs, staging, progress)
     return {"frames": len(names), "zip": str(Path(out) / "submission.zip")}
 

@@ -20,10 +20,8 @@ import json
 import math
 import os
 import re
-import shutil
 import tempfile
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -48,12 +46,12 @@ IGNORE_INDEX = 255
 __all__ = [
     "IGNORE_INDEX",
     "MAX_IMAGE_SIDE",
-    "staged_folder",
     "DISPARITY_SUFFIXES",
     "IMAGE_SUFFIXES",
     "RoadLabel",
     "atomic_write_bytes",
     "atomic_write_text",
+    "encode_json",
     "write_json",
     "write_csv",
     "read_image",
@@ -108,9 +106,14 @@ def atomic_write_text(path: PathLike, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def encode_json(obj: Any) -> bytes:
+    """``obj`` as the bytes of an indented UTF-8 JSON file (NaN/inf are rejected: use None)."""
+    return (json.dumps(obj, indent=2, allow_nan=False) + "\n").encode("utf-8")
+
+
 def write_json(path: PathLike, obj: Any) -> Path:
     """Write ``obj`` as indented JSON (NaN/inf are rejected: use None) atomically."""
-    return atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+    return atomic_write_bytes(path, encode_json(obj))
 
 
 def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLike | None]) -> None:
@@ -159,56 +162,6 @@ def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str,
     writer.writeheader()
     writer.writerows(rows)
     return atomic_write_text(path, buf.getvalue())
-
-
-@contextmanager
-def staged_folder(out: PathLike, marker: str, command: str, *, merge: bool = False) -> Iterator[Path]:
-    """An output folder written all or nothing, never mixed with an earlier run's files.
-
-    Yields a temporary folder beside ``out`` to write into. When the block ends normally the temporary
-    folder takes the place of ``out`` (an earlier output of the same command there is replaced whole);
-    when it raises, the temporary folder is removed and ``out`` is left as it was.
-
-    Args:
-        out: the output folder.
-        marker: a file name that the command always writes, by which an earlier output of it is known
-            (e.g. ``summary.json``). A non-empty ``out`` without it is refused: it holds someone else's files.
-        command: the command's name, for the message.
-        merge: move the files into ``out`` one atomic rename each, beside the files already there, instead
-            of replacing ``out`` (shards of one run that write disjoint files); ``.json`` files go first, so
-            that a run starting meanwhile sees a folder the command writes.
-    """
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InvalidOptionError(f"--out {out} is a file; give a folder")
-    if out.is_dir() and any(out.iterdir()) and not (out / marker).is_file():
-        raise InvalidOptionError(f"--out {out} holds files that freespace {command} did not write; choose a new or "
-                                 f"empty folder")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
-    except OSError as exc:
-        raise OutputError(f"cannot write {out}: {exc.strerror}; choose a writable output folder") from None
-    try:
-        yield tmp
-        if merge:
-            for path in sorted((p for p in tmp.rglob("*") if p.is_file()), key=lambda p: (p.suffix != ".json", str(p))):
-                target = out / path.relative_to(tmp)
-                target.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(path, target)
-            shutil.rmtree(tmp, ignore_errors=True)
-            return
-        os.chmod(tmp, 0o777 & ~_UMASK)
-        old = None
-        if out.exists():
-            old = out.parent / f".{out.name}.{tmp.name}.old"
-            os.replace(out, old)
-        os.replace(tmp, out)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -256,3 +256,24 @@ def test_tensorboard_is_optional(tiny: Path, tmp_path: Path, capsys: pytest.Capt
         pass
     assert _train(tiny, tmp_path / "tb", "--tensorboard") == 2
     assert "pip install tensorboard" in capsys.readouterr().err
+
+
+def test_dropout_draws_depend_on_the_run_seed_and_the_epoch() -> None:
+    from freespace.engine.module import epoch_seed
+
+    seeds = {(s, e): epoch_seed(s, e) for s in range(3) for e in range(3)}
+    assert len(set(seeds.values())) == 9
+    assert epoch_seed(1, 2) == epoch_seed(1, 2)  # a resumed run draws the same
+
+
+def test_the_monitored_validation_score(tmp_path: Path) -> None:
+    """With --val-window N the best epoch is the one whose N-epoch mean F-score is highest."""
+    from freespace.engine.train import CSV_FIELDS, _best_epoch, monitored
+    from freespace.io import write_csv
+
+    rows = [{"epoch": e, "val_f_score": f, "val_f_window": w}
+            for e, (f, w) in enumerate([(0.70, 0.70), (0.90, 0.80), (0.72, 0.773), (0.85, 0.823), (0.86, 0.81)])]
+    write_csv(tmp_path / "metrics.csv", CSV_FIELDS, rows)
+    assert monitored(1) == "val_f_score" and monitored(3) == "val_f_window"
+    assert _best_epoch(tmp_path, monitored(1)) == 1      # a lucky epoch
+    assert _best_epoch(tmp_path, monitored(3)) == 3      # the best smoothed one

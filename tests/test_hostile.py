@@ -473,6 +473,262 @@ def test_training_off_a_terminal_prints_lines_not_bar_frames(trained: dict[str, 
     assert sum("epoch" in line.lower() for line in text.splitlines()) >= 2, text
 
 
+# ------------------------------------------ issue 20: output folders (freespace.outdir, one rule for all)
+def _users_folder(folder: Path) -> dict[str, bytes]:
+    """A folder of a user's own files (names with spaces and non-ASCII characters among them)."""
+    (folder / "photos").mkdir(parents=True, exist_ok=True)
+    (folder / "thesis.tex").write_text("\\section{Results}\n")
+    (folder / "photos" / "straße 1.jpg").write_bytes(b"\xff\xd8 not really a jpeg")
+    return snapshot(folder)
+
+
+def _predict(trained: dict[str, Path], out: Path, *extra: str) -> list[str]:
+    images = trained["data"] / "data_road" / "training" / "image_2"
+    return ["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--out", str(out),
+            "--no-progress", *extra]
+
+
+@pytest.mark.parametrize("marker", ["summary.json", "metrics.json", "submission.zip", "config.yaml"])
+@pytest.mark.parametrize("command", ["predict", "predict-shard", "evaluate", "kitti-submit"])
+def test_a_folder_of_the_users_files_is_never_taken(marker: str, command: str, trained: dict[str, Path],
+                                                   tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A folder is not a command's own because it holds a file of the command's name: it is refused, and
+    every file in it stays byte-identical."""
+    out = tmp_path / "mine"
+    before = {**_users_folder(out)}
+    (out / marker).write_text("{}")
+    before = snapshot(out)
+    if command.startswith("predict"):
+        argv = _predict(trained, out, *(["--shard", "1/2"] if command == "predict-shard" else []))
+    elif command == "evaluate":
+        argv = ["evaluate", "--checkpoint", str(trained["ckpt"]), "--dataset", "synth", "--root",
+                str(trained["data"]), "--subset", "all", "--no-progress", "--out", str(out)]
+    else:
+        root = tmp_path / "kitti"
+        shutil.copytree(trained["data"] / "data_road" / "training", root / "data_road" / "testing")
+        argv = ["kitti-submit", "--checkpoint", str(trained["ckpt"]), "--root", str(root), "--out", str(out),
+                "--no-progress"]
+    err = refused(capsys, argv, match="did not write")
+    assert "thesis.tex" in err or "photos/" in err or marker in err
+    assert snapshot(out) == before
+
+
+def test_one_commands_folder_is_not_anothers(trained: dict[str, Path], tmp_path: Path,
+                                             capsys: pytest.CaptureFixture) -> None:
+    """evaluate --out RUN (a training run) and predict --out GEN (a generate --dataset output) are refused."""
+    gen = tmp_path / "gen"
+    assert main(["generate", "--dataset", "synth", "--root", str(trained["data"]), "--out", str(gen)]) == 0
+    run, before = trained["run"], snapshot(trained["run"], gen)
+    ckpt = tmp_path / "model.ckpt"
+    shutil.copy(trained["ckpt"], ckpt)
+    refused(capsys, ["evaluate", "--checkpoint", str(ckpt), "--dataset", "synth", "--root",
+                     str(trained["data"]), "--subset", "all", "--no-progress", "--out", str(run)],
+            match="output of freespace train")
+    refused(capsys, _predict(trained, gen), match="output of freespace generate")
+    refused(capsys, _predict(trained, gen, "--shard", "1/2"), match="output of freespace generate")
+    assert snapshot(run, gen) == before
+
+
+def test_rerun_replaces_only_its_own_files(trained: dict[str, Path], tmp_path: Path,
+                                           capsys: pytest.CaptureFixture) -> None:
+    """A second predict into its own folder replaces its files; a file the user adds there afterwards makes
+    the folder no longer the command's alone, and it is refused, --shard included."""
+    out = tmp_path / "pred ü"
+    assert main(_predict(trained, out)) == 0
+    assert main(_predict(trained, out)) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert "summary.json" in names and ".freespace" in names
+    (out / "notes.txt").write_text("mine")
+    before = snapshot(out)
+    refused(capsys, _predict(trained, out), match="notes.txt")
+    refused(capsys, _predict(trained, out, "--shard", "2/2"), match="notes.txt")
+    assert snapshot(out) == before
+
+
+def test_out_is_a_symlink_to_a_folder(trained: dict[str, Path], tmp_path: Path) -> None:
+    real = tmp_path / "real"
+    real.mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(real, target_is_directory=True)
+    for _ in range(2):
+        assert main(_predict(trained, link)) == 0
+    assert link.is_symlink() and (real / "summary.json").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"]  # nothing hidden left beside it
+
+
+def test_out_dot_in_an_empty_folder(trained: dict[str, Path], tmp_path: Path) -> None:
+    """``--out .`` from an empty current folder writes there (the folder itself is never renamed)."""
+    here = tmp_path / "here"
+    here.mkdir()
+    res = run_cli(*_predict(trained, Path(".")), cwd=here)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert (here / "summary.json").is_file()
+
+
+def test_a_failed_predict_keeps_the_earlier_output(trained: dict[str, Path], tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture) -> None:
+    images = tmp_path / "images"
+    shutil.copytree(trained["data"] / "data_road" / "training" / "image_2", images)
+    out = tmp_path / "pred"
+    argv = ["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--out", str(out),
+            "--no-progress"]
+    assert main(argv) == 0
+    before = snapshot(out)
+    sorted(images.iterdir())[-1].write_bytes(b"corrupt")
+    assert main(argv) != 0
+    assert snapshot(out) == before
+    assert not list((out / ".freespace").glob("stage-*"))
+
+
+def test_train_never_deletes_a_folder_it_did_not_write(trained: dict[str, Path], tmp_path: Path) -> None:
+    """``train --out .`` in a folder holding a config.yaml (but no run of freespace's) is refused, and
+    nothing in it is deleted."""
+    work = tmp_path / "work"
+    (work / "checkpoints").mkdir(parents=True)
+    (work / "checkpoints" / "model_v3.pt").write_bytes(b"weights")
+    (work / "tensorboard").mkdir()
+    (work / "tensorboard" / "events").write_bytes(b"events")
+    (work / "config.yaml").write_text("lr: 0.1\n")
+    before = snapshot(work)
+    res = run_cli("train", "--dataset", "synth", "--root", str(trained["data"]), "--model", "segnet", "--epochs",
+                  "1", "--image-size", "64x64", "--no-progress", "--out", ".", cwd=work)
+    refused_process(res, match="did not write")
+    assert snapshot(work) == before
+
+
+def test_two_runs_never_share_a_folder(trained: dict[str, Path], tmp_path: Path,
+                                       capsys: pytest.CaptureFixture) -> None:
+    """While a run holds its folder, a second run into it is refused (train, predict, generate)."""
+    from freespace.outdir import claim_folder
+
+    run = tmp_path / "run"
+    with claim_folder(run, "train", entries=["config.yaml"]):
+        refused(capsys, ["train", "--dataset", "synth", "--root", str(trained["data"]), "--model", "segnet",
+                         "--epochs", "1", "--image-size", "64x64", "--no-progress", "--out", str(run)],
+                match="another freespace run")
+    pred = tmp_path / "pred"
+    with claim_folder(pred, "predict"):
+        refused(capsys, _predict(trained, pred), match="another freespace run")
+    with claim_folder(pred, "predict", shared=True):  # a shard of the same run: shards share the folder
+        assert main(_predict(trained, pred, "--shard", "1/2")) == 0
+    gen = tmp_path / "gen"
+    with claim_folder(gen, "generate"):
+        refused(capsys, ["generate", "--dataset", "synth", "--root", str(trained["data"]), "--out", str(gen)],
+                match="another freespace run")
+
+
+def test_an_interrupted_stage_is_removed_by_the_next_run(trained: dict[str, Path], tmp_path: Path) -> None:
+    """What SIGKILL leaves (a stage folder of a dead process) is cleaned up by the next run."""
+    out = tmp_path / "pred"
+    assert main(_predict(trained, out)) == 0
+    stale = out / ".freespace" / "stage-999999999-x"
+    stale.mkdir()
+    (stale / "000000.png").write_bytes(b"half-written")
+    assert main(_predict(trained, out, "--shard", "1/2")) == 0  # a shard removes the stages of dead processes
+    assert not stale.exists()
+
+
+@pytest.mark.parametrize("form", ["pair", "virtual"])
+def test_a_failed_generate_rerun_keeps_the_earlier_outputs(form: str, pair: dict[str, Path], tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture) -> None:
+    """A rerun with an output that cannot be written fails before any work; the earlier outputs stay."""
+    calib = tmp_path / "calib.txt"
+    calib.write_text("P2: 200 0 80 0 0 200 48 0 0 0 1 0\nP3: 200 0 80 -100 0 200 48 0 0 0 1 0\n")
+    out, label_out, model = tmp_path / "G.png", tmp_path / "GL.png", tmp_path / "M.json"
+    base = ["generate", "--reference", str(pair["L"]), "--road-mask", str(pair["M"]), "--disparity", str(pair["D"]),
+            "--out", str(out)]
+    base += (["--target", str(pair["R"])] if form == "pair"
+             else ["--virtual", "--calib", str(calib), "--label-out", str(label_out), "--shift=0,-0.1,0"])
+    assert main(base + ["--model-json", str(model)]) == 0
+    before = snapshot(tmp_path)
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    before[str(blocker)] = b"x"
+    refused(capsys, base + ["--model-json", str(blocker / "M.json")], match="not a folder")
+    assert snapshot(tmp_path) == before
+
+
+def test_datasets_split_keeps_lists_written_by_hand(trained: dict[str, Path], tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture) -> None:
+    lists = tmp_path / "lists"
+    lists.mkdir()
+    for name in ("train", "val", "test"):
+        (lists / f"{name}.txt").write_text("my own list\n")
+    before = snapshot(lists)
+    refused(capsys, ["datasets", "split", "--dataset", "synth", "--root", str(trained["data"]), "--out",
+                     str(lists)], match="did not write")
+    assert snapshot(lists) == before
+    fresh = tmp_path / "fresh"
+    for _ in range(2):  # its own lists it replaces
+        assert main(["datasets", "split", "--dataset", "synth", "--root", str(trained["data"]), "--out",
+                     str(fresh)]) == 0
+    assert sorted(p.name for p in fresh.iterdir()) == [".freespace", "test.txt", "train.txt", "val.txt"]
+
+
+def test_generate_dataset_records_the_disparity_folder(trained: dict[str, Path], tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture) -> None:
+    """Other disparities (``--disparity-dir``) are other settings: refused, not "already done"."""
+    root = _kitti_root(trained, tmp_path)
+    disp = tmp_path / "disp"
+    shutil.copytree(root / "data_road" / "training" / "disparity", disp)
+    gen = tmp_path / "gen"
+    base = ["generate", "--dataset", "synth", "--root", str(root), "--out", str(gen)]
+    assert main(base) == 0
+    before = snapshot(gen)
+    refused(capsys, base + ["--disparity-dir", str(disp)], match="disparity_dir")
+    assert snapshot(gen) == before
+    (gen / "reports" / "mine.txt").write_text("a user's note")
+    refused(capsys, base + ["--disparity-dir", str(disp), "--overwrite"], match="reports/mine.txt")
+
+
+def test_an_interrupted_synth_resumes_and_can_be_overwritten(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture) -> None:
+    import freespace.data.synthetic.dataset as synth
+
+    out = tmp_path / "syn"
+    real = synth._render_and_write
+
+    def dies_on_the_second(job):
+        if job[0] == 1:
+            raise KeyboardInterrupt
+        return real(job)
+
+    monkeypatch.setattr(synth, "_render_and_write", dies_on_the_second)
+    assert main(["synth", "--out", str(out), "--num", "3", "--width", "96", "--height", "64"]) == 130
+    monkeypatch.setattr(synth, "_render_and_write", real)
+    assert (out / "synth.json").is_file() and not (out / "index.csv").exists()
+    assert main(["synth", "--out", str(out), "--num", "3", "--width", "96", "--height", "64"]) == 0
+    assert main(["synth", "--out", str(out), "--num", "2", "--width", "80", "--height", "64", "--overwrite"]) == 0
+    assert len(list((out / "data_road" / "training" / "image_2").iterdir())) == 2
+
+
+def test_reproduce_refuses_a_cell_with_other_settings(trained: dict[str, Path], tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    """A finished (or started) cell keeps its settings: --epochs, --image-size or --root changed is refused."""
+    from freespace.engine.config import TrainConfig
+    from freespace.experiments.reproduce import OUT_ENTRIES
+    from freespace.outdir import claim_folder
+
+    out = tmp_path / "exp"
+    run = out / "runs" / "segnet-orig-s0"
+    with claim_folder(out, "reproduce", entries=OUT_ENTRIES):
+        TrainConfig(dataset="synth", root=str(trained["data"]), out=str(run), model="segnet", epochs=1,
+                    image_size=(64, 64), batch_size=4, patience=10).save(run / "config.yaml")
+        (run / "metrics.json").write_text(json.dumps({"f_score": 0.5}))
+    before = snapshot(out)
+    base = ["reproduce", "--dataset", "synth", "--root", str(trained["data"]), "--out", str(out), "--only",
+            "segnet,X,0", "--batch-size", "4", "--patience", "10", "--seeds", "1", "--no-progress"]
+    for change, key in ((["--epochs", "2", "--image-size", "64x64"], "epochs"),
+                        (["--epochs", "1", "--image-size", "96x96"], "image_size")):
+        err = refused(capsys, base + change, match="other settings")
+        assert key in err
+    other = _kitti_root(trained, tmp_path)
+    refused(capsys, ["reproduce", "--dataset", "synth", "--root", str(other), "--out", str(out), "--only",
+                     "segnet,X,0", "--batch-size", "4", "--patience", "10", "--seeds", "1", "--epochs", "1",
+                     "--image-size", "64x64"], match="root")
+    assert snapshot(out) == before
+
+
 # ======================================================================================================
 # issue 20: validation and messages
 # Implausible fits, labels and predictions that are not what they seem, options checked before any work,

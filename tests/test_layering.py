@@ -16,11 +16,11 @@ PACKAGE = ROOT / "freespace"
 # the entry that names it or its closest enclosing package.
 LAYERS: list[tuple[str, ...]] = [
     ("freespace", "freespace.errors", "freespace.log", "freespace.parallel", "freespace.shard"),
-    ("freespace.io",),
+    ("freespace.io", "freespace.outdir"),
     ("freespace.video",),
     ("freespace.geometry",),
     ("freespace.data",),
-    ("freespace.generate",),
+    ("freespace.generate", "freespace.autolabel"),
     ("freespace.models", "freespace.metrics", "freespace.bev", "freespace.viz"),
     ("freespace.kitti_eval",),
     ("freespace.predictor",),

@@ -99,6 +99,7 @@ def test_duplicate_matches_homography_training_list(data: Path, tmp_path: Path) 
     assert [(it.index, it.name) for it in ha] == [(it.index, it.name) for it in dup]  # same frames → same labels
     assert [it.image for it in dup] == [None] * 2 * n and all(it.image for it in ha[n:])  # own images vs views
     assert [(it.index, it.name) for it in dup[:n]] == [(it.index, it.name) for it in x]
+    assert lists["none"]["frames"] == lists["homography"]["frames"] == lists["duplicate"]["frames"] == n
     for k in ("val", "test"):  # one split per seed
         assert lists["none"][k] == lists["homography"][k] == lists["duplicate"][k]
 
@@ -176,7 +177,7 @@ def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, caps
             "--batch-size", "4", "--no-progress", "--out", str(cells)]
     assert main(base + ["--only", "segnet,X,1"]) == 0
     assert "runs/segnet-orig-s1: done" in capsys.readouterr().out
-    assert [p.relative_to(cells).as_posix() for p in cells.iterdir()] == ["runs"]  # nothing shared written
+    assert sorted(p.name for p in cells.iterdir()) == [".freespace", "runs"]  # no table: only the manifest
     ours = json.loads((cells / "runs/segnet-orig-s1/metrics.json").read_text())
     theirs = json.loads((out / "runs/segnet-orig-s1/metrics.json").read_text())
     assert {k: ours[k] for k in METRICS} == {k: theirs[k] for k in METRICS}  # deterministic on a CPU
@@ -230,3 +231,61 @@ def test_reproduce_tables_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture
     assert main(["reproduce", "--out", str(tmp_path)]) == 2
     assert "needs --dataset and --root" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+# --- the converged protocol (issue 23): X-long, convergence, the averaged gains and the primary endpoint ---
+
+def _fake_run(out: Path, data: Path, model: str, variant: str, seed: int, f: float, best: int, run: int) -> None:
+    """A finished run folder as ``reproduce`` writes it (config.yaml, metrics.json), without training."""
+    from freespace.experiments.reproduce import _config
+
+    config = _config("synth", data, out, model, variant, seed, dict(epochs=10, patience=3, val_window=1,
+                                                                    batch_size=4, image_size=(64, 96)))
+    Path(config.out).mkdir(parents=True)
+    config.save(Path(config.out) / "config.yaml")
+    metrics = {k: f for k in (*METRICS, "max_f", "ap")}
+    (Path(config.out) / "metrics.json").write_text(json.dumps({**metrics, "best_epoch": best, "epochs_run": run}))
+
+
+def test_x_long_budget_and_convergence_in_the_index(data: Path, tmp_path: Path) -> None:
+    from freespace.experiments.reproduce import _collect, _config, _convergence_lines
+
+    long = _config("synth", data, tmp_path, "unet", "X-long", 0, dict(epochs=10, patience=3))
+    assert (long.augment, long.epochs, long.patience, Path(long.out).name) == ("none", 20, 6, "unet-long-s0")
+    _fake_run(tmp_path, data, "unet", "X", 0, 0.8, best=4, run=8)      # early stopping fired after epoch 8
+    _fake_run(tmp_path, data, "unet", "X-long", 0, 0.82, best=19, run=20)  # ran to its cap of 20
+    entries, differ = _collect(tmp_path)
+    assert differ == []  # X-long's doubled epochs and patience are its variant's, not another setting
+    assert [(e["variant"], e["augment"], e["best_epoch"], e["epochs_run"], e["stopped_by"]) for e in entries] == \
+        [("X", "none", 5, 8, "patience"), ("X-long", "none", 20, 20, "cap")]
+    lines = "\n".join(_convergence_lines(entries))
+    assert "| unet | X | 1 | 5.0 (5–5) | 8.0 (8–8) | 1 | 0 |" in lines
+    assert "| unet | X-long | 1 | 20.0 (20–20) | 20.0 (20–20) | 0 | 1 |" in lines
+
+
+def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
+    from freespace.experiments.reproduce import ALL_NETWORKS, _gains, _primary_lines
+
+    rng = np.random.default_rng(0)
+    entries = []
+    for model in ("unet", "segnet"):
+        for seed in range(6):
+            base = 0.8 + 0.02 * rng.standard_normal()
+            for variant, shift in (("X", 0.0), ("HA-X", 0.02), ("X-dup", 0.02 + 0.002 * rng.standard_normal())):
+                m = {k: base + shift for k in METRICS}
+                entries.append({"model": model, "variant": variant, "seed": seed, "metrics": m,
+                                "test_sets": {"same-rigs": m}})
+    gains = _gains(entries)
+    avg = [g for g in gains if g["network"] == ALL_NETWORKS and g["versus"] == "HA-X - X-dup"
+           and g["metric"] == "f_score" and g["test_set"] == "same-rigs"]
+    assert len(avg) == 1 and avg[0]["n"] == 6
+    per_seed = [100 * np.mean([next(e["metrics"]["f_score"] for e in entries if e["model"] == m and e["seed"] == s
+                                    and e["variant"] == v) for m in ("unet", "segnet")]) for s in range(6)
+                for v in ("HA-X", "X-dup")]
+    expected = paired_gain(per_seed[0::2], per_seed[1::2])
+    assert avg[0]["mean"] == pytest.approx(expected.mean) and avg[0]["ci_low"] == pytest.approx(expected.ci_low)
+    line = "\n".join(_primary_lines(gains))
+    assert "Primary endpoint" in line and "inside ±1" in line  # the two differ by noise of 0.2 points
+    ha_x = [g for g in gains if g["network"] == ALL_NETWORKS and g["versus"] == "HA-X - X" and g["metric"] == "f_score"
+            and g["test_set"] == "test"]
+    assert ha_x[0]["mean"] == pytest.approx(2.0) and ha_x[0]["excludes_zero"]

@@ -407,13 +407,13 @@ def test_resized_intrinsics_keep_the_geometry() -> None:
 def test_reproduce_variants_table() -> None:
     from freespace.experiments.reproduce import _name, _table, parse_variants
 
-    assert parse_variants("X,HA-X") == ("none", "homography")
-    assert parse_variants("HV-X,HAV-X") == ("none", "virtual", "homography,virtual")  # X always, first
-    assert parse_variants("X-dup,HA-X") == ("none", "duplicate", "homography")
+    assert parse_variants("X,HA-X") == ("X", "HA-X")
+    assert parse_variants("HV-X,HAV-X") == ("X", "HV-X", "HAV-X")  # X always, first
+    assert parse_variants("X-dup,HA-X,X-long") == ("X", "X-dup", "HA-X", "X-long")
     with pytest.raises(InvalidOptionError, match="unknown variants"):
         parse_variants("X,HB-X")
-    assert [_name("unet", v, 1) for v in parse_variants("X,HA-X,HV-X,HAV-X,X-dup")] == \
-        ["unet-orig-s1", "unet-ha-s1", "unet-hv-s1", "unet-hav-s1", "unet-dup-s1"]  # X and HA-X folders as before
+    assert [_name("unet", v, 1) for v in parse_variants("X,HA-X,HV-X,HAV-X,X-dup,X-long")] == \
+        ["unet-orig-s1", "unet-ha-s1", "unet-hv-s1", "unet-hav-s1", "unet-dup-s1", "unet-long-s1"]
     m = lambda f: {"accuracy": 0.9, "precision": 0.8, "recall": 0.7, "f_score": f, "iou": f - 0.1}  # noqa: E731
     entries = [{"model": "unet", "variant": v, "seed": s, "metrics": m(f)}
                for v, s, f in (("X", 0, 0.80), ("HV-X", 0, 0.83), ("HV-X", 1, 0.85), ("HA-X", 0, 0.82))]

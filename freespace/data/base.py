@@ -20,7 +20,7 @@ import numpy as np
 from freespace.data.disparity import DisparityCache, check_disparity_mode, resolve_disparity
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
 from freespace.geometry import SGBM_MAX_DISPARITY, StereoCalibration
-from freespace.io import PathLike, RoadLabel, read_image
+from freespace.io import PathLike, RoadLabel, read_image, read_road_label
 
 __all__ = ["FrameRef", "Sample", "Problem", "StereoRoadDataset", "check_dataset_root"]
 
@@ -106,6 +106,8 @@ class StereoRoadDataset(ABC):
 
     name: ClassVar[str] = ""
     splits: ClassVar[tuple[str, ...]] = ("all",)
+    #: frame name → a KITTI-colour label file read instead of the layout's own label (:meth:`with_labels`)
+    label_files: dict[str, Path] = {}
 
     def __init__(self, root: PathLike, split: str | None = None, *, disparity_mode: str = "auto",
                  cache_dir: PathLike | None = None, max_disparity: int = SGBM_MAX_DISPARITY) -> None:
@@ -191,6 +193,25 @@ class StereoRoadDataset(ABC):
         view.frames = frames
         return view
 
+    def with_labels(self, folder: PathLike, names: Iterable[str]) -> StereoRoadDataset:
+        """This dataset with the road labels of the frames ``names`` read from ``folder/<name>.png`` (KITTI
+        colours: an autolabel tree, ``freespace autolabel --dataset``) instead of its own; other frames keep
+        theirs. Every named frame must have its file there.
+
+        Raises:
+            DatasetError: a name is not a frame of this dataset, or has no ``<name>.png`` in ``folder``.
+        """
+        files = {}
+        for name in names:
+            self.index(name)
+            path = Path(folder) / f"{name}.png"
+            if not path.is_file():
+                raise DatasetError(f"{path} not found: the label tree {folder} has no label of frame {name}")
+            files[name] = path
+        view = copy.copy(self)
+        view.label_files = {**self.label_files, **files}
+        return view
+
     def labelled(self) -> StereoRoadDataset:
         """The frames that have a road label (:meth:`subset`), in order."""
         return self.subset(f.name for f in self.frames if f.label is not None)
@@ -203,7 +224,10 @@ class StereoRoadDataset(ABC):
         if right_img is not None and right_img.shape != left_img.shape:
             raise ShapeMismatchError(f"{frame.name}: right image is {right_img.shape[1]}×{right_img.shape[0]} but the "
                                      f"left is {left_img.shape[1]}×{left_img.shape[0]}")
-        lab = self.read_label(frame) if label and frame.label else None
+        if label and frame.name in self.label_files:
+            lab = read_road_label(self.label_files[frame.name])
+        else:
+            lab = self.read_label(frame) if label and frame.label else None
         if lab is not None and lab.shape != left_img.shape[:2]:
             raise ShapeMismatchError(f"{frame.name}: label is {lab.shape[1]}×{lab.shape[0]} but the image is "
                                      f"{left_img.shape[1]}×{left_img.shape[0]}")

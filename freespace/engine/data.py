@@ -65,8 +65,9 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
 
     With ``--augment virtual`` it finds the road plane of every training frame (:class:`VirtualAugment`).
 
-    Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`), ``"size"`` (H, W) and
-    ``"virtual"`` (a :class:`VirtualAugment`, or None).
+    Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`; ``train`` starts with the
+    training frames themselves, ``"frames"`` of them, and the views or duplicates follow), ``"size"``
+    (H, W) and ``"virtual"`` (a :class:`VirtualAugment`, or None).
     """
     ds = get_dataset(config.dataset, config.root, config.split, disparity_mode=config.disparity_mode,
                      cache_dir=config.cache_dir)
@@ -88,6 +89,16 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     if not all(splits[k] for k in ("train", "val", "test")):
         raise DatasetError(f"a split is empty ({', '.join(f'{k} {len(v)}' for k, v in splits.items())}); use more "
                            f"frames or scenarios, or give --splits")
+    if config.labels is not None:  # the training frames' labels from a label tree; val and test keep their own
+        train = [n for n in splits["train"] if (Path(config.labels) / f"{n}.png").is_file()]
+        if not train:
+            raise DatasetError(f"--labels {config.labels} has no label of any of the {len(splits['train'])} training "
+                               f"frames (<frame>.png); label them with `freespace autolabel --dataset`")
+        if len(train) < len(splits["train"]):
+            log.warning("--labels: %d of %d training frames have no label in %s and are left out",
+                        len(splits["train"]) - len(train), len(splits["train"]), config.labels)
+        ds = ds.with_labels(config.labels, train)
+        splits = {**splits, "train": train}
     index = {f.name: ds.index(f.name) for f in labelled}
     items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
     augments = parse_augment(config.augment)
@@ -103,7 +114,7 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
         views = _generated_views(ds, [index[n] for n in splits["train"]], run_dir / "generated")
         items["train"] += [Item(it.index, it.name) for it in views]
     size = config.image_size or tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
-    return {"dataset": ds, **items, "size": size, "virtual": virtual}
+    return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
 
 
 def _road_planes(ds: StereoRoadDataset, indices: list[int],

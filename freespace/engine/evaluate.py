@@ -16,8 +16,9 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError
-from freespace.io import PathLike, check_outputs, staged_folder, write_image, write_json
+from freespace.io import PathLike, check_outputs, write_image, write_json
 from freespace.metrics import RoadEvaluator
+from freespace.outdir import claim_folder
 from freespace.predictor import Predictor
 from freespace.viz import overlay_errors, write_pr_curve
 
@@ -70,7 +71,7 @@ def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out:
     names = _frames(ds, subset, checkpoint, splits_dir)
     if not names:
         raise DatasetError(f"subset {subset!r} has no labelled frames")
-    with staged_folder(out, "metrics.json", "evaluate") as staging:  # all or nothing
+    with claim_folder(out, "evaluate") as folder, folder.staged() as staging:  # all or nothing
         evaluator, seconds = evaluate_frames(predictor, ds, names, overlays=staging / "overlays", progress=progress)
         scores = evaluator.evaluate()
         metrics = {**{k: scores[k] for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap")},

@@ -14,18 +14,34 @@ from freespace.io import IGNORE_INDEX
 from freespace.metrics import RoadEvaluator
 from freespace.models import create_model, main_logits
 
-__all__ = ["RoadModule", "TrainingError"]
+__all__ = ["RoadModule", "TrainingError", "epoch_seed"]
+
+
+def epoch_seed(seed: int, epoch: int) -> int:
+    """The torch seed of one training epoch (dropout and the like) of a run with ``seed``."""
+    return int(np.random.default_rng([seed, epoch, 17]).integers(2**31))
 
 
 class RoadModule(pl.LightningModule):
     """Trains ``create_model(model, **model_options)``; validation and test metrics are computed from
-    confusion counts summed over the whole split (and over DDP ranks), never averaged per batch."""
+    confusion counts summed over the whole split (and over DDP ranks), never averaged per batch.
+
+    ``encoder_weights`` (``"imagenet"`` or a file) initialise the encoder; they are kept out of
+    ``model_options``, so that a checkpoint rebuilds the network without them and loads its own tensors.
+    """
 
     def __init__(self, model: str, model_options: dict[str, Any], lr: float, momentum: float,
-                 weight_decay: float, image_size: tuple[int, int] | list[int] | None = None) -> None:
+                 weight_decay: float, image_size: tuple[int, int] | list[int] | None = None, seed: int = 0,
+                 val_window: int = 1, encoder_weights: str | None = None) -> None:
+        """``seed``: the run's seed, from which dropout draws (with the epoch); ``val_window``: the epochs
+        over which ``val_f_window`` (the early-stopping and checkpoint criterion when > 1) averages the
+        validation F-score; ``encoder_weights``: the encoder's initial weights ("imagenet" or a file; a
+        checkpoint rebuilds the network without them and loads its own tensors)."""
         super().__init__()
         self.save_hyperparameters()
-        self.net = create_model(model, **model_options)
+        weights = {"encoder_weights": encoder_weights} if encoder_weights is not None else {}
+        self.net = create_model(model, **model_options, **weights)
+        self._val_f: list[float] = []  # each epoch's validation F-score (kept in checkpoints)
         self._reset()
 
     def _reset(self) -> None:
@@ -38,8 +54,8 @@ class RoadModule(pl.LightningModule):
                                weight_decay=self.hparams.weight_decay)
 
     def on_train_epoch_start(self) -> None:
-        # dropout and the like draw from a generator seeded by the epoch: a resumed run is exact
-        torch.manual_seed(int(np.random.default_rng([self.trainer.current_epoch, 17]).integers(2**31)))
+        # dropout and the like draw from a generator seeded by the run's seed and the epoch: a resumed run is exact
+        torch.manual_seed(epoch_seed(self.hparams.seed, self.trainer.current_epoch))
 
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         outputs = self.net(batch["image"])
@@ -90,8 +106,20 @@ class RoadModule(pl.LightningModule):
         return metrics
 
     def on_validation_epoch_end(self) -> None:
-        for k, v in self._reduce().items():
+        metrics = self._reduce()
+        for k, v in metrics.items():
             self.log(f"val_{k}", v, sync_dist=True)  # already summed over ranks: the mean of equal values
+        if not self.trainer.sanity_checking:
+            self._val_f.append(float(metrics["f_score"]))
+        window = self._val_f[-self.hparams.val_window:] or [float(metrics["f_score"])]
+        self.log("val_f_window", float(np.mean(window)), sync_dist=True)
+
+    def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        checkpoint["val_f_history"] = list(self._val_f)
+
+    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        history = checkpoint.get("val_f_history", [])
+        self._val_f = [float(x) for x in history] if isinstance(history, list) else []
 
     def on_test_epoch_end(self) -> None:
         self.test_metrics = self._reduce()

@@ -14,7 +14,6 @@ import csv
 import io as _io
 import logging
 import os
-import shutil
 import warnings
 import time
 from pathlib import Path
@@ -29,16 +28,23 @@ from freespace.errors import CorruptFileError, InvalidOptionError
 from freespace.io import atomic_write_bytes, write_csv, write_json
 from freespace.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
+from freespace.outdir import claim_folder
 
 log = logging.getLogger(__name__)
 
 __all__ = ["run_training"]
 
 CSV_FIELDS = ["epoch", "train_loss", "val_accuracy", "val_precision", "val_recall", "val_f_score", "val_iou",
-              "val_max_f", "val_ap", "lr", "seconds"]
+              "val_max_f", "val_ap", "val_f_window", "lr", "seconds"]
 
 
-def _callbacks(run_dir: Path, patience: int):
+def monitored(val_window: int) -> str:
+    """The metric that early stopping and the best checkpoint follow: the epoch's validation F-score, or
+    with ``val_window`` > 1 its mean over the last ``val_window`` epochs."""
+    return "val_f_score" if val_window == 1 else "val_f_window"
+
+
+def _callbacks(run_dir: Path, patience: int, monitor: str):
     import lightning.pytorch as pl
     from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 
@@ -68,14 +74,15 @@ def _callbacks(run_dir: Path, patience: int):
                          trainer.max_epochs, row.get("train_loss", "—"), row.get("val_f_score", "—"),
                          row.get("val_iou", "—"), row["seconds"])
 
-    ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor="val_f_score", mode="max",
+    ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor=monitor, mode="max",
                            save_top_k=1, save_last=True, enable_version_counter=False)
-    stop = EarlyStopping(monitor="val_f_score", mode="max", patience=patience, check_finite=True)
+    stop = EarlyStopping(monitor=monitor, mode="max", patience=patience, check_finite=True)
     return [ckpt, stop, EpochCSV()], ckpt
 
 
-#: what a run writes into its folder (removed when a plain rerun takes over a start that never checkpointed)
-RUN_FILES = ("config.yaml", "splits", "generated", "metrics.csv", "metrics.json", "checkpoints", "tensorboard")
+#: what a run writes into its folder, as :mod:`freespace.outdir` entries (removed when a plain rerun takes
+#: over a start that never checkpointed)
+RUN_ENTRIES = ("config.yaml", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/", "tensorboard/")
 
 
 def _checkpoint_io(run_dir: Path):
@@ -140,6 +147,44 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
 
 
 def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
+    run_dir = Path(config.out)
+    if not is_rank_zero():  # DDP children re-run the command inside the folder their launcher holds
+        return _train(config, resume, progress)
+    with claim_folder(run_dir, "train", entries=RUN_ENTRIES) as folder:
+        last = run_dir / "checkpoints" / "last.ckpt"
+        if resume:
+            _check_resume(config, run_dir, last)
+        elif (run_dir / "config.yaml").is_file():
+            if last.is_file():
+                raise InvalidOptionError(f"{run_dir} already holds a run; add --resume to continue it or choose "
+                                         f"another --out")
+            config.check()
+            log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
+            folder.forget(RUN_ENTRIES)
+        return _train(config, resume, progress)
+
+
+def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> None:
+    """Refuse ``--resume`` of a folder with no checkpoint, a damaged one, or other options than the run's."""
+    if (run_dir / "config.yaml").is_file() and not last.is_file():
+        raise InvalidOptionError(f"{run_dir} never reached its first checkpoint, so there is nothing to resume; "
+                                 f"run the same command without --resume to start it again")
+    if not (run_dir / "config.yaml").is_file():
+        raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
+                                 f"{run_dir} has none")
+    saved = TrainConfig.load(run_dir / "config.yaml")
+    _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
+    if config.image_size is None:
+        config.image_size = saved.image_size  # "auto" was resolved when the run started
+    changed = [k for k, v in saved.to_dict().items()
+               if k not in ("epochs", "out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
+               and config.to_dict()[k] != v]
+    if changed:
+        raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
+                                 f"resume with the same options (only --epochs may grow)")
+
+
+def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     import lightning.pytorch as pl
 
     quiet_lightning()
@@ -148,32 +193,6 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
 
     run_dir = Path(config.out)
     last = run_dir / "checkpoints" / "last.ckpt"
-    if resume:
-        if (run_dir / "config.yaml").is_file() and not last.is_file():
-            raise InvalidOptionError(f"{run_dir} never reached its first checkpoint, so there is nothing to resume; "
-                                     f"run the same command without --resume to start it again")
-        if not (run_dir / "config.yaml").is_file():
-            raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
-                                     f"{run_dir} has none")
-        saved = TrainConfig.load(run_dir / "config.yaml")
-        _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
-        if config.image_size is None:
-            config.image_size = saved.image_size  # "auto" was resolved when the run started
-        changed = [k for k, v in saved.to_dict().items()
-                   if k not in ("epochs", "out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
-                   and config.to_dict()[k] != v]
-        if changed:
-            raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
-                                     f"resume with the same options (only --epochs may grow)")
-    elif (run_dir / "config.yaml").is_file() and is_rank_zero():  # DDP children re-run the command: skip
-        if last.is_file():
-            raise InvalidOptionError(f"{run_dir} already holds a run; add --resume to continue it or choose another "
-                                     f"--out")
-        config.check()
-        log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
-        for name in RUN_FILES:
-            path = run_dir / name
-            shutil.rmtree(path) if path.is_dir() else path.unlink(missing_ok=True)
     config.check()
     pl.seed_everything(config.seed, workers=True, verbose=False)
     data = prepare_data(config, run_dir)
@@ -192,11 +211,14 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                                            num_workers=config.workers, persistent_workers=config.workers > 0)
 
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
-    module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay,
-                        image_size=list(size))
+    module = RoadModule(config.model, config.model_options(), config.lr, config.momentum, config.weight_decay,
+                        image_size=list(size), seed=config.seed, val_window=config.val_window,
+                        encoder_weights=config.encoder_weights)
     if not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
-        module.net.prepare(train[i]["label"] for i in range(len(data["train"])))
-    callbacks, ckpt = _callbacks(run_dir, config.patience)
+        # from the training frames themselves (the first items; views and duplicates follow), so that every
+        # variant of the protocol fits it from the same labels
+        module.net.prepare(train[i]["label"] for i in range(data["frames"]))
+    callbacks, ckpt = _callbacks(run_dir, config.patience, monitored(config.val_window))
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
         devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",
@@ -209,7 +231,8 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     best = run_dir / "checkpoints" / "best.ckpt"  # this folder's, whatever a resumed checkpoint recorded
     best = best if best.is_file() else last
     trainer.test(module, loader(test, False), ckpt_path=str(best), verbose=False)
-    metrics = {**module.test_metrics, "best_epoch": _best_epoch(run_dir), "epochs_run": trainer.current_epoch,
+    metrics = {**module.test_metrics, "best_epoch": _best_epoch(run_dir, monitored(config.val_window)),
+               "epochs_run": trainer.current_epoch,
                "frames": {k: len(data[k]) for k in ("train", "val", "test")}, "image_size": list(size),
                "checkpoint": best.relative_to(run_dir).as_posix()}
     if trainer.is_global_zero:
@@ -226,10 +249,11 @@ def _logger(config: TrainConfig, run_dir: Path):
     return TensorBoardLogger(str(run_dir), name="tensorboard", version="")
 
 
-def _best_epoch(run_dir: Path) -> int | None:
+def _best_epoch(run_dir: Path, monitor: str) -> int | None:
+    """The (0-based) epoch whose ``monitor`` in ``metrics.csv`` is highest (the first of equals)."""
     path = run_dir / "metrics.csv"
     if not path.is_file():
         return None
     rows = list(csv.DictReader(path.open()))
-    scored = [r for r in rows if r.get("val_f_score")]
-    return int(max(scored, key=lambda r: float(r["val_f_score"]))["epoch"]) if scored else None
+    scored = [r for r in rows if r.get(monitor)]
+    return int(max(scored, key=lambda r: float(r[monitor]))["epoch"]) if scored else None

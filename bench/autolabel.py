@@ -1,0 +1,159 @@
+"""Quality of `freespace autolabel` against human labels: precision, recall and F of the road class on the
+pixels the autolabel covers (not don't care), and coverage (the share of the human label's evaluated pixels
+that the autolabel does not mark don't care). Counts are summed over each set's frames.
+
+- rendered `test` (seed 0) and `shifted` (seed 1, the evidence run's wider rigs) sets, 320×240, frames 0…N−1
+  of `freespace synth` with the evidence run's options (rendered in memory, byte-identical to the files),
+  from the renderer's exact disparity and from SGBM (`--max-disparity 64`) on the rendered pair;
+- the two real KITTI stereo 2015 frames (../shared/data/kitti_stereo_2015, road_mask/ the human label),
+  from SGBM on the real pair and from the LiDAR disparity disp_occ_0 (baseline 0.54 m);
+- the three real KITTI road frames with LiDAR depth (../shared/data/kitti_road_depth), against the road
+  polygons tests/test_depth.py draws: the polygons mark road only, so only recall and coverage (inside
+  the polygon) are measured there.
+
+    .venv/bin/python bench/autolabel.py [--frames 40] [--csv OUT.csv] [--shared DIR] [--write]
+
+`--write` puts the table into BENCHMARKS.md. A frame whose road plane is not found ("no label") counts
+with every pixel don't care.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import ROOT, machine, write_section  # noqa: E402
+
+from freespace.autolabel import autolabel  # noqa: E402
+from freespace.errors import RoadFitError  # noqa: E402
+from freespace.data.synthetic import SynthConfig, render_sample  # noqa: E402
+from freespace.geometry import compute_disparity  # noqa: E402
+from freespace.geometry.depth import disparity_from_depth_file  # noqa: E402
+from freespace.io import RoadLabel, read_disparity, read_image, read_kitti_calib, read_road_label  # noqa: E402
+
+SETS = {"test": (SynthConfig(width=320, height=240, frames_per_scenario=5), 0),
+        "shifted": (SynthConfig(width=320, height=240, frames_per_scenario=5, max_roll_deg=6.0,
+                                camera_heights=(1.0, 2.6), pitches_deg=(-5.0, 5.0), baselines=(0.2, 2.0)), 1)}
+# the road polygons of tests/test_depth.py: (split folder, frame) → (u, v) vertices on the left image
+ROAD_POLYGONS = {
+    ("testing", "um_000000"): [(230, 370), (560, 200), (625, 200), (770, 370)],
+    ("unknown_split", "uu_000000"): [(200, 370), (510, 205), (630, 205), (790, 370)],
+    ("unknown_split", "uu_000001"): [(200, 370), (330, 290), (490, 215), (620, 215), (720, 300), (720, 370)],
+}
+
+Case = tuple[str, str, np.ndarray, RoadLabel, float | None]  # set, source, disparity, human label, baseline
+
+
+def rendered(frames: int) -> Iterator[Case]:
+    for name, (config, seed) in SETS.items():
+        for i in range(frames):
+            s = render_sample(i, seed, config)
+            yield f"rendered {name}", "exact", s.disparity, s.label, s.calibration.baseline
+            yield f"rendered {name}", "SGBM", compute_disparity(s.left, s.right, max_disparity=64), s.label, \
+                s.calibration.baseline
+
+
+def kitti_stereo(shared: Path) -> Iterator[Case]:
+    root = shared / "kitti_stereo_2015"
+    for path in sorted((root / "road_mask").glob("*.png")):
+        label = read_road_label(path)
+        left, right = read_image(root / "image_2" / path.name), read_image(root / "image_3" / path.name)
+        yield "KITTI stereo 2015", "SGBM", compute_disparity(left, right), label, 0.54
+        yield "KITTI stereo 2015", "LiDAR", read_disparity(root / "disp_occ_0" / path.name), label, 0.54
+
+
+def kitti_road_depth(shared: Path) -> Iterator[Case]:
+    root = shared / "kitti_road_depth"
+    for (split, name), polygon in sorted(ROAD_POLYGONS.items()):
+        base = root / split
+        disparity, rig = disparity_from_depth_file(base / "depth_u16" / f"{name}.png",
+                                                   read_kitti_calib(base / "calib" / f"{name}.txt"))
+        road = np.zeros(disparity.shape, np.uint8)
+        cv2.fillPoly(road, [np.array(polygon, np.int32)], 1)
+        yield "KITTI road (polygons)", "LiDAR depth", disparity, RoadLabel(road > 0, road > 0), rig.baseline
+
+
+def measure(cases: Iterator[Case]) -> list[dict]:
+    """Summed counts per (set, source) → rows with precision, recall, F, coverage (percent)."""
+    acc: dict[tuple[str, str], np.ndarray] = {}
+    for set_name, source, disparity, human, baseline in cases:
+        t0 = time.perf_counter()
+        try:
+            auto = autolabel(disparity, baseline=baseline).label
+            failed = 0
+        except RoadFitError:  # no label: every pixel don't care
+            auto = RoadLabel(np.zeros_like(human.road), np.zeros_like(human.road))
+            failed = 1
+        seconds = time.perf_counter() - t0
+        evaluated = human.valid
+        covered = auto.valid & evaluated
+        counts = np.array([np.count_nonzero(auto.road & human.road & covered),
+                           np.count_nonzero(auto.road & ~human.road & covered),
+                           np.count_nonzero(~auto.road & human.road & covered),
+                           np.count_nonzero(covered), np.count_nonzero(evaluated), 1, failed, seconds])
+        acc[(set_name, source)] = acc.get((set_name, source), 0) + counts
+    rows = []
+    for (set_name, source), (tp, fp, fn, covered, evaluated, frames, failed, seconds) in acc.items():
+        precision = tp / (tp + fp) if tp + fp and set_name != "KITTI road (polygons)" else float("nan")
+        recall = tp / (tp + fn) if tp + fn else float("nan")
+        f = 2 * precision * recall / (precision + recall) if np.isfinite(precision) else float("nan")
+        rows.append({"set": set_name, "disparity": source, "frames": int(frames), "failed": int(failed),
+                     "precision": 100 * precision,
+                     "recall": 100 * recall, "F": 100 * f, "coverage": 100 * covered / evaluated,
+                     "seconds_per_frame": seconds / frames})
+    return rows
+
+
+def table(rows: list[dict]) -> str:
+    def pct(x: float) -> str:
+        return f"{x:.1f}" if np.isfinite(x) else "–"
+
+    lines = ["| set | disparity | frames | no label | precision % | recall % | F % | coverage % | s/frame |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['set']} | {r['disparity']} | {r['frames']} | {r['failed']} | {pct(r['precision'])} | {pct(r['recall'])} | "
+                     f"{pct(r['F'])} | {pct(r['coverage'])} | {r['seconds_per_frame']:.2f} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=40, help="rendered frames per set (default 40)")
+    parser.add_argument("--csv", metavar="OUT.csv", help="also write the rows as CSV")
+    parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared" / "data", metavar="DIR",
+                        help="the shared real samples (default ../shared/data beside the checkout)")
+    parser.add_argument("--write", action="store_true", help="write the table into BENCHMARKS.md")
+    args = parser.parse_args()
+    cv2.setNumThreads(1)
+    cases = [rendered(args.frames)]
+    if args.shared.is_dir():
+        cases += [kitti_stereo(args.shared), kitti_road_depth(args.shared)]
+    else:
+        print(f"({args.shared} not found: real frames skipped)")
+    rows = [r for c in cases for r in measure(c)]
+    text = table(rows)
+    print(text)
+    if args.csv:
+        with open(args.csv, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]), lineterminator="\n")
+            writer.writeheader()
+            writer.writerows(rows)
+    if args.write:
+        write_section("Autolabel quality (`freespace autolabel` against human labels)",
+                      f"`OMP_NUM_THREADS=1 .venv/bin/python bench/autolabel.py --frames {args.frames} --write` on "
+                      f"{machine()}.\n\nPrecision, recall and F of the road class on the pixels the autolabel "
+                      f"covers; coverage: the share of the human label's evaluated pixels that the autolabel does "
+                      f"not mark don't care (counts summed over each set's frames). The KITTI road polygons mark "
+                      f"road only: recall and coverage there are inside the polygons, no precision.\n\n{text}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,360 @@
+"""Output folders: one rule for every command that writes a folder.
+
+A command owns an output folder through a **manifest**, ``OUT/.freespace/manifest.json``: the command's
+name and every entry it wrote (``"name"`` a file, ``"name/"`` a whole subtree, e.g. a training run's
+``checkpoints/``). The rule:
+
+* a command writes into a new or empty folder, or into a folder whose manifest names that command;
+* it refuses a folder that holds any file its manifest does not list (the message names one);
+* it replaces or deletes only entries of its manifest, ``--overwrite`` included, so a file it did not
+  write is never touched;
+* a lock (``OUT/.freespace/lock``, ``flock``) keeps two runs out of one folder: a whole run takes it
+  alone, the shards of one run (``--shard K/N``) and the cells of one ``reproduce`` share it;
+* staged output (:meth:`OwnedFolder.staged`) is written under ``OUT/.freespace/stage-<pid>-…`` and moved
+  into place file by file (one atomic rename each) when the block ends; an interrupted stage
+  (SIGINT, SIGTERM, or SIGKILL) is removed by the next run that claims the folder.
+
+The folder itself is never renamed or replaced, so an ``--out`` that is a symbolic link stays one, and
+``--out .`` works. Files are listed in the manifest **before** they are written (in place or by a
+stage), so a run killed half-way leaves only files that its next run knows.
+
+Also here: :func:`check_writable` (every output path checked before any work) and
+:func:`write_files_together` (several output files written all or nothing, earlier files kept when it
+fails). Only the standard library is imported.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+
+from freespace.errors import InvalidOptionError, OutputError
+
+PathLike = str | os.PathLike[str]
+
+#: the hidden folder of an output folder that holds its manifest, lock and stages
+META = ".freespace"
+MANIFEST = "manifest.json"
+_LOCK = "lock"
+_STAGE = "stage-"
+
+__all__ = ["OwnedFolder", "claim_folder", "check_writable", "write_files_together", "META"]
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _known(rel: str, entries: set[str]) -> bool:
+    """Whether ``rel`` (a POSIX path relative to the folder) is an entry or lies in a ``"dir/"`` entry."""
+    if rel in entries:
+        return True
+    parts = rel.split("/")
+    return any("/".join(parts[:i]) + "/" in entries for i in range(1, len(parts)))
+
+
+class OwnedFolder:
+    """An output folder claimed by one command (see the module docstring); made by :func:`claim_folder`.
+
+    Attributes:
+        path: the folder (as given; a symbolic link stays one).
+        command: the command that owns it (e.g. ``"predict"``).
+    """
+
+    def __init__(self, path: Path, command: str, flag: str) -> None:
+        self.path, self.command, self.flag = path, command, flag
+        self._meta = path / META
+
+    # -- the manifest -----------------------------------------------------------------------------
+
+    def entries(self) -> set[str]:
+        """The entries of the manifest (``"name"`` files, ``"name/"`` subtrees), empty when there is none."""
+        return set(_read_manifest(self._meta / MANIFEST)[1])
+
+    def record(self, entries: Iterable[str]) -> None:
+        """Add ``entries`` (POSIX paths relative to the folder; ``"dir/"`` for a whole subtree) to the
+        manifest, before they are written."""
+        with _exclusive(self._meta / "manifest.lock"):
+            old = self.entries()
+            new = old | {str(e) for e in entries}
+            if new != old:
+                _write_manifest(self._meta / MANIFEST, self.command, new)
+
+    def forget(self, entries: Iterable[str]) -> None:
+        """Delete ``entries`` (each must be in the manifest: a file or a ``"dir/"`` subtree) and drop them
+        from the manifest."""
+        with _exclusive(self._meta / "manifest.lock"):
+            known = self.entries()
+            gone = {str(e) for e in entries}
+            for entry in sorted(gone):
+                if entry not in known:
+                    raise ValueError(f"{entry!r} is not in the manifest of {self.path}")
+                target = self.path / entry.rstrip("/")
+                if target.is_dir() and not target.is_symlink():
+                    shutil.rmtree(target)
+                else:
+                    target.unlink(missing_ok=True)
+            _write_manifest(self._meta / MANIFEST, self.command, known - gone)
+
+    # -- staged output --------------------------------------------------------------------------------
+
+    @contextmanager
+    def staged(self, *, replace: bool = True) -> Iterator[Path]:
+        """A temporary folder to write the command's output into, moved into place when the block ends.
+
+        Args:
+            replace: True: the output replaces this command's earlier output (entries of the manifest
+                that the stage did not write are deleted); False: it is added beside it (shards).
+
+        When the block raises (or is interrupted), the stage is removed and the folder is left as it
+        was. Files are moved one atomic rename each, ``.json`` files last (a summary appears once the
+        files it describes are in place).
+        """
+        try:
+            stage = Path(tempfile.mkdtemp(dir=self._meta, prefix=f"{_STAGE}{os.getpid()}-"))
+        except OSError as exc:
+            raise OutputError(f"cannot write {self.path}: {exc.strerror}; choose a writable output folder") from None
+        try:
+            yield stage
+            files = sorted((p for p in stage.rglob("*") if p.is_file() or p.is_symlink()),
+                           key=lambda p: (p.suffix == ".json", str(p)))
+            written = {p.relative_to(stage).as_posix() for p in files}
+            stale = self.entries() - written if replace else set()
+            stale = {e for e in stale if not any(w.startswith(e) for w in written if e.endswith("/"))}
+            clash = next((w for w in sorted(written) if (self.path / w).is_dir()), None)
+            if clash is not None:
+                raise OutputError(f"{self.flag} {self.path} has a folder {clash} where {self.command} writes a file; "
+                                  f"move it away or choose another {self.flag}")
+            self.record(written)
+            for path in files:
+                target = self.path / path.relative_to(stage)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(path, target)
+            if stale:
+                self.forget(stale)
+        finally:
+            shutil.rmtree(stage, ignore_errors=True)
+
+
+def _read_manifest(path: Path) -> tuple[str | None, list[str]]:
+    """``(command, entries)`` of a manifest file, ``(None, [])`` when there is none or it is unreadable."""
+    try:
+        data = json.loads(path.read_text())
+        command, entries = data["command"], data["entries"]
+        if isinstance(command, str) and isinstance(entries, list) and all(isinstance(e, str) for e in entries):
+            return command, entries
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    return None, []
+
+
+def _write_manifest(path: Path, command: str, entries: set[str]) -> None:
+    text = json.dumps({"command": command, "entries": sorted(entries)}, indent=1) + "\n"
+    write_files_together({path: text.encode("utf-8")})
+
+
+@contextmanager
+def _exclusive(path: Path) -> Iterator[None]:
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _unknown_file(out: Path, entries: set[str]) -> str | None:
+    """The first file or folder in ``out`` (sorted, depth first) that ``entries`` does not cover, or None."""
+    for root, dirs, files in os.walk(out):
+        rel_root = Path(root).relative_to(out).as_posix()
+        prefix = "" if rel_root == "." else rel_root + "/"
+        if not prefix:
+            dirs[:] = [d for d in dirs if d != META]
+        dirs.sort()
+        for name in sorted(files):
+            if not _known(prefix + name, entries):
+                return prefix + name
+        for name in list(dirs):
+            rel = prefix + name
+            if _known(rel + "/", entries) or _known(rel, entries):
+                dirs.remove(name)  # a whole subtree of the command's
+            elif not any(e.startswith(rel + "/") for e in entries):
+                if not any(os.scandir(out / rel)):
+                    continue  # an empty folder holds nothing to lose
+                return rel + "/"
+    return None
+
+
+@contextmanager
+def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), shared: bool = False,
+                 flag: str = "--out") -> Iterator[OwnedFolder]:
+    """Claim ``out`` for ``command`` for the length of the block (see the module docstring).
+
+    Args:
+        out: the output folder (created if missing, with its parents).
+        command: the command's name (``"predict"``, ``"train"``, …): only the same command may write
+            into a folder it wrote before.
+        entries: entries the command writes in place (``"name"`` files, ``"name/"`` subtrees), recorded
+            in the manifest at once (before they are written).
+        shared: share the lock with other runs of ``command`` that pass ``shared`` (the shards of one
+            run); otherwise the run holds the folder alone.
+        flag: the option that named the folder, for messages.
+
+    Raises:
+        InvalidOptionError: ``out`` is a file, holds a file that the command did not write (named), was
+            written by another command, or another run holds it.
+        OutputError: it cannot be created or written.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InvalidOptionError(f"{flag} {out} is a file; give a folder")
+    meta = out / META
+    owner, known = _read_manifest(meta / MANIFEST)
+    if out.is_dir():
+        if owner is not None and owner != command:
+            raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another {flag} for "
+                                     f"freespace {command}")
+        stray = _unknown_file(out, set(known))
+        if stray is not None:
+            raise InvalidOptionError(f"{flag} {out} holds {stray}, which freespace {command} did not write; choose a "
+                                     f"new or empty folder, or move that file away")
+    existing = out
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent  # the folders below it are created here, and removed if left empty
+    try:
+        meta.mkdir(parents=True, exist_ok=True)
+        fd = os.open(meta / _LOCK, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+    except OSError as exc:
+        raise OutputError(f"cannot write {out}: {exc.strerror}; choose a writable output folder") from None
+    try:
+        try:
+            fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
+        except OSError as exc:
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
+                raise
+            raise InvalidOptionError(f"another freespace run is writing to {flag} {out}; wait for it to end or "
+                                     f"choose another {flag}") from None
+        owner, known = _read_manifest(meta / MANIFEST)  # as it is now that the lock is held
+        if owner is not None and owner != command:
+            raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another {flag}")
+        _remove_stale_stages(meta, alone=not shared)
+        folder = OwnedFolder(out, command, flag)
+        if owner is None:
+            _write_manifest(meta / MANIFEST, command, set(known))
+        folder.record(entries)
+        yield folder
+    finally:
+        _leave(out, existing, fd)
+
+
+def _leave(out: Path, existing: Path, fd: int) -> None:
+    """Release the lock of ``out``; a folder that holds nothing but the manifest (a run that wrote no
+    file) is left as it was found: the manifest removed, and the folders created for it too."""
+    try:
+        if any(p.name != META for p in out.iterdir()):
+            return
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # no other shard is in the folder
+    except OSError:
+        return
+    finally:
+        os.close(fd)
+    shutil.rmtree(out / META, ignore_errors=True)
+    folder = out
+    while folder != existing and folder != folder.parent:
+        try:
+            folder.rmdir()
+        except OSError:
+            break
+        folder = folder.parent
+
+
+def _remove_stale_stages(meta: Path, alone: bool) -> None:
+    """Remove the stages of interrupted runs: all of them when this run holds the folder alone, else
+    those whose process is gone."""
+    for stage in meta.glob(f"{_STAGE}*"):
+        pid = stage.name[len(_STAGE):].partition("-")[0]
+        if alone or not (pid.isdigit() and _pid_alive(int(pid))):
+            shutil.rmtree(stage, ignore_errors=True)
+
+
+# ---------------------------------------------------------------------------------------------------
+# single output files
+
+
+def check_writable(outputs: Mapping[str, PathLike | None]) -> None:
+    """Check, before any work, that every output file can be written.
+
+    Args:
+        outputs: option name → output file path (None = not given).
+
+    Raises:
+        InvalidOptionError: a path is an existing folder, or its parent is a file.
+        OutputError: its folder cannot be created or written.
+    """
+    for flag, path in outputs.items():
+        if path is None:
+            continue
+        path = Path(path)
+        if path.is_dir():
+            raise InvalidOptionError(f"{flag} {path} is a folder; give a file name")
+        parent = path.parent
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        if not parent.is_dir():
+            raise InvalidOptionError(f"{flag} {path}: {parent} is a file, not a folder; choose another path")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise OutputError(f"cannot write {flag} {path}: {parent} is not writable; choose a writable path")
+        if path.exists() and not os.access(path, os.W_OK) and not os.access(path.parent, os.W_OK):
+            raise OutputError(f"cannot write {flag} {path}: permission denied; choose a writable path")
+
+
+def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:
+    """Write several output files all or nothing: each goes to a temporary file beside its target, and
+    only when every one is written are they renamed into place. When any write fails, the temporary
+    files are removed and every earlier file at the targets is left as it was.
+
+    Returns the paths written.
+    """
+    mask = _umask()
+    staged: list[tuple[str, Path]] = []
+    try:
+        for target, data in files.items():
+            target = Path(target)
+            try:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+            except OSError as exc:
+                raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
+            staged.append((tmp, target))
+            try:
+                with os.fdopen(fd, "wb") as f:
+                    f.write(data)
+                os.chmod(tmp, 0o666 & ~mask)
+            except OSError as exc:
+                raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
+        for tmp, target in staged:
+            os.replace(tmp, target)
+    except BaseException:
+        for tmp, _ in staged:
+            Path(tmp).unlink(missing_ok=True)
+        raise
+    return [target for _, target in staged]
