@@ -33,7 +33,6 @@ class _Parser(argparse.ArgumentParser):
         self._negative_number_matcher = re.compile(r"^-(\.?\d|inf|nan)", re.IGNORECASE)
 
 
-
 def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, required: bool = True,
                       split: bool = True) -> None:
     """``--dataset``, ``--root`` and (optionally) ``--split``, shared by every command that reads a dataset."""

@@ -7,9 +7,10 @@ Tree written under ``OUT``::
     OUT/data_road/training/calib/<cat>_<id>.txt            KITTI calibration text
     OUT/data_road/training/disparity/<cat>_<id>.png        exact left disparity (KITTI uint16)
     OUT/data_road_right/training/image_3/<cat>_<id>.png    right images
-    OUT/index.csv                                          frame, category, scenario, weather, rig (pitch_deg > 0: looking down)
+    OUT/index.csv                                          frame, category, scenario, weather, rig
     OUT/synth.json                                         seed and configuration
 
+``pitch_deg`` in ``index.csv`` (and ``--pitches``) is positive when the camera looks down at the road.
 ``<id>`` is the global frame index, so frame i has the same name and bytes for a given seed and
 configuration whatever ``num`` is.
 """

@@ -210,8 +210,9 @@ class Frame:
 
         The pitch is positive when the optical axis points down at the road. The roll is signed like the
         paper's Φ: the road disparity model fitted to the frame has ``Φ = roll`` (a rotation of the rig by
-        −Φ about its optical axis). So the road normal in the camera frame is ``Rz(roll)·Rx(pitch)·(0, 1, 0)``,
-        the plane of :meth:`freespace.geometry.RoadPlane.from_camera` with the same height, pitch and roll.
+        −Φ about its optical axis). So the road normal in the camera frame is
+        ``Rz(roll)·Rx(pitch)·(0, 1, 0)``, the plane of :meth:`freespace.geometry.RoadPlane.from_camera` with
+        the same height, pitch and roll.
         """
         sc = self.scenario
         cy, sy = math.cos(self.yaw), math.sin(self.yaw)
@@ -256,7 +257,8 @@ def sample_scenario(config: SynthConfig, seed: int, index: int) -> Scenario:
         cy=0.5 * config.height + float(rng.uniform(-6, 6)),
         baseline=config.baseline if config.baseline is not None else float(rng.uniform(*config.baselines)),
         cam_height=float(rng.uniform(*config.camera_heights)),
-        # drawn as an upward angle in −range, as before positive meant down: the same rigs for symmetric ranges
+        # drawn as the upward angle, uniform in (−max, −min), as when positive meant up: the same rigs as
+        # before for symmetric ranges
         pitch=-math.radians(rng.uniform(-config.pitches_deg[1], -config.pitches_deg[0])),
         roll=math.radians(rng.uniform(-config.max_roll_deg, config.max_roll_deg)),
         lanes=lanes, lane_width=lane_width,
