@@ -1101,3 +1101,31 @@ def test_issue20_config_that_is_a_folder(trained: dict[str, Path], tmp_path: Pat
     refused(capsys, ["train", "--config", str(tmp_path), "--dataset", "synth", "--root", str(trained["data"]),
                      "--out", str(tmp_path / "run")], match="is a folder; name a YAML file")
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["datasets", "info", "--dataset", "synth", "--root", "{file}"], "dataset root {file} is a file"),
+    (["train", "--dataset", "synth", "--root", "{data}", "--splits", "{file}", "--out", "{tmp}/run"],
+     "split lists {file} is a file"),
+    (["predict", "--checkpoint", "{dir}", "--input", "{data}", "--out", "{tmp}/p"], "checkpoint {dir} is a folder"),
+    (["predict", "--onnx", "{dir}", "--input", "{data}", "--out", "{tmp}/p"], "ONNX model {dir} is a folder"),
+    (["evaluate-kitti", "--gt", "{file}", "--pred", "{dir}", "--out", "{tmp}/s.json"], "folder {file} is a file"),
+    (["generate", "--dataset", "synth", "--root", "{data}", "--disparity-dir", "{file}", "--out", "{tmp}/g"],
+     "disparity folder {file} is a file"),
+    (["generate", "--dataset", "synth", "--root", "{data}", "--disparity-source", "sgbm", "--cache-dir", "{file}",
+      "--out", "{tmp}/g"], "--cache-dir {file} is a file"),
+    (["train", "--dataset", "synth", "--root", "{data}", "--augment", "homography", "--disparity-source", "sgbm",
+      "--cache-dir", "{file}", "--out", "{tmp}/run"], "--cache-dir {file} is a file"),
+])
+def test_issue20_a_file_where_a_folder_is_wanted_and_back(argv: list[str], match: str, trained: dict[str, Path],
+                                                          tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """Found probing: these said "not found" (or failed frame by frame, for --cache-dir) about a path that
+    exists as the other kind."""
+    file, folder = tmp_path / "notes ü.txt", tmp_path / "a folder"
+    file.write_text("a user's file\n")
+    (folder / "x.png").parent.mkdir()
+    (folder / "x.png").write_bytes(b"not a model")
+    fill = {"file": file, "dir": folder, "tmp": tmp_path, "data": trained["data"]}
+    before = snapshot(tmp_path)
+    refused(capsys, [a.format(**fill) for a in argv], match=match.format(**fill))
+    assert snapshot(tmp_path) == before and sorted(tmp_path.iterdir()) == [folder, file]
