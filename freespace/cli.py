@@ -10,6 +10,8 @@ command with a one-line message on stderr and exit code 2; a dataset run with fa
 from __future__ import annotations
 
 import argparse
+import os
+import re
 import sys
 from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
@@ -19,6 +21,16 @@ from freespace import __version__
 from freespace.errors import FreespaceError, InvalidOptionError
 
 # --- options shared by several commands ----------------------------------------------------------------
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, except that an argument starting with a minus and a digit, ``inf`` or ``nan`` is a value,
+    never an option: ``--shift -1,0,0``, ``--rotate -2,0,0`` and ``--pitches -5,5`` need no ``=`` form (no
+    option of this command starts that way). Sub-command parsers are of this class too."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(\.?\d|inf|nan)", re.IGNORECASE)
 
 
 def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, required: bool = True,
@@ -72,8 +84,8 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
                       help="KITTI calibration (P2, P3; Tr_cam_to_road without --disparity)")
     virt.add_argument("--shift", metavar="DX,DY,DZ",
                       help="camera centre move in metres (+x right, +y down; default 0,0,0)")
-    virt.add_argument("--rotate", metavar="ROLL,PITCH,YAW", help="degrees about z, x, y, R = R_yaw·R_pitch·R_roll "
-                      "(default 0,0,0)")
+    virt.add_argument("--rotate", metavar="ROLL,PITCH,YAW", help="degrees about z, x, y, R = R_yaw·R_pitch·R_roll; "
+                      "positive pitch looks down, positive yaw left (default 0,0,0)")
     virt.add_argument("--label-out", metavar="VL.png", help="the view's label, KITTI colours (don't care black)")
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
@@ -264,14 +276,13 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames-per-scenario", type=int, default=10, help="frames per drive (default 10)")
     p.add_argument("--non-planar", action="store_true", help="roads with slopes and camber")
     p.add_argument("--baseline", type=float, help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
-    p.add_argument("--max-roll", type=float, default=3.0, help="rig roll range ± degrees (default 3)")
+    p.add_argument("--max-roll", type=float, default=3.0, help="rig roll range ± degrees, at most 15 (default 3)")
     p.add_argument("--baselines", type=_range, default=(0.3, 1.6), metavar="MIN,MAX",
                    help="baseline range in metres, drawn per drive when --baseline is not given (default 0.3,1.6)")
     p.add_argument("--camera-heights", type=_range, default=(1.4, 2.0), metavar="MIN,MAX",
-                   help="camera height range above the road in metres (default 1.4,2.0)")
+                   help="camera height range above the road in metres, within 0.3–6 (default 1.4,2.0)")
     p.add_argument("--pitches", type=_range, default=(-2.0, 2.0), metavar="MIN,MAX",
-                   help="rig pitch range in degrees, positive = looking up; write --pitches=-5,5 when MIN is negative "
-                        "(default -2,2)")
+                   help="rig pitch range in degrees, positive = looking down at the road (default -2,2)")
     p.add_argument("--weather", help="comma-separated subset of clear,cloudy,rain,sunset,dusk,fog (default all)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.add_argument("--overwrite", action="store_true",
@@ -664,7 +675,7 @@ def build_parser(commands: Collection[str] | None = None,
                  config: Mapping[str, Any] | None = None) -> argparse.ArgumentParser:
     """The argument parser of the ``freespace`` command, with the options of ``commands`` (default: all;
     the others are listed but take no options). ``config``: option values read from ``train --config``."""
-    parser = argparse.ArgumentParser(prog="freespace", description=__doc__.splitlines()[0] if __doc__ else None)
+    parser = _Parser(prog="freespace", description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--version", action="version", version=f"freespace {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log messages")
     parser.add_argument("-q", "--quiet", action="store_true", help="warnings and errors only")
@@ -679,6 +690,18 @@ def build_parser(commands: Collection[str] | None = None,
     return parser
 
 
+def _refuse_extra_arguments(parser: argparse.ArgumentParser, extra: list[str]) -> None:
+    """Arguments no option took: the shell's expansion of an unquoted wildcard (``--input *.png`` gives one
+    file to ``--input`` and the rest here) gets a one-line hint to quote it; anything else argparse's usage
+    error."""
+    files = [a for a in extra if os.path.exists(a)]
+    if files:
+        shown = " ".join(extra[:3]) + (f" … ({len(extra)} in all)" if len(extra) > 3 else "")
+        raise InvalidOptionError(f"unexpected argument{'s' if len(extra) > 1 else ''} {shown}: the shell expanded an "
+                                 f"unquoted wildcard into many files; quote the pattern, e.g. --input 'frames/*.png'")
+    parser.error(f"unrecognized arguments: {' '.join(extra)}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``freespace`` console script; returns the exit code."""
     from freespace.log import setup_logging
@@ -688,7 +711,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         config = _config_file_options(argv) if command == "train" else None
         parser = build_parser({command} if command else (), config)
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
+        if extra:
+            _refuse_extra_arguments(parser, extra)
         setup_logging(-1 if args.quiet else args.verbose)
         return int(args.func(args))
     except FreespaceError as exc:

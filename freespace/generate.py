@@ -58,13 +58,14 @@ from freespace.io import (
     write_csv,
     write_json,
 )
+from freespace.geometry.stereo import check_search_range
 from freespace.outdir import check_writable, claim_folder, write_files_together
 from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)
 
 __all__ = ["FitOptions", "GenerateResult", "VirtualResult", "generate_pair", "generate_virtual_pair",
-           "generate_dataset"]
+           "generate_dataset", "road_to_fit"]
 
 
 @dataclass(frozen=True)
@@ -113,14 +114,45 @@ def _size(shape: tuple[int, ...]) -> str:
     return f"{shape[1]}×{shape[0]}"
 
 
+def road_to_fit(label: RoadLabel) -> np.ndarray:
+    """The road pixels of ``label`` the fit uses (``bool H×W``: road and evaluated), or a RoadFitError that
+    says why there are none: no evaluated pixel at all (an all-black KITTI ground truth), or no road."""
+    if not label.valid.any():
+        raise RoadFitError("empty road mask: the label has no evaluated pixel (all black: don't care everywhere "
+                           "in KITTI colours); give the frame's road ground truth")
+    road = label.road & label.valid
+    if not road.any():
+        raise RoadFitError("empty road mask: the label marks no road pixel; give a label with road (magenta in "
+                           "KITTI colours, non-zero in a single-channel mask)")
+    return road
+
+
+#: what to check when a disparity has no valid value, by where it came from
+_NO_DISPARITY_HINT = {
+    "file": "check the disparity file",
+    "depth": "check the depth map (0 and 65535 mean no depth) and the camera's focal length and baseline",
+    "lidar": "no point of the LiDAR scan lands in the image: check the Velodyne scan and the calibration "
+             "(Tr_velo_to_cam, R0_rect, P2)",
+    "sgbm": "the stereo matcher found no match: check that the images are one rectified pair",
+}
+
+
 def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray, disparity: np.ndarray | None,
-                    options: FitOptions = FitOptions()) -> GenerateResult:
+                    options: FitOptions = FitOptions(), *, disparity_source: str = "file",
+                    calibration: StereoCalibration | None = None) -> GenerateResult:
     """Fit the road model and generate the view from arrays.
 
     Args:
         reference, target: ``H×W×3`` RGB (or ``H×W``) uint8 left and right images.
         road: ``bool H×W`` road pixels of the reference label (don't-care pixels excluded).
         disparity: ``float32 H×W`` left disparity (NaN invalid), or None to compute it with SGBM.
+        disparity_source: where ``disparity`` came from (``file``, ``depth``, ``lidar``, ``sgbm``), for
+            the report and the messages.
+        calibration: the rig, when known: with a baseline the fit's camera height is checked too.
+
+    Raises:
+        RoadFitError: no road, no valid disparity, or a fit no real rig gives
+            (:meth:`RoadModel.check_plausible`).
     """
     timings: dict[str, float] = {}
     if reference.shape != target.shape:
@@ -130,9 +162,9 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
         raise ShapeMismatchError(f"road mask is {_size(road.shape)} but the images are {_size(reference.shape)}; "
                                  f"give the label of the reference image")
     if not road.any():
-        raise RoadFitError("the road mask marks no road pixel; give a label with road (magenta in KITTI "
-                             "colours, non-zero in a single-channel mask)")
-    source = "file"
+        raise RoadFitError("empty road mask: it marks no road pixel; give a label with road (magenta in KITTI "
+                           "colours, non-zero in a single-channel mask)")
+    source = disparity_source
     if disparity is None:
         t0 = time.perf_counter()
         disparity = compute_disparity(reference, target, max_disparity=options.max_disparity)
@@ -142,12 +174,12 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
         raise ShapeMismatchError(f"disparity is {_size(disparity.shape)} but the images are "
                                  f"{_size(reference.shape)}; give the disparity of the reference image")
     if not np.isfinite(disparity).any():
-        hint = ("the stereo matcher found no match: check that the images are one rectified pair"
-                if source == "sgbm" else "check the disparity file")
-        raise RoadFitError(f"the disparity map has no valid value (all 0, NaN or inf); {hint}")
+        raise RoadFitError(f"the disparity map (from {source}) has no valid value (all 0, NaN or inf); "
+                           f"{_NO_DISPARITY_HINT.get(source, _NO_DISPARITY_HINT['file'])}")
     t0 = time.perf_counter()
     model = fit_road_model(disparity, road, robust=options.robust, inlier_threshold=options.inlier_threshold)
     timings["fit"] = time.perf_counter() - t0
+    model.check_plausible(_camera_height(model, calibration))
     if model.num_inliers < 0.5 * model.num_valid:
         log.warning("only %d of %d road pixels (%.0f%%) agree with the fitted plane: check that the images are "
                     "one rectified pair and the label marks a planar road", model.num_inliers, model.num_valid,
@@ -156,6 +188,13 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
     image = generate_view(reference, target, model)
     timings["warp"] = time.perf_counter() - t0
     return GenerateResult(model=model, image=image, disparity_source=source, timings=timings)
+
+
+def _camera_height(model: RoadModel, rig: StereoCalibration | None) -> float | None:
+    """The camera height (metres) of a fitted model on ``rig``, or None without a rig or a baseline."""
+    if rig is None or not rig.baseline > 0:
+        return None
+    return RoadPlane.from_road_model(model, rig.fx, rig.baseline, rig.cx, rig.cy, fy=rig.fy).height
 
 
 def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, disparity: PathLike | None = None,
@@ -177,7 +216,7 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
     tgt = read_image(target, what="target image")
     label = read_road_label(road_mask)
     disp = read_disparity(disparity) if disparity is not None else None
-    result = generate_arrays(ref, tgt, label.road & label.valid, disp, options)
+    result = generate_arrays(ref, tgt, road_to_fit(label), disp, options)
     files: dict[PathLike, bytes] = {}
     if out is not None:
         files[out] = encode_image(result.image, Path(out).suffix.lower())
@@ -279,12 +318,11 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
         if disp.shape != image.shape[:2]:
             raise ShapeMismatchError(f"disparity is {_size(disp.shape)} but the image is {_size(image.shape)}; give "
                                      f"the disparity of the reference image")
-        road = label.road & label.valid
-        if not road.any():
-            raise RoadFitError("the road mask marks no road pixel to fit the road plane to; give a label with road")
         t0 = time.perf_counter()
-        model = fit_road_model(disp, road, robust=options.robust, inlier_threshold=options.inlier_threshold)
+        model = fit_road_model(disp, road_to_fit(label), robust=options.robust,
+                               inlier_threshold=options.inlier_threshold)
         plane = RoadPlane.from_road_model(model, rig.fx, rig.baseline, rig.cx, rig.cy, fy=rig.fy)
+        model.check_plausible(plane.height)
         timings = {"fit": time.perf_counter() - t0}
         source = "fit"
     else:
@@ -327,10 +365,8 @@ def _process_frame(dataset: Any, index: int, out: Path, report: Path, options: F
         if frame.label is None:
             raise DatasetError("missing road label")
         sample = dataset.load(index)
-        result = generate_arrays(sample.left, sample.right, sample.label.road & sample.label.valid,
-                                 sample.disparity, options)
-        if sample.disparity is not None:
-            result.disparity_source = sample.disparity_source
+        result = generate_arrays(sample.left, sample.right, road_to_fit(sample.label), sample.disparity, options,
+                                 disparity_source=sample.disparity_source, calibration=sample.calibration)
         atomic_write_bytes(out, encode_image(result.image, ".png"))
         record.update(status="done", **result.report())
         if settings is not None:
@@ -443,6 +479,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     if out_dir.exists() and not out_dir.is_dir():
         raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the generated dataset")
     check_outputs({"--out": out_dir}, {"--root": dataset.root})
+    _check_sgbm_width(dataset, options)
     settings = _settings(dataset, options)
     if shard is not None:
         dataset = dataset.subset(select_shard((f.name for f in dataset.frames), *shard))
@@ -493,6 +530,24 @@ def _generate_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], opti
                            "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode}}
     write_json(out_dir / summary_name, summary)
     return summary
+
+
+def _check_sgbm_width(dataset: Any, options: FitOptions) -> None:
+    """Refuse, once and before any work, a ``--max-disparity`` that SGBM cannot use on the dataset's images:
+    checked on the first frame that would be matched (no disparity or depth file, or ``--disparity-source
+    sgbm``); frames of other sizes still fail one by one."""
+    if dataset.disparity_mode not in ("auto", "sgbm"):
+        return
+    frame = next((f for f in dataset.frames if f.right is not None and f.label is not None
+                  and (dataset.disparity_mode == "sgbm" or (f.disparity is None and f.depth is None))), None)
+    if frame is None:
+        return
+    try:
+        width = read_image(frame.left, what="left image").shape[1]
+    except FreespaceError:
+        return  # the frame fails with its own reason
+    check_search_range(options.max_disparity, width, "give disparities (--disparity-dir, or depth maps with "
+                                                     "--disparity-source depth)")
 
 
 def _plan(frames: list[Any], out_dir: Path, options: FitOptions,

@@ -66,6 +66,7 @@ __all__ = [
     "road_label_to_kitti",
     "read_kitti_calib",
     "check_outputs",
+    "missing_input",
 ]
 
 
@@ -167,6 +168,18 @@ def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str,
 # images
 
 
+def missing_input(path: PathLike, what: str, kind: Literal["file", "folder"] = "file") -> InputFileError:
+    """The one-line error for an input ``path`` that is not the ``kind`` asked for: that it is a folder
+    where a file is wanted (or the other way round), else that it is not found. ``what`` names it
+    ("checkpoint", "ground-truth folder", ...)."""
+    path = Path(path)
+    if kind == "file" and path.is_dir():
+        return InputFileError(f"{what} {path} is a folder; name a file")
+    if kind == "folder" and path.exists():
+        return InputFileError(f"{what} {path} is a file; give a folder")
+    return InputFileError(f"{what} not found: {path}")
+
+
 def _read_bytes(path: PathLike, what: str) -> bytes:
     path = Path(path)
     if not path.is_file():
@@ -262,6 +275,12 @@ def _read_pfm(path: PathLike, what: str = "disparity") -> np.ndarray:
         scale = float(scale_line)
     except ValueError:
         raise CorruptFileError(f"cannot decode {what} {path}: not a PFM file (bad header)") from None
+    if width < 1 or height < 1:
+        raise CorruptFileError(f"cannot decode {what} {path}: its PFM header gives a size of {width}×{height} "
+                               f"(W×H); both must be ≥ 1")
+    if not (math.isfinite(scale) and scale != 0):
+        raise CorruptFileError(f"cannot decode {what} {path}: its PFM scale is {scale}; it must be a finite, "
+                               f"non-zero number (negative = little-endian)")
     channels = 3 if header == b"PF" else 1
     dtype = "<f4" if scale < 0 else ">f4"
     count = width * height * channels
@@ -421,14 +440,21 @@ def read_road_label(path: PathLike) -> RoadLabel:
       evaluated (valid) = red > 0.
     * single-channel masks (or colour files whose three channels are equal): non-zero = road, every
       pixel valid.
+
+    A colour file that is black everywhere is KITTI ground truth with every pixel don't care (no pixel
+    is evaluated); a single-channel file of zeros is a mask without road.
     """
     return road_label_from_image(read_image(path, what="road label"))
 
 
 def road_label_from_image(img: np.ndarray) -> RoadLabel:
-    """Decode a road label image already in memory (RGB or grey); see :func:`read_road_label`."""
-    if img.ndim == 3 and not (np.array_equal(img[:, :, 0], img[:, :, 1])
-                              and np.array_equal(img[:, :, 1], img[:, :, 2])):
+    """Decode a road label image already in memory (RGB or grey); see :func:`read_road_label`.
+
+    A colour (``H×W×3``) image that is black everywhere is KITTI ground truth with every pixel don't care
+    (``valid`` all False), not a mask without road: KITTI marks non-road red, never black.
+    """
+    if img.ndim == 3 and (not (np.array_equal(img[:, :, 0], img[:, :, 1])
+                               and np.array_equal(img[:, :, 1], img[:, :, 2])) or not img.any()):
         red, blue = img[:, :, 0], img[:, :, 2]
         road = blue > 0
         return RoadLabel(road=road & (red > 0), valid=red > 0)

@@ -2,7 +2,7 @@
 
 Ground truth: ``GT_DIR/<cat>_road_<id>.png`` (KITTI colours, read as the devkit reads them: road = blue
 > 0, evaluated = red > 0). Predictions: ``PRED_DIR/<cat>_road_<id>.png`` (the benchmark's naming) or
-``PRED_DIR/<cat>_<id>.png``, 8-bit grey (255 = sure road; colour files are converted to grey).
+``PRED_DIR/<cat>_<id>.png``, 8-bit grey (255 = sure road; a colour file must have three equal channels).
 Counts are summed per category (``um_road``, ``umm_road``, ``uu_road``) and over all images (``all``). With a calibration folder the
 evaluation is in the benchmark's bird's-eye view (``--bev``).
 """
@@ -13,12 +13,11 @@ import re
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
-from freespace.errors import DatasetError, InputFileError, ShapeMismatchError
+from freespace.errors import CorruptFileError, DatasetError, InputFileError, ShapeMismatchError
 from freespace.bev import to_bev
-from freespace.io import PathLike, read_image, read_kitti_calib, road_label_from_image
+from freespace.io import PathLike, missing_input, read_image, read_kitti_calib, road_label_from_image
 from freespace.metrics import KITTI_CATEGORIES, RoadEvaluator
 
 __all__ = ["evaluate_kitti_dirs", "read_confidence"]
@@ -27,9 +26,20 @@ _GT = re.compile(r"^(um|umm|uu)_road_(\d{6})$")
 
 
 def read_confidence(path: PathLike) -> np.ndarray:
-    """An 8-bit road confidence map (``uint8 H×W``; colour files converted to grey)."""
+    """An 8-bit road confidence map (``uint8 H×W``, 255 = sure road): a one-channel file, or a colour file
+    whose three channels are equal (a grey image saved as RGB).
+
+    Raises:
+        CorruptFileError: a colour image (its channels differ): an overlay or a KITTI ground truth, not a
+            confidence map; the devkit would turn its colours into grey levels and score them.
+    """
     img = read_image(path, what="prediction")
-    return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
+    if img.ndim == 2:
+        return img
+    if not (np.array_equal(img[:, :, 0], img[:, :, 1]) and np.array_equal(img[:, :, 1], img[:, :, 2])):
+        raise CorruptFileError(f"prediction {path} is a colour image, not a confidence map (8-bit grey, 255 = sure "
+                               f"road); give the <name>.png files of freespace predict, not overlays or ground truth")
+    return np.ascontiguousarray(img[:, :, 0])
 
 
 def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLike | None = None) -> dict[str, Any]:
@@ -52,7 +62,7 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLik
         folders.append((calib_dir, "calibration"))
     for d, what in folders:
         if not d.is_dir():
-            raise InputFileError(f"{what} folder not found: {d}")
+            raise missing_input(d, f"{what} folder", "folder")
     gts = [p for p in sorted(gt_dir.glob("*.png")) if _GT.match(p.stem)]
     if not gts:
         raise DatasetError(f"no KITTI road ground truth (<cat>_road_<id>.png) in {gt_dir}")
@@ -70,18 +80,22 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLik
                              f"(first: {missing[0]}); name them like the ground truth")
     evaluators: dict[str, RoadEvaluator] = {}
     for cat, gt, pred in pairs:
+        calib = read_kitti_calib(calib_dir / f"{gt.stem.replace('_road_', '_')}.txt") if calib_dir is not None else None
         gt_image = read_image(gt, what="ground truth")
         conf = read_confidence(pred)
         if conf.shape != gt_image.shape[:2]:
             raise ShapeMismatchError(f"{pred.name} is {conf.shape[1]}×{conf.shape[0]} but its ground truth is "
                                      f"{gt_image.shape[1]}×{gt_image.shape[0]}")
-        if calib_dir is not None:
-            calib_path = calib_dir / f"{gt.stem.replace('_road_', '_')}.txt"
-            calib = read_kitti_calib(calib_path)
+        if calib is not None:
             gt_image, conf = to_bev(gt_image, calib), to_bev(conf, calib)
         label = road_label_from_image(gt_image)
         evaluators.setdefault(cat, RoadEvaluator()).process(conf, label.road, label.valid)
     order = [c for c in KITTI_CATEGORIES if c in evaluators] + ["all"]
     evaluators["all"] = RoadEvaluator.from_vector(sum(ev.to_vector() for ev in evaluators.values()))
+    if evaluators["all"].kitti.pos + evaluators["all"].kitti.neg == 0:
+        where = " in the bird's-eye view" if calib_dir is not None else ""
+        raise DatasetError(f"the ground truth in {gt_dir} has no evaluated pixel{where} (every file all black: don't "
+                           f"care everywhere), so there is nothing to score; give KITTI road ground truth (road "
+                           f"magenta, non-road red)")
     keys = ("max_f", "ap", "pre", "rec", "fpr", "fnr", "threshold", "images")
     return {k: {m: v for m, v in evaluators[k].evaluate().items() if m in keys} for k in order}

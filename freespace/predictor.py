@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
-from freespace.io import MAX_IMAGE_SIDE, PathLike
+from freespace.errors import CorruptFileError, InvalidOptionError
+from freespace.io import MAX_IMAGE_SIDE, PathLike, missing_input
 
 if TYPE_CHECKING:
     from freespace.models import SegmentationModel
@@ -39,7 +39,7 @@ def load_checkpoint(path: PathLike) -> tuple[SegmentationModel, dict[str, Any]]:
 
     path = Path(path)
     if not path.is_file():
-        raise InputFileError(f"checkpoint not found: {path}")
+        raise missing_input(path, "checkpoint")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
         hp = ckpt["hyper_parameters"]
@@ -95,7 +95,7 @@ class Predictor:
 
             path = Path(onnx)  # type: ignore[arg-type]
             if not path.is_file():
-                raise InputFileError(f"ONNX model not found: {path}")
+                raise missing_input(path, "ONNX model")
             try:
                 self.session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
             except Exception as exc:  # onnxruntime raises its own types for corrupt files

@@ -7,6 +7,7 @@ byte-identical afterwards, and no partial output left behind.
 from __future__ import annotations
 
 import json
+import math
 import os
 import pickle
 import shutil
@@ -180,7 +181,11 @@ def test_synth_refuses_other_settings_in_the_same_folder(tmp_path: Path, capsys:
     assert main(["synth", "--out", str(out), "--num", "1", "--width", "80", "--height", "64", "--overwrite"]) == 0
     assert len(list((out / "data_road" / "training" / "image_2").iterdir())) == 1
     assert json.loads((out / "synth.json").read_text())["config"]["width"] == 80
-    assert main(["datasets", "info", "--dataset", "synth", "--root", str(out), "--no-progress"]) == 0
+    # no stale frame is left: the one problem is that a single frame cannot be split (issue 20)
+    capsys.readouterr()
+    assert main(["datasets", "info", "--dataset", "synth", "--root", str(out), "--no-progress"]) == 1
+    info = capsys.readouterr().out
+    assert "1 problem:" in info and "leaves val and test empty" in info, info
 
 
 def test_generate_dataset_refuses_other_fit_options(trained: dict[str, Path], tmp_path: Path,
@@ -722,3 +727,405 @@ def test_reproduce_refuses_a_cell_with_other_settings(trained: dict[str, Path], 
                      "segnet,X,0", "--batch-size", "4", "--patience", "10", "--seeds", "1", "--epochs", "1",
                      "--image-size", "64x64"], match="root")
     assert snapshot(out) == before
+
+
+# ======================================================================================================
+# issue 20: validation and messages
+# Implausible fits, labels and predictions that are not what they seem, options checked before any work,
+# one convention for the pitch, and messages that name the right thing. Each case: exit code, one line,
+# no traceback, no output.
+# ======================================================================================================
+from freespace.io import read_road_label  # noqa: E402
+
+from helpers import shared_path  # noqa: E402
+
+
+def _pfm_top_down(path: Path, disparity: np.ndarray) -> None:
+    """A PFM whose rows are stored top to bottom: read back, the map is upside down."""
+    h, w = disparity.shape
+    path.write_bytes(f"Pf\n{w} {h}\n-1.0\n".encode() + np.nan_to_num(disparity).astype("<f4").tobytes())
+
+
+def _pair_args(pair: dict[str, Path], out: Path, **extra: Path) -> list[str]:
+    args = ["generate", "--reference", str(pair["L"]), "--target", str(pair["R"]), "--road-mask", str(pair["M"]),
+            "--out", str(out)]
+    for key, value in extra.items():
+        args += [f"--{key.replace('_', '-')}", str(value)]
+    return args
+
+
+def test_issue20_flipped_pfm_is_an_implausible_fit(pair: dict[str, Path], tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture) -> None:
+    from freespace.io import read_disparity
+
+    flipped = tmp_path / "flipped.pfm"
+    _pfm_top_down(flipped, read_disparity(pair["D"]))
+    err = refused(capsys, _pair_args(pair, tmp_path / "G.png", disparity=flipped, model_json=tmp_path / "m.json"),
+                  match="implausible road fit")
+    assert "roll" in err and "beyond the ±20°" in err and "right way up" in err
+    assert not (tmp_path / "G.png").exists() and not (tmp_path / "m.json").exists()
+
+
+def test_issue20_camera_height_bound_with_a_calibration(trained: dict[str, Path], tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture) -> None:
+    from freespace.io import read_disparity
+
+    training = trained["data"] / "data_road" / "training"
+    frame = sorted((training / "image_2").iterdir())[0].stem
+    cat, idx = frame.split("_")
+    base = ["generate", "--virtual", "--reference", str(training / "image_2" / f"{frame}.png"), "--road-mask",
+            str(training / "gt_image_2" / f"{cat}_road_{idx}.png"), "--calib", str(training / "calib" / f"{frame}.txt"),
+            "--shift", "0.2,0,0", "--out", str(tmp_path / "V.png"), "--label-out", str(tmp_path / "VL.png")]
+    assert main(base + ["--disparity", str(training / "disparity" / f"{frame}.png")]) == 0  # the true disparity
+    (tmp_path / "V.png").unlink()
+    (tmp_path / "VL.png").unlink()
+    # a disparity ten times too small: the same roll, a camera ten times higher than the rig's
+    small = tmp_path / "small.npy"
+    np.save(small, read_disparity(training / "disparity" / f"{frame}.png") / 10)
+    err = refused(capsys, base + ["--disparity", str(small)], match="implausible road fit")
+    assert "m above the road" in err and "above the highest (0.1–8 m)" in err
+    assert not (tmp_path / "V.png").exists() and not (tmp_path / "VL.png").exists()
+
+
+def test_issue20_few_inliers_is_an_implausible_fit(pair: dict[str, Path], tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture) -> None:
+    from freespace.io import read_disparity
+
+    disparity = read_disparity(pair["D"])
+    rng = np.random.default_rng(0)
+    noisy = np.where(rng.random(disparity.shape) < 0.94, rng.uniform(1, 60, disparity.shape), disparity)
+    np.save(tmp_path / "noisy.npy", noisy.astype(np.float32))
+    err = refused(capsys, _pair_args(pair, tmp_path / "G.png", disparity=tmp_path / "noisy.npy"),
+                  match="implausible road fit")
+    assert "agree with the plane" in err and "below the 10 %" in err and "--inlier-threshold" in err
+    assert not (tmp_path / "G.png").exists()
+
+
+def test_issue20_implausible_frame_fails_alone_in_a_dataset_run(trained: dict[str, Path], tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture) -> None:
+    from freespace.io import read_disparity
+
+    root = _kitti_root(trained, tmp_path)
+    disp_dir = root / "data_road" / "training" / "disparity"
+    victim = sorted(disp_dir.iterdir())[0]
+    flipped = read_disparity(victim)[::-1]
+    write_disparity(victim, np.ascontiguousarray(flipped))
+    out = tmp_path / "gen"
+    capsys.readouterr()
+    assert main(["generate", "--dataset", "synth", "--root", str(root), "--out", str(out), "--no-robust"]) == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary["failed"]) == [victim.stem] and "implausible road fit" in summary["failed"][victim.stem]
+    assert summary["generated"] == summary["frames"] - 1 and not (out / f"{victim.stem}.png").exists()
+
+
+def test_issue20_bounds_pass_real_kitti_and_every_rig_the_renderer_may_draw(tmp_path: Path) -> None:
+    import cv2
+
+    from freespace.data.synthetic import scene
+    from freespace.geometry import RoadPlane, StereoCalibration, compute_disparity, fit_road_model
+    from freespace.geometry.road_model import CAMERA_HEIGHT_RANGE_M, MAX_ROLL_DEG
+    from freespace.io import read_disparity, read_image, read_kitti_calib
+
+    # the renderer's limits lie inside the bounds, with a margin
+    assert scene.MAX_ROLL_DEG < MAX_ROLL_DEG
+    assert CAMERA_HEIGHT_RANGE_M[0] < scene.CAMERA_HEIGHTS_M[0] < scene.CAMERA_HEIGHTS_M[1] < CAMERA_HEIGHT_RANGE_M[1]
+    # its extreme rigs (roll ±15°, 0.3–6 m, pitch ±20°, non-planar roads) all fit within them
+    data, gen = tmp_path / "extreme", tmp_path / "gen"
+    assert main(["synth", "--out", str(data), "--num", "12", "--width", "320", "--height", "240", "--seed", "2",
+                 "--frames-per-scenario", "1", "--max-roll", "15", "--camera-heights", "0.3,6", "--pitches", "-20,20",
+                 "--baselines", "0.2,2", "--non-planar"]) == 0
+    assert main(["generate", "--dataset", "synth", "--root", str(data), "--out", str(gen)]) == 0
+    # real KITTI: LiDAR and SGBM fits of the two stereo frames (camera height with KITTI's f and B)
+    stereo = shared_path("kitti_stereo_2015")
+    for name in ("000000_10", "000001_10"):
+        road = read_road_label(stereo / "road_mask" / f"{name}.png").road
+        lidar = read_disparity(stereo / "disp_occ_0" / f"{name}.png")
+        sgbm = compute_disparity(read_image(stereo / "image_2" / f"{name}.png"),
+                                 read_image(stereo / "image_3" / f"{name}.png"))
+        for disparity in (lidar, sgbm):
+            model = fit_road_model(disparity, road)
+            model.check_plausible(RoadPlane.from_road_model(model, 721.5, 0.54, 609.6, 172.9).height)
+    # the six real calibrations' road planes
+    for path in sorted(shared_path("kitti_road_calib").glob("*.txt")):
+        rig = StereoCalibration.from_kitti(read_kitti_calib(path))
+        rig.road_model().check_plausible(rig.road_distance)
+    # a real road frame's depth (measured heights 1.62–1.67 m)
+    from freespace.geometry.depth import disparity_from_depth_file
+
+    depth_root = shared_path("kitti_road_depth", "testing")
+    road = np.zeros((375, 1242), np.uint8)
+    cv2.fillPoly(road, [np.array([(230, 370), (560, 200), (625, 200), (770, 370)], np.int32)], 1)
+    disparity, rig = disparity_from_depth_file(depth_root / "depth_u16" / "um_000000.png",
+                                               read_kitti_calib(depth_root / "calib" / "um_000000.txt"),
+                                               shape=road.shape)
+    model = fit_road_model(disparity, road.astype(bool))
+    model.check_plausible(RoadPlane.from_road_model(model, rig.fx, rig.baseline, rig.cx, rig.cy, fy=rig.fy).height)
+
+
+def test_issue20_real_flipped_pfms_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from freespace.io import read_disparity
+
+    stereo = shared_path("kitti_stereo_2015")
+    for name in ("000000_10", "000001_10"):
+        flipped = tmp_path / f"{name}.pfm"
+        _pfm_top_down(flipped, read_disparity(stereo / "disp_occ_0" / f"{name}.png"))
+        refused(capsys, ["generate", "--reference", str(stereo / "image_2" / f"{name}.png"), "--target",
+                         str(stereo / "image_3" / f"{name}.png"), "--road-mask", str(stereo / "road_mask" / f"{name}.png"),
+                         "--disparity", str(flipped), "--out", str(tmp_path / "G.png")], match="roll")
+    assert not (tmp_path / "G.png").exists()
+
+
+def test_issue20_all_black_colour_ground_truth_is_all_dont_care(pair: dict[str, Path], tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture) -> None:
+    black = tmp_path / "black.png"
+    write_image(black, np.zeros((96, 160, 3), np.uint8))
+    label = read_road_label(black)
+    assert not label.valid.any() and not label.road.any()
+    zeros = tmp_path / "zeros.png"  # a one-channel mask of zeros stays a mask: evaluated, no road
+    write_image(zeros, np.zeros((96, 160), np.uint8))
+    assert read_road_label(zeros).valid.all()
+    err = refused(capsys, _pair_args({**pair, "M": black}, tmp_path / "G.png"), match="empty road mask")
+    assert "no evaluated pixel" in err and "don't care" in err
+    err = refused(capsys, _pair_args({**pair, "M": zeros}, tmp_path / "G.png"), match="empty road mask")
+    assert "marks no road pixel" in err
+    assert not (tmp_path / "G.png").exists()
+
+
+def test_issue20_all_black_ground_truth_scores_nothing(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    gt, pred = tmp_path / "gt", tmp_path / "pred"
+    write_image(gt / "um_road_000000.png", np.zeros((64, 96, 3), np.uint8))
+    write_image(pred / "um_road_000000.png", np.full((64, 96), 200, np.uint8))
+    refused(capsys, ["evaluate-kitti", "--gt", str(gt), "--pred", str(pred), "--out", str(tmp_path / "s.json")],
+            match="no evaluated pixel")
+    assert not (tmp_path / "s.json").exists()
+
+
+def test_issue20_all_black_frames_train_without_nan(trained: dict[str, Path], tmp_path: Path) -> None:
+    root = _kitti_root(trained, tmp_path)
+    for gt in (root / "data_road" / "training" / "gt_image_2").iterdir():
+        write_image(gt, np.zeros((128, 160, 3), np.uint8))  # every label all don't care: no pixel to learn from
+    assert main(["train", "--dataset", "synth", "--root", str(root), "--model", "segnet", "--epochs", "1",
+                 "--batch-size", "1", "--image-size", "64x64", "--no-progress", "--out", str(tmp_path / "run")]) == 0
+
+
+def test_issue20_evaluate_kitti_refuses_colour_predictions(trained: dict[str, Path], tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture) -> None:
+    gt = trained["data"] / "data_road" / "training" / "gt_image_2"
+    err = refused(capsys, ["evaluate-kitti", "--gt", str(gt), "--pred", str(gt), "--out", str(tmp_path / "s.json")],
+                  match="colour image, not a confidence map")
+    assert "predict" in err and not (tmp_path / "s.json").exists()
+    # grey saved as RGB (three equal channels) is a confidence map
+    pred = tmp_path / "pred"
+    for f in gt.iterdir():
+        conf = read_road_label(f).road.astype(np.uint8) * 255
+        write_image(pred / f.name, np.repeat(conf[..., None], 3, axis=2))
+    capsys.readouterr()
+    assert main(["evaluate-kitti", "--gt", str(gt), "--pred", str(pred), "--out", str(tmp_path / "s.json")]) == 0
+    assert json.loads((tmp_path / "s.json").read_text())["all"]["max_f"] == pytest.approx(1.0)
+
+
+def test_issue20_virtual_shift_is_checked_against_the_road_before_work(trained: dict[str, Path], tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture) -> None:
+    run = tmp_path / "run"
+    t0 = time.perf_counter()
+    err = refused(capsys, ["train", "--dataset", "synth", "--root", str(trained["data"]), "--model", "segnet",
+                           "--augment", "homography,virtual", "--virtual-shift", "0,5,0", "--epochs", "1",
+                           "--image-size", "64x64", "--no-progress", "--out", str(run)], match="--virtual-shift 0,5,0")
+    assert time.perf_counter() - t0 < 30
+    assert "through the road" in err and "a DY of at most" in err and "--shift " not in err
+    assert not (run / "checkpoints").exists() and not (run / "generated").exists()
+
+
+@pytest.mark.parametrize("option,value", [("--weight-decay", "nan"), ("--weight-decay", "inf"), ("--lr", "inf"),
+                                          ("--momentum", "nan"), ("--momentum", "-inf"), ("--virtual-prob", "nan")])
+def test_issue20_non_finite_training_floats(option: str, value: str, trained: dict[str, Path], tmp_path: Path,
+                                            capsys: pytest.CaptureFixture) -> None:
+    err = refused(capsys, ["train", "--dataset", "synth", "--root", str(trained["data"]), option, value,
+                           "--out", str(tmp_path / "run")], match=f"{option} must be a finite number")
+    assert value in err and not (tmp_path / "run").exists()
+
+
+def test_issue20_non_finite_float_in_a_config_file(trained: dict[str, Path], tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture) -> None:
+    config = tmp_path / "c.yaml"
+    config.write_text(f"dataset: synth\nroot: {trained['data']}\nout: {tmp_path / 'run'}\nweight_decay: .nan\n")
+    refused(capsys, ["train", "--config", str(config)], match="--weight-decay must be a finite number")
+    assert not (tmp_path / "run").exists()
+
+
+def test_issue20_one_pitch_convention(tmp_path: Path) -> None:
+    """Positive pitch looks down everywhere: a rig copied from synth's index.csv into freespace.yaml's
+    `camera:` gives the plane of the frame's calibration, and the horizon of a camera looking down is above
+    the principal point."""
+    import csv
+
+    from freespace.data.registry import get_dataset
+    from freespace.geometry import RoadPlane, StereoCalibration
+    from freespace.io import read_kitti_calib
+
+    data = tmp_path / "syn"
+    assert main(["synth", "--out", str(data), "--num", "3", "--width", "160", "--height", "128", "--seed", "4",
+                 "--frames-per-scenario", "1", "--pitches", "3,6", "--max-roll", "5"]) == 0
+    training = data / "data_road" / "training"
+    for row in csv.DictReader((data / "index.csv").open()):
+        pitch, roll, height = float(row["pitch_deg"]), float(row["roll_deg"]), float(row["camera_height_m"])
+        assert 3 <= pitch <= 6
+        calib = StereoCalibration.from_kitti(read_kitti_calib(training / "calib" / f"{row['frame']}.txt"))
+        truth = RoadPlane.from_calibration(calib)
+        # the same rig through a generic tree's freespace.yaml
+        root = tmp_path / row["frame"]
+        for sub in ("left", "labels"):
+            (root / sub).mkdir(parents=True)
+        shutil.copy(training / "image_2" / f"{row['frame']}.png", root / "left" / "a.png")
+        write_image(root / "labels" / "a.png", np.zeros((128, 160), np.uint8))
+        (root / "freespace.yaml").write_text(
+            f"left: left\nlabel: labels\ncamera: {{fx: {calib.fx}, cx: {calib.cx}, cy: {calib.cy}, "
+            f"height: {height}, pitch: {pitch}, roll: {roll}}}\n")
+        ds = get_dataset("generic", root)
+        copied = RoadPlane.from_calibration(ds.calibration(ds.frames[0]))
+        np.testing.assert_allclose(copied.normal, truth.normal, atol=1e-5)
+        assert copied.height == pytest.approx(truth.height, rel=1e-5)
+        np.testing.assert_allclose(RoadPlane.from_camera(height, pitch, roll).normal, truth.normal, atol=1e-5)
+        # looking down: the road's vanishing line (disparity 0) lies above the principal point
+        a, b, c = calib.road_model().affine
+        assert -(a * calib.cx + c) / b < calib.cy - calib.fy * math.tan(math.radians(pitch - 0.5))
+
+
+def test_issue20_synth_folder_of_the_old_pitch_sign_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "syn"
+    args = ["synth", "--out", str(out), "--num", "1", "--width", "64", "--height", "64"]
+    assert main(args) == 0
+    settings = json.loads((out / "synth.json").read_text())
+    assert settings["pitch_sign"] == "positive down"
+    del settings["pitch_sign"]  # a folder written when positive pitch meant looking up
+    (out / "synth.json").write_text(json.dumps(settings))
+    before = snapshot(out)
+    refused(capsys, args, match="pitch_sign 'positive up' → 'positive down'")
+    assert snapshot(out) == before
+
+
+def test_issue20_depth_and_lidar_failures_name_their_source(trained: dict[str, Path], tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture) -> None:
+    from freespace.geometry.lidar import write_velodyne
+
+    root = _kitti_root(trained, tmp_path)
+    training = root / "data_road" / "training"
+    shutil.rmtree(training / "disparity")
+    for image in (training / "image_2").iterdir():
+        write_image(training / "depth_u16" / image.name, np.zeros((128, 160), np.uint16))  # no depth anywhere
+        write_velodyne(training / "velodyne" / f"{image.stem}.bin",
+                       np.array([[-10.0, 0.0, -1.5, 0.5], [-12.0, 1.0, -1.5, 0.5]]))  # behind the car
+    for source, words in (("depth", "check the depth map"), ("lidar", "LiDAR scan")):
+        out = tmp_path / source
+        capsys.readouterr()
+        assert main(["generate", "--dataset", "synth", "--root", str(root), "--disparity-source", source,
+                     "--out", str(out)]) == 1
+        reasons = json.loads((out / "summary.json").read_text())["failed"].values()
+        assert reasons and all(words in r and "disparity file" not in r for r in reasons), reasons
+
+
+@pytest.mark.parametrize("header,match", [(b"Pf\n-160 96\n-1.0\n", "-160×96"), (b"Pf\n0 96\n-1.0\n", "0×96"),
+                                          (b"Pf\n160 96\nnan\n", "scale is nan"), (b"Pf\n160 96\n0\n", "scale is 0")])
+def test_issue20_pfm_header_with_impossible_values(header: bytes, match: str, pair: dict[str, Path], tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture) -> None:
+    bad = tmp_path / "bad.pfm"
+    bad.write_bytes(header + b"\0" * (4 * 160 * 96))
+    refused(capsys, _pair_args(pair, tmp_path / "G.png", disparity=bad), match=match)
+    assert not (tmp_path / "G.png").exists()
+
+
+def test_issue20_sgbm_range_checked_once_for_a_dataset(trained: dict[str, Path], tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "gen"
+    t0 = time.perf_counter()
+    err = refused(capsys, ["generate", "--dataset", "synth", "--root", str(trained["data"]), "--disparity-source",
+                           "sgbm", "--max-disparity", "200", "--cache-dir", str(tmp_path / "cache"), "--out", str(out)],
+                  match="image width (160 px)")
+    assert time.perf_counter() - t0 < 10 and "--disparity-dir" in err and "--disparity " not in err
+    assert not out.exists() and not (tmp_path / "cache").exists()
+
+
+def test_issue20_negative_values_need_no_equals_sign(trained: dict[str, Path], tmp_path: Path) -> None:
+    training = trained["data"] / "data_road" / "training"
+    frame = sorted((training / "image_2").iterdir())[0].stem
+    cat, idx = frame.split("_")
+    res = run_cli("generate", "--virtual", "--reference", str(training / "image_2" / f"{frame}.png"), "--road-mask",
+                  str(training / "gt_image_2" / f"{cat}_road_{idx}.png"), "--calib", str(training / "calib" / f"{frame}.txt"),
+                  "--shift", "-0.3,-0.1,0", "--rotate", "-1,-2,-.5", "--out", str(tmp_path / "V.png"),
+                  "--label-out", str(tmp_path / "VL.png"))
+    assert res.returncode == 0 and "shift (-0.300, -0.100, +0.000)" in res.stdout, res.stderr
+    res = run_cli("synth", "--out", str(tmp_path / "s"), "--num", "1", "--width", "64", "--height", "64",
+                  "--pitches", "-5,-1")
+    assert res.returncode == 0, res.stderr
+    assert json.loads((tmp_path / "s" / "synth.json").read_text())["config"]["pitches_deg"] == [-5.0, -1.0]
+
+
+def test_issue20_unquoted_glob_gets_a_hint(trained: dict[str, Path], tmp_path: Path) -> None:
+    images = sorted(str(p) for p in (trained["data"] / "data_road" / "training" / "image_2").iterdir())
+    res = run_cli("predict", "--checkpoint", str(trained["ckpt"]), "--input", *images, "--out", str(tmp_path / "p"))
+    refused_process(res, match="quote the pattern")
+    assert f"({len(images) - 1} in all)" in res.stderr and not (tmp_path / "p").exists()
+    res = run_cli("synth", "--out", str(tmp_path / "s"), "--num", "1", "--bogus")  # not files: argparse's usage
+    assert res.returncode == 2 and "unrecognized arguments: --bogus" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_issue20_test_root_names_are_lower_case(trained: dict[str, Path], tmp_path: Path,
+                                                capsys: pytest.CaptureFixture) -> None:
+    refused(capsys, ["reproduce", "--dataset", "synth", "--root", str(trained["data"]), "--test-root",
+                     f"Shifted={trained['data']}", "--out", str(tmp_path / "r")], match="lower-case")
+    assert not (tmp_path / "r").exists()
+
+
+def test_issue20_info_flags_an_empty_split(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    data = tmp_path / "syn"
+    write_dataset(data, 4, seed=0, config=SynthConfig(width=96, height=64, frames_per_scenario=2), progress=False)
+    capsys.readouterr()
+    assert main(["datasets", "info", "--dataset", "synth", "--root", str(data), "--no-progress"]) == 1
+    out = capsys.readouterr().out
+    assert "2/0/2" in out and "leaves val empty" in out and "1 problem" in out
+
+
+def test_issue20_name_twice_in_one_list(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    names = sorted(p.stem for p in (trained["data"] / "data_road" / "training" / "image_2").iterdir())
+    lists = tmp_path / "lists"
+    lists.mkdir()
+    (lists / "train.txt").write_text(f"{names[0]}\n{names[1]}\n{names[0]}\n")
+    (lists / "val.txt").write_text(f"{names[2]}\n")
+    (lists / "test.txt").write_text(f"{names[3]}\n")
+    err = refused(capsys, ["train", "--dataset", "synth", "--root", str(trained["data"]), "--splits", str(lists),
+                           "--out", str(tmp_path / "run")], match=f"{names[0]} listed twice in")
+    assert "train.txt" in err and "more than one split" not in err
+
+
+def test_issue20_config_that_is_a_folder(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    refused(capsys, ["train", "--config", str(tmp_path), "--dataset", "synth", "--root", str(trained["data"]),
+                     "--out", str(tmp_path / "run")], match="is a folder; name a YAML file")
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["datasets", "info", "--dataset", "synth", "--root", "{file}"], "dataset root {file} is a file"),
+    (["train", "--dataset", "synth", "--root", "{data}", "--splits", "{file}", "--out", "{tmp}/run"],
+     "split lists {file} is a file"),
+    (["predict", "--checkpoint", "{dir}", "--input", "{data}", "--out", "{tmp}/p"], "checkpoint {dir} is a folder"),
+    (["predict", "--onnx", "{dir}", "--input", "{data}", "--out", "{tmp}/p"], "ONNX model {dir} is a folder"),
+    (["evaluate-kitti", "--gt", "{file}", "--pred", "{dir}", "--out", "{tmp}/s.json"], "folder {file} is a file"),
+    (["generate", "--dataset", "synth", "--root", "{data}", "--disparity-dir", "{file}", "--out", "{tmp}/g"],
+     "disparity folder {file} is a file"),
+    (["generate", "--dataset", "synth", "--root", "{data}", "--disparity-source", "sgbm", "--cache-dir", "{file}",
+      "--out", "{tmp}/g"], "--cache-dir {file} is a file"),
+    (["train", "--dataset", "synth", "--root", "{data}", "--augment", "homography", "--disparity-source", "sgbm",
+      "--cache-dir", "{file}", "--out", "{tmp}/run"], "--cache-dir {file} is a file"),
+])
+def test_issue20_a_file_where_a_folder_is_wanted_and_back(argv: list[str], match: str, trained: dict[str, Path],
+                                                          tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """Found probing: these said "not found" (or failed frame by frame, for --cache-dir) about a path that
+    exists as the other kind."""
+    file, folder = tmp_path / "notes ü.txt", tmp_path / "a folder"
+    file.write_text("a user's file\n")
+    (folder / "x.png").parent.mkdir()
+    (folder / "x.png").write_bytes(b"not a model")
+    fill = {"file": file, "dir": folder, "tmp": tmp_path, "data": trained["data"]}
+    before = snapshot(tmp_path)
+    refused(capsys, [a.format(**fill) for a in argv], match=match.format(**fill))
+    assert snapshot(tmp_path) == before and sorted(tmp_path.iterdir()) == [folder, file]

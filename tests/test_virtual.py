@@ -117,9 +117,9 @@ def test_plane_sources_agree(frames) -> None:
     X = X + (from_tr.height - from_tr.n @ X) * from_tr.n  # onto the plane
     lhs = a * X[0] + b * X[1] + (a * calib.cx + b * calib.cy + c) * X[2] / calib.fx
     assert lhs == pytest.approx(calib.baseline, rel=1e-5)
-    # a camera height and pitch: the level plane seen from the pitched camera
+    # a camera height and pitch: the level plane seen from the camera pitched, then rolled about its optical axis
     h, pitch, roll = 1.65, 2.5, -1.0
-    expected = RoadPlane((0, 1, 0), h).in_view(VirtualPose(roll=roll, pitch=pitch))
+    expected = RoadPlane((0, 1, 0), h).in_view(VirtualPose(pitch=pitch)).in_view(VirtualPose(roll=roll))
     got = RoadPlane.from_camera(h, pitch, roll)
     np.testing.assert_allclose(got.normal, expected.normal, atol=1e-12)
     assert got.height == h and got.n[2] > 0  # looking down: the road lies ahead (n·(0, 0, Z) = h for Z > 0)

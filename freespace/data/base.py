@@ -84,7 +84,8 @@ def check_dataset_root(root: PathLike, layout: str) -> Path:
     """``root`` as a Path if it is a folder; InputFileError (the same everywhere) if it is not."""
     root = Path(root)
     if not root.is_dir():
-        raise InputFileError(f"dataset root not found: {root} (give the folder that holds the {layout} dataset)")
+        what = f"dataset root {root} is a file" if root.exists() else f"dataset root not found: {root}"
+        raise InputFileError(f"{what} (give the folder that holds the {layout} dataset)")
     return root
 
 

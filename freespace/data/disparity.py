@@ -71,6 +71,8 @@ class DisparityCache:
     def __init__(self, folder: PathLike | None = None, **settings: Any) -> None:
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "freespace" / "sgbm"
         self.folder = Path(folder) if folder is not None else base
+        if self.folder.exists() and not self.folder.is_dir():
+            raise InvalidOptionError(f"--cache-dir {self.folder} is a file; give a folder for the SGBM disparities")
         self.settings = dict(sorted(settings.items()))
 
     def path(self, frame: FrameFiles) -> Path:

@@ -66,7 +66,10 @@ def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[li
                 elif kind == "label":
                     label = dataset.read_label(frame)
                     sizes[kind] = label.road.shape  # type: ignore[assignment]
-                    if not (label.road & label.valid).any():
+                    if not label.valid.any():
+                        problems.append(Problem(frame.name, f"label {path} has no evaluated pixel (all black: don't "
+                                                            f"care everywhere), so no road to fit or score"))
+                    elif not (label.road & label.valid).any():
                         problems.append(Problem(frame.name, f"label {path} marks no road pixel (the DS-Generator "
                                                             f"needs road to fit)"))
                 else:
@@ -125,6 +128,13 @@ def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int 
         labelled = [(f.name, f.scenario) for f in ds.labelled()]
         if labelled:
             entry["paper_split"] = {k: len(v) for k, v in make_splits(labelled, seed=seed).items()}
+            empty = [k for k, v in entry["paper_split"].items() if not v]
+            if empty:
+                sizes = "/".join(str(v) for v in entry["paper_split"].values())
+                problems.append(Problem("split", f"the train/val/test split by scenario ({sizes}, seed {seed}) leaves "
+                                                 f"{' and '.join(empty)} empty: {len(labelled)} labelled frames in "
+                                                 f"{len({s for _, s in labelled})} scenarios; train needs frames "
+                                                 f"in each, so add frames of more scenarios or give train --splits"))
         info["splits"][split] = entry
         info["problems"] += [f"[{split}] {p}" for p in problems]
     if not info["splits"]:

@@ -43,6 +43,7 @@ from freespace.io import (
     DISPARITY_SUFFIXES,
     PathLike,
     RoadLabel,
+    missing_input,
     read_depth,
     read_kitti_calib,
     read_road_label,
@@ -83,7 +84,7 @@ class KittiRoad(StereoRoadDataset):
                  lidar_densify: float = 0, **options) -> None:
         self.disparity_dir = Path(disparity_dir) if disparity_dir is not None else None
         if self.disparity_dir is not None and not self.disparity_dir.is_dir():
-            raise InputFileError(f"disparity folder not found: {self.disparity_dir}")
+            raise missing_input(self.disparity_dir, "disparity folder", "folder")
         if isinstance(lidar_densify, bool) or not (isinstance(lidar_densify, (int, float))
                                                    and math.isfinite(lidar_densify) and lidar_densify >= 0):
             raise InvalidOptionError(f"--lidar-densify must be a number of pixels ≥ 0, got {lidar_densify!r}")

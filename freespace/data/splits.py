@@ -80,12 +80,19 @@ def read_splits(folder: PathLike, known: Sequence[str] | None = None) -> dict[st
         InputFileError: a list is missing. DatasetError: unknown or repeated names.
     """
     folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputFileError(f"split lists {folder} is a file; give the folder that holds train.txt, val.txt and "
+                             f"test.txt")
     out = {}
     for k in SPLIT_NAMES:
         path = folder / f"{k}.txt"
         if not path.is_file():
             raise InputFileError(f"split list not found: {path} (expected train.txt, val.txt, test.txt)")
         out[k] = [line.strip() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
+    for k in SPLIT_NAMES:
+        twice = sorted({n for n in out[k] if out[k].count(n) > 1})
+        if twice:
+            raise DatasetError(f"{', '.join(twice[:5])} listed twice in {folder / f'{k}.txt'}; list each frame once")
     seen = [n for k in SPLIT_NAMES for n in out[k]]
     if len(seen) != len(set(seen)):
         dup = sorted({n for n in seen if seen.count(n) > 1})

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import math
 import re
 import types
 from collections.abc import Callable, Iterable, Mapping
@@ -164,12 +165,15 @@ class TrainConfig:
         from freespace.data.base import check_dataset_root
         from freespace.data.registry import get_dataset_class
 
+        hints = get_type_hints(TrainConfig)
         for f in fields(self):
             choices = _choices(f)
             value = getattr(self, f.name)
             if choices is not None and value not in choices:
                 raise InvalidOptionError(f"unknown {f.name.replace('_', ' ')} {value!r} ({_flag(f)}); "
                                          f"choose one of {', '.join(choices)}")
+            if _base_type(hints[f.name]) is float and value is not None and not math.isfinite(value):
+                raise InvalidOptionError(f"{_flag(f)} must be a finite number, got {value}")
         parse_ranges(self.virtual_shift, "--virtual-shift DX,DY,DZ (metres)")
         parse_ranges(self.virtual_rotate, "--virtual-rotate ROLL,PITCH,YAW (degrees)")
         if not 0 <= self.virtual_prob <= 1:
@@ -180,8 +184,11 @@ class TrainConfig:
         if self.workers < 0:
             raise InvalidOptionError("--workers must be ≥ 0")
         check_seed(self.seed)
-        if not (0 < self.lr < 10) or not (0 <= self.momentum < 1) or self.weight_decay < 0:
-            raise InvalidOptionError("--lr must be in (0, 10), --momentum in [0, 1), --weight-decay ≥ 0")
+        for flag, value, ok, allowed in (("--lr", self.lr, 0 < self.lr < 10, "in (0, 10)"),
+                                         ("--momentum", self.momentum, 0 <= self.momentum < 1, "in [0, 1)"),
+                                         ("--weight-decay", self.weight_decay, 0 <= self.weight_decay, "≥ 0")):
+            if not ok:
+                raise InvalidOptionError(f"{flag} must be {allowed}, got {value}")
         if self.max_frames is not None and self.max_frames < 3:
             raise InvalidOptionError("--max-frames must be ≥ 3 (train, val and test need a frame each)")
         if self.tensorboard:
@@ -309,6 +316,8 @@ def read_config_yaml(path: PathLike) -> dict[str, Any]:
     """
     import yaml
 
+    if Path(path).is_dir():
+        raise InputFileError(f"--config {path} is a folder; name a YAML file, e.g. {Path(path) / 'config.yaml'}")
     if not Path(path).is_file():
         raise InputFileError(f"config file not found: {path}")
     try:

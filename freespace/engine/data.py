@@ -103,17 +103,17 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     index = {f.name: ds.index(f.name) for f in labelled}
     items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
     augments = parse_augment(config.augment)
+    virtual = None
+    if "virtual" in augments:  # before the DS-Generator views: a --virtual-shift no frame allows is refused first
+        shift = parse_ranges(config.virtual_shift, "--virtual-shift")
+        virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]], shift), shift=shift,
+                                 rotate=parse_ranges(config.virtual_rotate, "--virtual-rotate"),
+                                 prob=config.virtual_prob)
     if "homography" in augments:
         items["train"] += _generated_views(ds, [index[n] for n in splits["train"]], run_dir / "generated")
     elif "duplicate" in augments:  # the control: the same frames again, their own left images
         views = _generated_views(ds, [index[n] for n in splits["train"]], run_dir / "generated")
         items["train"] += [Item(it.index, it.name) for it in views]
-    virtual = None
-    if "virtual" in augments:
-        virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]]),
-                                 shift=parse_ranges(config.virtual_shift, "--virtual-shift"),
-                                 rotate=parse_ranges(config.virtual_rotate, "--virtual-rotate"),
-                                 prob=config.virtual_prob)
     size = config.image_size or tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
     return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
 
@@ -127,13 +127,22 @@ def _human_drives(frames: list[Any], train: list[str], share: float, seed: int) 
     return {n for n in train if scenario[n] in keep}
 
 
-def _road_planes(ds: StereoRoadDataset, indices: list[int]) -> dict[int, tuple[np.ndarray, Any]]:
+def _road_planes(ds: StereoRoadDataset, indices: list[int],
+                 shift: tuple[float, float, float]) -> dict[int, tuple[np.ndarray, Any]]:
     """Intrinsics and road plane of each frame, for ``--augment virtual``: the calibration's plane (KITTI
     ``Tr_cam_to_road``, or the camera height and pitch of ``freespace.yaml``), else the road fit of the
     frame's disparity (file, depth, LiDAR or SGBM, as ``--disparity-source`` allows) with the rig's focal
-    length and baseline."""
-    from freespace.errors import FreespaceError
+    length and baseline; a fit no real rig gives (:meth:`~freespace.geometry.RoadModel.check_plausible`)
+    leaves its frame without views.
+
+    Raises:
+        InvalidOptionError: a camera move within ±``shift`` (``--virtual-shift``, metres) can take a frame's
+            camera closer than :data:`~freespace.geometry.road_model.CAMERA_HEIGHT_RANGE_M`'s lowest height
+            to its road plane (or through it), checked here, before any training.
+    """
+    from freespace.errors import FreespaceError, InvalidOptionError
     from freespace.geometry import RoadPlane, fit_road_model
+    from freespace.geometry.road_model import CAMERA_HEIGHT_RANGE_M
 
     planes: dict[int, tuple[np.ndarray, Any]] = {}
     reasons: dict[str, str] = {}
@@ -151,6 +160,7 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int]) -> dict[int, tuple[n
                     raise DatasetError("no road plane in the calibration and no disparity (and baseline) to fit one")
                 model = fit_road_model(sample.disparity, sample.label.road & sample.label.valid)
                 plane = RoadPlane.from_road_model(model, calib.fx, calib.baseline, calib.cx, calib.cy, fy=calib.fy)
+                model.check_plausible(plane.height)
             planes[i] = (calib.K, plane)
         except FreespaceError as exc:
             reasons[frame.name] = str(exc)
@@ -159,6 +169,17 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int]) -> dict[int, tuple[n
         raise DatasetError(f"--augment virtual needs each frame's camera and road plane; none of the {len(indices)} "
                            f"training frames has one ({first[0]}: {first[1]}); give a KITTI calibration with "
                            f"Tr_cam_to_road, `camera: {{height: .., pitch: ..}}` in freespace.yaml, or disparities")
+    lowest = min(planes, key=lambda i: planes[i][1].clearance(shift))
+    plane, least = planes[lowest][1], CAMERA_HEIGHT_RANGE_M[0]
+    if plane.clearance(shift) < least:
+        # the largest DY half-range that keeps every frame's camera `least` above its road (DX, DZ kept)
+        dy = min((p.clearance((shift[0], 0.0, shift[2])) - least) / max(abs(p.n[1]), 1e-9) for _, p in planes.values())
+        fix = f"a DY of at most {dy:.2f}" if dy > 0 else "smaller DX and DZ"
+        raise InvalidOptionError(
+            f"--virtual-shift {','.join(f'{x:g}' for x in shift)} can move the camera through the road: frame "
+            f"{ds.frames[lowest].name}'s camera is {plane.height:.2f} m above its road, and a move within ± those "
+            f"metres brings it {plane.height - plane.clearance(shift):.2f} m closer; to keep it ≥ {least:g} m above "
+            f"the road give {fix}")
     if reasons:
         log.warning("%d of %d training frames have no road plane and get no virtual views: %s", len(reasons),
                     len(indices), "; ".join(f"{k}: {v}" for k, v in list(reasons.items())[:3]))

@@ -59,7 +59,13 @@ class RoadModule(pl.LightningModule):
 
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         outputs = self.net(batch["image"])
-        losses = self.net.loss(outputs, batch["label"], IGNORE_INDEX)
+        if not bool((batch["label"] != IGNORE_INDEX).any()):
+            # no evaluated pixel in the whole batch (e.g. all-black KITTI ground truth, all don't care): the mean
+            # over no pixel is NaN; nothing to learn, so a zero loss that still reaches every output
+            zero = main_logits(outputs).sum() * 0.0
+            losses = {"total": zero, "seg": zero}
+        else:
+            losses = self.net.loss(outputs, batch["label"], IGNORE_INDEX)
         loss = losses["total"]
         if not torch.isfinite(loss):
             raise TrainingError(f"the loss became {loss.item()} at epoch {self.current_epoch}, step {batch_idx}; "

@@ -166,6 +166,9 @@ def parse_test_roots(test_root: TestRoots) -> dict[str, Path]:
         for text in [test_root] if isinstance(test_root, (str, Path)) else test_root:
             name, sep, folder = str(text).partition("=")
             named = sep and _TEST_SET_NAME.fullmatch(name)  # else a folder, whatever its characters
+            if sep and not named and re.fullmatch(r"\w[\w-]*", name) and not Path(text).exists():
+                raise InvalidOptionError(f"--test-root {text}: test set names are lower-case letters, digits, - and _ "
+                                         f"(e.g. {name.lower()}={folder}); {text} is no folder either")
             pairs.append((name, folder) if named else (DEFAULT_TEST_SET, str(text)))
     roots: dict[str, Path] = {}
     for name, folder in pairs:

@@ -22,10 +22,26 @@ import numpy as np
 
 from freespace.errors import InvalidOptionError, RoadFitError, ShapeMismatchError
 
-__all__ = ["RoadModel", "fit_road_model", "fit_road_model_closed_form", "road_energy", "road_pixels"]
+__all__ = ["RoadModel", "MAX_ROLL_DEG", "CAMERA_HEIGHT_RANGE_M", "MIN_INLIER_SHARE", "fit_road_model",
+           "fit_road_model_closed_form", "road_energy", "road_pixels"]
 
 #: Smallest number of valid road pixels :func:`fit_road_model` accepts.
 MIN_ROAD_PIXELS = 50
+
+#: Physical bounds of a fit (:meth:`RoadModel.check_plausible`), ones that a stereo rig on a road vehicle
+#: cannot leave. Real rigs: KITTI's roll is within ±3° and its cameras 1.65 m above the road; cars, buses
+#: and trucks carry cameras 0.3–4 m up. The renderer (``freespace synth``) draws the roll within
+#: ±``--max-roll`` (at most 15°) and the height within ``--camera-heights`` (0.3–6 m). A flipped
+#: disparity map, or one of another frame, leaves them: vertically flipped PFMs of the two real KITTI
+#: stereo frames give rolls of −179.7° and +35.0°.
+MAX_ROLL_DEG = 20.0
+#: (lowest, highest) camera height above the road in metres; checked when the rig's focal length and
+#: baseline are known (:meth:`freespace.geometry.RoadPlane.from_road_model`).
+CAMERA_HEIGHT_RANGE_M = (0.1, 8.0)
+#: Smallest share of the valid road pixels that must agree with the fitted plane (robust fits). With the
+#: default 1 px inlier threshold real KITTI frames keep 73–89 % (LiDAR and SGBM disparities); a threshold
+#: of 0.25 px, below SGBM's noise, still keeps 24 %.
+MIN_INLIER_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -93,6 +109,36 @@ class RoadModel:
         h, w = shape
         return (a * np.arange(w, dtype=np.float32)[None, :] + b * np.arange(h, dtype=np.float32)[:, None]
                 + np.float32(c)).astype(np.float32)
+
+    def check_plausible(self, camera_height: float | None = None) -> RoadModel:
+        """``self`` when the fit is one a stereo rig on a road can give, else a :class:`RoadFitError` that
+        names the bound crossed and by how much.
+
+        Bounds, in this order: at least :data:`MIN_INLIER_SHARE` of the valid road pixels are inliers
+        (fitted models only); ``|Φ| ≤`` :data:`MAX_ROLL_DEG`; and ``camera_height``, when given (metres,
+        e.g. the height of :meth:`freespace.geometry.RoadPlane.from_road_model`), within
+        :data:`CAMERA_HEIGHT_RANGE_M`.
+        """
+        hint = ("check that the disparity (file, depth map or LiDAR scan) belongs to this reference image and is "
+                "the right way up (a PFM's rows run bottom to top), and that the label marks the road")
+        if self.num_valid and self.num_inliers < MIN_INLIER_SHARE * self.num_valid:
+            share = self.num_inliers / self.num_valid
+            raise RoadFitError(f"implausible road fit: only {100 * share:.1f} % of the {self.num_valid} valid road "
+                               f"pixels agree with the plane, {100 * (MIN_INLIER_SHARE - share):.1f} points below "
+                               f"the {100 * MIN_INLIER_SHARE:g} % a road gives; raise --inlier-threshold if it is "
+                               f"below the disparity's noise, else {hint}")
+        if abs(self.roll_deg) > MAX_ROLL_DEG:
+            raise RoadFitError(f"implausible road fit: roll {self.roll_deg:+.1f}° is "
+                               f"{abs(self.roll_deg) - MAX_ROLL_DEG:.1f}° beyond the ±{MAX_ROLL_DEG:g}° a stereo rig on "
+                               f"a road can have; {hint}")
+        lo, hi = CAMERA_HEIGHT_RANGE_M
+        if camera_height is not None and not lo <= camera_height <= hi:
+            off = f"{camera_height - hi:.2f} m above the highest" if camera_height > hi else \
+                f"{lo - camera_height:.2f} m below the lowest"
+            raise RoadFitError(f"implausible road fit: it puts the camera {camera_height:.2f} m above the road, "
+                               f"{off} ({lo:g}–{hi:g} m) a vehicle's rig can have; check the calibration's focal "
+                               f"length and baseline, and {hint.removeprefix('check ')}")
+        return self
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: ``roll_deg``, ``kappa_hat``, ``kappa``, ``affine``, ``homography``,

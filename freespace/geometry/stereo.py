@@ -28,6 +28,19 @@ def _grey(img: np.ndarray) -> np.ndarray:
     raise InvalidOptionError(f"expected an H×W or H×W×3 image, got shape {img.shape}")
 
 
+def check_search_range(max_disparity: int, width: int,
+                       fix: str = "give the disparity (--disparity; --disparity-dir for a dataset)") -> int:
+    """SGBM's search range for ``max_disparity`` (pixels, rounded up to a multiple of 16), or an
+    :class:`InvalidOptionError` when it is not smaller than the image ``width`` (pixels); ``fix`` ends the
+    message (how else to get a disparity)."""
+    num = int(np.ceil(max_disparity / 16.0)) * 16
+    if num >= width:
+        raise InvalidOptionError(f"the stereo matcher's maximum disparity ({num} px, --max-disparity rounded up to "
+                                 f"a multiple of 16) must be smaller than the image width ({width} px); "
+                                 f"lower --max-disparity, or {fix}")
+    return num
+
+
 def compute_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int = SGBM_MAX_DISPARITY,
                       block_size: int = 5, uniqueness: int = 10, lr_check: bool = True, lr_tolerance: float = 1.0,
                       speckle_window: int = 100, speckle_range: int = 2) -> np.ndarray:
@@ -54,11 +67,7 @@ def compute_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int
                                  f"a rectified stereo pair has two images of one size")
     if max_disparity < 1 or block_size < 1 or block_size % 2 == 0:
         raise InvalidOptionError(f"max_disparity must be ≥ 1 and block_size odd (got {max_disparity}, {block_size})")
-    num = int(np.ceil(max_disparity / 16.0)) * 16
-    if num >= gl.shape[1]:
-        raise InvalidOptionError(f"the stereo matcher's maximum disparity ({num} px, --max-disparity rounded up to "
-                                 f"a multiple of 16) must be smaller than the image width ({gl.shape[1]} px); "
-                                 f"lower --max-disparity, or give the disparity with --disparity")
+    num = check_search_range(max_disparity, gl.shape[1])
     matcher = cv2.StereoSGBM_create(
         minDisparity=0, numDisparities=num, blockSize=block_size,
         P1=8 * block_size * block_size, P2=32 * block_size * block_size,

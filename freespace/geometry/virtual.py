@@ -181,11 +181,29 @@ class RoadPlane:
     def from_camera(cls, height: float, pitch_deg: float = 0.0, roll_deg: float = 0.0) -> RoadPlane:
         """The plane under a camera ``height`` metres above a flat road, pitched and rolled (degrees).
 
-        The camera is a level camera (plane ``y = height``) turned by ``R = Rx(pitch)·Rz(roll)`` as in
-        :class:`VirtualPose`: positive pitch looks down at the road. ``n = R·(0, 1, 0)``.
+        Pitch convention, the one of the whole package (``--rotate``, ``freespace.yaml``'s ``camera``,
+        ``synth --pitches`` and its ``index.csv``): positive pitch tilts the optical axis *down*, towards
+        the road, by ``pitch_deg`` below the horizon. The roll then turns the camera about its optical
+        axis, signed like the paper's Φ (a fit of the road disparity gives ``Φ = roll_deg``). So
+        ``n = Rz(roll)·Rx(pitch)·(0, 1, 0)`` with the elementary rotations of :func:`rotation_from_angles`.
+
+        Example:
+            >>> [round(x, 4) for x in RoadPlane.from_camera(1.5, pitch_deg=90).normal]  # looking straight down
+            [0.0, 0.0, 1.0]
         """
-        R = rotation_from_angles(roll_deg, pitch_deg, 0.0)
+        R = rotation_from_angles(roll_deg, 0.0, 0.0) @ rotation_from_angles(0.0, pitch_deg, 0.0)
         return cls(tuple(float(x) for x in R @ np.array([0.0, 1.0, 0.0])), float(height))  # type: ignore[arg-type]
+
+    def clearance(self, shift: tuple[float, float, float]) -> float:
+        """The lowest height above this plane (metres) of a camera centre moved anywhere within ±``shift``
+        (half-ranges ``(dx, dy, dz) ≥ 0`` in metres, reference frame): ``h − Σ |nᵢ|·shiftᵢ``. Negative when
+        such a move can take the camera through the road.
+
+        Example:
+            >>> RoadPlane((0, 1, 0), 1.65).clearance((0.5, 0.2, 0.0))  # a level camera: only dy counts
+            1.45
+        """
+        return self.height - float(np.abs(self.n) @ np.abs(np.asarray(shift, dtype=np.float64)))
 
     def in_view(self, pose: VirtualPose) -> RoadPlane:
         """The same plane in the frame of the camera at ``pose``: ``n' = R·n``, ``h' = h − n·C``."""

@@ -10,6 +10,7 @@ Tree written under ``OUT``::
     OUT/index.csv                                          frame, category, scenario, weather, rig
     OUT/synth.json                                         seed and configuration
 
+``pitch_deg`` in ``index.csv`` (and ``--pitches``) is positive when the camera looks down at the road.
 ``<id>`` is the global frame index, so frame i has the same name and bytes for a given seed and
 configuration whatever ``num`` is.
 """
@@ -35,6 +36,10 @@ from freespace.io import (PathLike, atomic_write_text, road_label_to_kitti, writ
 from freespace.outdir import claim_folder
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
+
+#: the sign of ``pitch_deg`` and ``--pitches``, recorded in ``synth.json``: a folder written when positive
+#: meant looking up is refused (its index.csv would mix the two signs)
+PITCH_SIGN = "positive down"
 
 INDEX_FIELDS = ["frame", "index", "category", "scenario", "weather", "roll_deg", "pitch_deg", "baseline_m",
                 "focal_px", "camera_height_m", "lanes", "planar"]
@@ -107,8 +112,9 @@ def _check_settings(out: Path, settings: dict[str, Any], overwrite: bool) -> Non
         raise InvalidOptionError(f"--out {out} has an unreadable synth.json, so its frames' settings are unknown; "
                                  f"add --overwrite to render them again, or choose another --out")
     defaults = json.loads(json.dumps(asdict(SynthConfig())))  # keys added since the folder was written
-    old = {"seed": recorded.get("seed"), **defaults, **(recorded.get("config") or {})}
-    new = {"seed": settings["seed"], **settings["config"]}
+    old = {"seed": recorded.get("seed"), "pitch_sign": recorded.get("pitch_sign", "positive up"), **defaults,
+           **(recorded.get("config") or {})}
+    new = {"seed": settings["seed"], "pitch_sign": settings["pitch_sign"], **settings["config"]}
     differ = [k for k in new if old.get(k) != new[k]]
     if differ and not overwrite:
         what = ", ".join(f"{k} {old.get(k)!r} → {new[k]!r}" for k in differ)
@@ -137,7 +143,8 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InvalidOptionError(f"--out {out} is a file; give a folder for the dataset")
-    settings = {"seed": seed, "config": json.loads(json.dumps(asdict(config)))}
+    # pitch_sign: index.csv's pitch_deg and --pitches were positive up before they followed the package
+    settings = {"seed": seed, "pitch_sign": PITCH_SIGN, "config": json.loads(json.dumps(asdict(config)))}
     with claim_folder(out, "synth", entries=OUT_ENTRIES) as folder:
         _check_settings(out, settings, overwrite)
         if overwrite:

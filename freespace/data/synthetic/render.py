@@ -510,7 +510,8 @@ def kitti_calibration(frame: Frame) -> dict[str, np.ndarray]:
     """KITTI calibration matrices of the frame's rig (camera 0 = 2 = left, 1 = 3 = right, rectified).
 
     ``Tr_cam_to_road`` maps left-camera coordinates to the road frame (origin on the road under the
-    camera, Y down, Z along the rig's heading): ``[Rx(pitch)·Rz(roll) | (0, −h, 0)]``.
+    camera, Y down, Z along the rig's heading): ``[Rx(−pitch)·Rz(−roll) | (0, −h, 0)]`` (pitch positive
+    down, roll the paper's Φ; see :meth:`~freespace.data.synthetic.scene.Frame.rotation`).
     """
     sc = frame.scenario
     K = np.array([[sc.focal, 0, sc.cx], [0, sc.focal, sc.cy], [0, 0, 1.0]])

@@ -26,6 +26,12 @@ __all__ = ["SynthConfig", "Scenario", "Frame", "Box", "Sphere", "sample_scenario
 WEATHERS = ("clear", "cloudy", "rain", "sunset", "dusk", "fog")
 CATEGORIES = ("um", "umm", "uu")  # KITTI road: urban marked, urban multiple marked lanes, urban unmarked
 
+#: the rigs the renderer may draw: inside the bounds a road fit must keep
+#: (:meth:`freespace.geometry.RoadModel.check_plausible`: roll ±20°, camera 0.1–8 m), with a margin for
+#: the fit of a non-planar road
+MAX_ROLL_DEG = 15.0
+CAMERA_HEIGHTS_M = (0.3, 6.0)
+
 # materials (surface classes); the road label is ROAD | MARKING
 SKY, ROAD, MARKING, CURB, SIDEWALK, GRASS, FACADE, VEHICLE, GLASS, PERSON, POLE, TRUNK, FOLIAGE, HEDGE = range(14)
 
@@ -41,7 +47,8 @@ class SynthConfig:
         baseline: fixed baseline in metres, or None to draw it per scenario from ``baselines``.
         baselines: (min, max) baseline in metres drawn per scenario when ``baseline`` is None.
         camera_heights: (min, max) height of the rig above the road in metres, per scenario.
-        pitches_deg: (min, max) rig pitch in degrees (positive = optical axis up), per scenario.
+        pitches_deg: (min, max) rig pitch in degrees, per scenario: positive = the optical axis tilted down,
+            towards the road (as ``--rotate``, ``RoadPlane.from_camera`` and ``freespace.yaml``'s ``camera``).
         max_roll_deg: rig roll drawn in ±this (degrees).
         weathers: weathers to draw from.
         vehicles, pedestrians: (min, max) counts per frame.
@@ -69,12 +76,12 @@ class SynthConfig:
         if self.baseline is not None and not 0.01 <= self.baseline <= 10:
             raise InvalidOptionError(f"--baseline must be 0.01..10 m, got {self.baseline}")
         for flag, (lo, hi), (least, most) in (("--baselines", self.baselines, (0.01, 10.0)),
-                                               ("--camera-heights", self.camera_heights, (0.3, 10.0)),
+                                               ("--camera-heights", self.camera_heights, CAMERA_HEIGHTS_M),
                                                ("--pitches", self.pitches_deg, (-20.0, 20.0))):
             if not least <= lo <= hi <= most:
                 raise InvalidOptionError(f"{flag} must be MIN,MAX with {least} ≤ MIN ≤ MAX ≤ {most}, got {lo},{hi}")
-        if not 0 <= self.max_roll_deg <= 45:
-            raise InvalidOptionError(f"--max-roll must be 0..45 degrees, got {self.max_roll_deg}")
+        if not 0 <= self.max_roll_deg <= MAX_ROLL_DEG:
+            raise InvalidOptionError(f"--max-roll must be 0..{MAX_ROLL_DEG:g} degrees, got {self.max_roll_deg}")
         bad = [w for w in self.weathers if w not in WEATHERS]
         if bad or not self.weathers:
             raise InvalidOptionError(f"unknown weather {bad}; choose from {', '.join(WEATHERS)}")
@@ -126,7 +133,7 @@ class Scenario:
     cy: float
     baseline: float
     cam_height: float
-    pitch: float  # radians, positive = optical axis tilted up
+    pitch: float  # radians, positive = optical axis tilted down (towards the road)
     roll: float  # radians, the paper's Φ (see Frame.rotation)
     # road
     lanes: int
@@ -198,14 +205,18 @@ class Frame:
         return np.array([sc.centre_x(self.z_cam) + s, -(ground + sc.cam_height), self.z_cam])
 
     def rotation(self) -> np.ndarray:
-        """R_wc (camera → world): yaw about Y, then pitch about X, then roll about the optical axis.
+        """R_wc (camera → world): yaw about Y, then pitch about X, then roll about the optical axis:
+        ``Ry(yaw)·Rx(−pitch)·Rz(−roll)``.
 
-        The roll is signed like the paper's Φ: the road disparity model fitted to the frame has
-        ``Φ = roll`` (a rotation of the rig by −Φ about its optical axis).
+        The pitch is positive when the optical axis points down at the road. The roll is signed like the
+        paper's Φ: the road disparity model fitted to the frame has ``Φ = roll`` (a rotation of the rig by
+        −Φ about its optical axis). So the road normal in the camera frame is
+        ``Rz(roll)·Rx(pitch)·(0, 1, 0)``, the plane of :meth:`freespace.geometry.RoadPlane.from_camera` with
+        the same height, pitch and roll.
         """
         sc = self.scenario
         cy, sy = math.cos(self.yaw), math.sin(self.yaw)
-        cp, sp = math.cos(sc.pitch), math.sin(sc.pitch)
+        cp, sp = math.cos(-sc.pitch), math.sin(-sc.pitch)
         cr, sr = math.cos(-sc.roll), math.sin(-sc.roll)
         Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
         Rx = np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
@@ -246,7 +257,9 @@ def sample_scenario(config: SynthConfig, seed: int, index: int) -> Scenario:
         cy=0.5 * config.height + float(rng.uniform(-6, 6)),
         baseline=config.baseline if config.baseline is not None else float(rng.uniform(*config.baselines)),
         cam_height=float(rng.uniform(*config.camera_heights)),
-        pitch=math.radians(rng.uniform(*config.pitches_deg)),
+        # drawn as the upward angle, uniform in (−max, −min), as when positive meant up: the same rigs as
+        # before for symmetric ranges
+        pitch=-math.radians(rng.uniform(-config.pitches_deg[1], -config.pitches_deg[0])),
         roll=math.radians(rng.uniform(-config.max_roll_deg, config.max_roll_deg)),
         lanes=lanes, lane_width=lane_width,
         centre=(-ego_offset, float(rng.uniform(-0.04, 0.04)), float(rng.uniform(-1.5e-3, 1.5e-3))),
