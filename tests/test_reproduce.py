@@ -237,12 +237,13 @@ def test_reproduce_tables_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture
 
 # --- the converged protocol (issue 23): X-long, convergence, the averaged gains and the primary endpoint ---
 
-def _fake_run(out: Path, data: Path, model: str, variant: str, seed: int, f: float, best: int, run: int) -> None:
+def _fake_run(out: Path, data: Path, model: str, variant: str, seed: int, f: float, best: int, run: int,
+              size: tuple[int, int] = (64, 96)) -> None:
     """A finished run folder as ``reproduce`` writes it (config.yaml, metrics.json), without training."""
     from freespace.experiments.reproduce import _config
 
     config = _config("synth", data, out, model, variant, seed, dict(epochs=10, patience=3, val_window=1,
-                                                                    batch_size=4, image_size=(64, 96)))
+                                                                    batch_size=4, image_size=size))
     Path(config.out).mkdir(parents=True)
     config.save(Path(config.out) / "config.yaml")
     metrics = {k: f for k in (*METRICS, "max_f", "ap")}
@@ -256,8 +257,12 @@ def test_x_long_budget_and_convergence_in_the_index(data: Path, tmp_path: Path) 
     assert (long.augment, long.epochs, long.patience, Path(long.out).name) == ("none", 20, 6, "unet-long-s0")
     _fake_run(tmp_path, data, "unet", "X", 0, 0.8, best=4, run=8)      # early stopping fired after epoch 8
     _fake_run(tmp_path, data, "unet", "X-long", 0, 0.82, best=19, run=20)  # ran to its cap of 20
+    _fake_run(tmp_path, data, "segnet", "X", 0, 0.7, best=2, run=5, size=(96, 128))
     entries, differ = _collect(tmp_path)
-    assert differ == []  # X-long's doubled epochs and patience are its variant's, not another setting
+    assert differ == []  # X-long's doubled budget is its variant's; each network may have its own size
+    _fake_run(tmp_path, data, "segnet", "X", 1, 0.7, best=2, run=5, size=(64, 96))
+    assert _collect(tmp_path)[1] == ['image_size of segnet: [64, 96], [96, 128]']  # within a network: warned
+    entries = [e for e in _collect(tmp_path)[0] if e["model"] == "unet"]
     assert [(e["variant"], e["augment"], e["best_epoch"], e["epochs_run"], e["stopped_by"]) for e in entries] == \
         [("X", "none", 5, 8, "patience"), ("X-long", "none", 20, 20, "cap")]
     lines = "\n".join(_convergence_lines(entries))

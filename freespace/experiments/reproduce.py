@@ -388,18 +388,22 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
                     log.warning("%s skipped: not a test set's metrics (%s)", path, exc)
                     continue
                 settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
-        for key in ("dataset", "root", "epochs", "patience", "val_window", "batch_size", "image_size", "max_frames",
-                    "preset", "encoder_name", "encoder_weights"):
+        for key in ("dataset", "root", "epochs", "patience", "val_window", "batch_size", "max_frames", *_PER_NETWORK):
             value = config.get(key)
             if key in ("epochs", "patience") and isinstance(value, int):
                 value //= variant.budget  # X-long's budget is part of the variant
-            settings.setdefault(key, set()).add(json.dumps(value))
+            name = f"{key} of {config['model']}" if key in _PER_NETWORK else key
+            settings.setdefault(name, set()).add(json.dumps(value))
         entries.append(entry)
     order = {m: i for i, m in enumerate(list_models())}
     names = list(VARIANTS)
     entries.sort(key=lambda e: (order.get(e["model"], len(order)), e["model"], names.index(e["variant"]), e["seed"]))
     differ = [f"{k}: {', '.join(sorted(v))}" for k, v in settings.items() if len(v) > 1]
     return entries, differ
+
+
+#: settings that may differ between networks (each at its own size and encoder), not within one
+_PER_NETWORK = ("image_size", "preset", "encoder_name", "encoder_weights")
 
 
 def _convergence(metrics: dict[str, Any], config: dict[str, Any]) -> dict[str, Any]:
