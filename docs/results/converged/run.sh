@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# The converged run (issue 23; plan and costs in plan.md beside this file): the claim in the paper's regime.
+# DeepLabv3+ (EfficientNet-Lite0, ImageNet weights, output stride 16) at 320x416, DenseASPP at 224x288 (their
+# intact sizes), U-Net and DUpsampling (Lite0, ImageNet) and SegNet (no offline weights for VGG) at 192x256;
+# variants X, HA-X, X-dup, X-long; 10 seeds; each run to early stopping (patience 10 on the 3-epoch mean of
+# the validation F-score, cap 100 epochs; X-long 20 and 200); test sets: test, shifted (rigs the training
+# set never had, wider than the evidence run's), same-rigs (200 frames of new drives with the training rigs).
+#
+# Cells run seed-major (every network and variant of seed 0 first, ...), two at a time with one thread each,
+# as `reproduce --only` cells in WORK/res. A cell interrupted by the end of a session resumes from its
+# last.ckpt the next time. After each finished cell its small files (config, per-epoch CSV, metrics, splits,
+# test-set metrics; never checkpoints or views) are copied to runs/ beside this script, and the tables are
+# rebuilt there; on a new machine the copied cells are restored into WORK first, so they are not run again.
+#
+# Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace; STOP_AT: a `date` time after
+#        which no new cell starts, e.g. "14:10"; CELLS="net,variant,seed ..." to run only those)
+set -euo pipefail
+FS=${FREESPACE:-freespace}
+HERE=$(cd "$(dirname "$0")" && pwd)
+WORK=$1
+STOP_AT=$(date -d "${2:-tomorrow}" +%s)
+mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
+[ -d syn ] || $FS synth --out syn --num 100 --width 416 --height 320 --frames-per-scenario 5 --seed 0 --workers 2
+[ -d same-rigs ] || $FS synth --out same-rigs --num 200 --width 416 --height 320 --frames-per-scenario 5 --seed 2 \
+    --workers 2
+[ -d shifted ] || $FS synth --out shifted --num 60 --width 416 --height 320 --frames-per-scenario 5 --seed 1 \
+    --workers 2 --max-roll 10 --camera-heights 0.8,3.4 --pitches -6,6 --baselines 0.2,2.0
+
+NETS=${NETS:-"unet dupsampling segnet denseaspp deeplabv3plus"}
+VARIANTS=${VARIANTS:-"X HA-X X-dup X-long"}
+SEEDS=${SEEDS:-10}
+export FS WORK HERE STOP_AT
+COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root same-rigs=same-rigs --seeds 10
+        --epochs 100 --patience 10 --val-window 3 --batch-size 2 --no-progress --out res"
+export COMMON
+
+PY=${PYTHON:-$(dirname "$(command -v "$FS")")/python}
+export PY
+# restore the cells finished on another machine (their small files; a finished cell is never trained again)
+$PY "$HERE/sync.py" restore "$HERE" res
+
+cell() {  # net,variant,seed
+  IFS=, read -r net variant seed <<< "$1"
+  [ "$(date +%s)" -lt "$STOP_AT" ] || { echo "$(date +%T) not started (STOP_AT) $1"; return 0; }
+  case $net in
+    deeplabv3plus) opts="--image-size 320x416 --encoder-name efficientnet-lite0 --encoder-weights imagenet" ;;
+    denseaspp) opts="--image-size 224x288" ;;
+    unet|dupsampling) opts="--image-size 192x256 --encoder-name efficientnet-lite0 --encoder-weights imagenet" ;;
+    segnet) opts="--image-size 192x256" ;;
+  esac
+  log="logs/$(echo "$1" | tr , _).log"
+  if OMP_NUM_THREADS=1 $FS reproduce $COMMON $opts --only "$1" > "$log" 2>&1; then
+    run=$(grep -o 'runs/[^:]*' "$log" | tail -1)
+    $PY "$HERE/sync.py" save res "${run#runs/}" "$HERE"
+    echo "$(date +%T) done $1"
+  else
+    echo "$(date +%T) FAILED $1 (see $WORK/$log)"
+  fi
+}
+export -f cell
+
+if [ -n "${CELLS:-}" ]; then
+  printf '%s\n' $CELLS
+else
+  for s in $(seq 0 $((SEEDS - 1))); do for n in $NETS; do for v in $VARIANTS; do echo "$n,$v,$s"; done; done; done
+fi | xargs -P 2 -I{} bash -c 'cell {}'
+
+# the tables of every finished cell, copied beside this script
+$FS reproduce --tables --out res > logs/tables.log 2>&1 || { tail -3 logs/tables.log; exit 1; }
+cp res/results.md res/results.csv res/gains.csv res/index.json "$HERE/"
+mkdir -p "$HERE/figures" && cp res/figures/gains_*.png "$HERE/figures/" 2>/dev/null || true
