@@ -29,6 +29,7 @@ from freespace.errors import CorruptFileError, InvalidOptionError
 from freespace.io import atomic_write_bytes, write_csv, write_json
 from freespace.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
+from freespace.predictor import check_weights, checkpoint_state_dict
 
 log = logging.getLogger(__name__)
 
@@ -78,7 +79,7 @@ def _callbacks(run_dir: Path, patience: int):
 RUN_FILES = ("config.yaml", "splits", "generated", "metrics.csv", "metrics.json", "checkpoints", "tensorboard")
 
 
-def _checkpoint_io(run_dir: Path):
+def _checkpoint_io(run_dir: Path, module: torch.nn.Module | None = None):
     from lightning.pytorch.plugins.io import TorchCheckpointIO
 
     class RunCheckpointIO(TorchCheckpointIO):
@@ -88,6 +89,7 @@ def _checkpoint_io(run_dir: Path):
         Loading uses ``torch.load(weights_only=True)`` (a checkpoint runs no code), refuses a corrupt or
         crafted file with one line, and points every path that the checkpoint callback stored back into
         this run folder: a copied or moved run, or a crafted file, never reads or deletes files elsewhere.
+        With ``module``, weights and optimizer state that do not fit it are refused too.
         """
 
         def save_checkpoint(self, checkpoint: dict[str, Any], path, storage_options=None) -> None:
@@ -103,14 +105,50 @@ def _checkpoint_io(run_dir: Path):
             except Exception as exc:  # pickle, zip and torch errors: the file is not a plain checkpoint
                 raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged "
                                        f"({type(exc).__name__}); it was not loaded") from None
-            if not isinstance(checkpoint, dict) or "state_dict" not in checkpoint:
-                raise CorruptFileError(f"{path} is not a freespace training checkpoint")
+            _check_training_state(checkpoint, path)
+            if module is not None:
+                _check_fits(checkpoint, module, path)
             for state in (checkpoint.get("callbacks") or {}).values():
                 if isinstance(state, dict) and "dirpath" in state:
                     _confine_paths(state, Path(os.path.realpath(run_dir / "checkpoints")))  # as Lightning keeps it
             return checkpoint
 
     return RunCheckpointIO()
+
+
+#: the parts of a checkpoint that Lightning restores on resume, and their types
+_RESTORED = {"loops": dict, "callbacks": dict, "optimizer_states": list, "lr_schedulers": list, "epoch": int,
+             "global_step": int}
+
+
+def _check_training_state(checkpoint: Any, path: Path) -> None:
+    """Refuse a checkpoint whose weights, or the parts of it that Lightning restores, are not of the types
+    Lightning expects (a damaged or crafted file would otherwise end in a traceback deep inside it)."""
+    checkpoint_state_dict(checkpoint, path)
+    bad = [k for k, kind in _RESTORED.items() if k in checkpoint and not isinstance(checkpoint[k], kind)]
+    if not bad:
+        bad = [f"{part}[{k!r}]" for part in ("callbacks", "loops") for k, v in checkpoint.get(part, {}).items()
+               if not isinstance(v, dict)]
+        bad += [f"optimizer_states[{i}]" for i, o in enumerate(checkpoint.get("optimizer_states", []))
+                if not (isinstance(o, dict) and isinstance(o.get("state"), dict)
+                        and isinstance(o.get("param_groups"), list) and all(isinstance(g, dict) for g in o["param_groups"]))]
+    if bad:
+        raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged ({bad[0]} is not what "
+                               f"Lightning saves); it was not loaded")
+
+
+def _check_fits(checkpoint: dict[str, Any], module: torch.nn.Module, path: Path) -> None:
+    """Refuse a checkpoint whose weights or optimizer state do not fit ``module`` (the run's network)."""
+    check_weights(module, checkpoint["state_dict"], path)
+    params = list(module.parameters())
+    for opt in checkpoint.get("optimizer_states") or []:
+        for i, state in opt["state"].items():
+            shapes = [tuple(t.shape) for t in (state.values() if isinstance(state, dict) else [None])
+                      if isinstance(t, torch.Tensor) and t.dim() > 0]
+            if not (isinstance(i, int) and 0 <= i < len(params) and isinstance(state, dict)) \
+                    or any(shape != tuple(params[i].shape) for shape in shapes):
+                raise CorruptFileError(f"{path}: its optimizer state does not fit the run's network (parameter {i!r}); "
+                                       f"it was not loaded")
 
 
 def _confine_paths(state: dict[str, Any], folder: Path) -> None:
@@ -156,7 +194,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
             raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
                                      f"{run_dir} has none")
         saved = TrainConfig.load(run_dir / "config.yaml")
-        _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
+        resumed = _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
         if config.image_size is None:
             config.image_size = saved.image_size  # "auto" was resolved when the run started
         changed = [k for k, v in saved.to_dict().items()
@@ -194,13 +232,15 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
     module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay,
                         image_size=list(size))
-    if not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
+    if resume:
+        _check_fits(resumed, module, last)
+    else:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
         module.net.prepare(train[i]["label"] for i in range(len(data["train"])))
     callbacks, ckpt = _callbacks(run_dir, config.patience)
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
         devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",
-        max_epochs=config.epochs, callbacks=callbacks, plugins=[_checkpoint_io(run_dir)],
+        max_epochs=config.epochs, callbacks=callbacks, plugins=[_checkpoint_io(run_dir, module)],
         logger=_logger(config, run_dir),
         default_root_dir=str(run_dir), num_sanity_val_steps=0, deterministic=True,
         enable_progress_bar=progress and on_terminal(), enable_model_summary=False, use_distributed_sampler=False,
