@@ -10,13 +10,15 @@ command with a one-line message on stderr and exit code 2; a dataset run with fa
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from freespace import __version__
-from freespace.errors import FreespaceError, InvalidOptionError
+from freespace.errors import FreespaceError, InvalidOptionError, Terminated
 
 # --- options shared by several commands ----------------------------------------------------------------
 
@@ -580,12 +582,25 @@ def build_parser(commands: Collection[str] | None = None,
     return parser
 
 
+def _raise_terminated(signum: int, frame: Any) -> None:
+    """``SIGTERM`` handler: raise :class:`~freespace.errors.Terminated` once (so that clean-ups run, as on
+    Ctrl-C); further ``SIGTERM``\ s are ignored while they do."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise Terminated()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``freespace`` console script; returns the exit code."""
+    """Entry point of the ``freespace`` console script; returns the exit code.
+
+    Ctrl-C ends a command with "interrupted" and exit code 130, ``SIGTERM`` (SLURM's time limit, ``kill``)
+    with "terminated" and 143; both after the command's clean-ups (``finally`` blocks) have run.
+    """
     from freespace.log import setup_logging
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)  # the global options take no value
+    main_thread = threading.current_thread() is threading.main_thread()  # signal handlers live there only
+    previous = signal.signal(signal.SIGTERM, _raise_terminated) if main_thread else None
     try:
         config = _config_file_options(argv) if command == "train" else None
         parser = build_parser({command} if command else (), config)
@@ -598,6 +613,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("freespace: interrupted", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        print("freespace: terminated (SIGTERM)", file=sys.stderr)
+        return exc.exit_code
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
 
 
 if __name__ == "__main__":

@@ -10,10 +10,9 @@ from __future__ import annotations
 import json
 import logging
 import math
-import multiprocessing
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -352,9 +351,9 @@ def _process_frame(index: int, out: Path, report: Path, options: FitOptions,
 def _init_worker(dataset: Any, parent: int) -> None:
     import cv2
 
-    from freespace.parallel import die_with_parent
+    from freespace.parallel import init_worker
 
-    die_with_parent(parent)
+    init_worker(parent)
     global _DATASET
     _DATASET = dataset
     cv2.setNumThreads(1)
@@ -515,9 +514,9 @@ def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool) -> 
         finally:
             _DATASET = previous
     else:
-        # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset, os.getpid()),
-                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+        from freespace.parallel import worker_pool
+
+        with worker_pool(workers, _init_worker, (dataset, os.getpid())) as pool:  # ends at once on Ctrl-C
             for future in as_completed([pool.submit(_process_frame, *job) for job in jobs]):
                 record = future.result()
                 records[record["frame"]] = record

@@ -245,16 +245,40 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         default_root_dir=str(run_dir), num_sanity_val_steps=0, deterministic=True,
         enable_progress_bar=progress and on_terminal(), enable_model_summary=False, use_distributed_sampler=False,
         log_every_n_steps=1)
-    trainer.fit(module, loader(train, True), loader(val, False), ckpt_path=str(last) if resume else None)
+    _interruptible(trainer.fit, module, loader(train, True), loader(val, False),
+                   ckpt_path=str(last) if resume else None)
     best = run_dir / "checkpoints" / "best.ckpt"  # this folder's, whatever a resumed checkpoint recorded
     best = best if best.is_file() else last
-    trainer.test(module, loader(test, False), ckpt_path=str(best), verbose=False)
+    _interruptible(trainer.test, module, loader(test, False), ckpt_path=str(best), verbose=False)
     metrics = {**module.test_metrics, "best_epoch": _best_epoch(run_dir), "epochs_run": trainer.current_epoch,
                "frames": {k: len(data[k]) for k in ("train", "val", "test")}, "image_size": list(size),
                "checkpoint": best.relative_to(run_dir).as_posix()}
     if trainer.is_global_zero:
         write_json(run_dir / "metrics.json", metrics)
     return metrics
+
+
+def _interruptible(step: Any, *args: Any, **kwargs: Any) -> Any:
+    """``trainer.fit`` or ``trainer.test`` (``step``), where Ctrl-C stays a :class:`KeyboardInterrupt`.
+
+    Lightning catches Ctrl-C, tears the run down, ignores Ctrl-C from then on and calls ``sys.exit(1)``;
+    here that exit becomes the :class:`KeyboardInterrupt` again (the command line then says "interrupted",
+    exit code 130) and Ctrl-C is handled as before. Other exceptions, ``SIGTERM``'s
+    :class:`~freespace.errors.Terminated` included, Lightning passes on as they are.
+    """
+    import signal
+
+    trainer = step.__self__
+    handler = signal.getsignal(signal.SIGINT)
+    try:
+        return step(*args, **kwargs)
+    except SystemExit:
+        if trainer.interrupted:
+            raise KeyboardInterrupt from None
+        raise
+    finally:
+        if handler is not None and signal.getsignal(signal.SIGINT) is not handler:
+            signal.signal(signal.SIGINT, handler)
 
 
 def _logger(config: TrainConfig, run_dir: Path):

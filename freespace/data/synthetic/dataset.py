@@ -18,10 +18,8 @@ from __future__ import annotations
 
 import csv
 import json
-import multiprocessing
 import os
 import shutil
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -79,9 +77,9 @@ def _render_and_write(job: tuple[int, int, SynthConfig, str]) -> dict[str, Any]:
 def _init_worker(parent: int) -> None:
     import cv2
 
-    from freespace.parallel import die_with_parent
+    from freespace.parallel import init_worker
 
-    die_with_parent(parent)
+    init_worker(parent)
     cv2.setNumThreads(1)
 
 
@@ -148,8 +146,9 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
             rows.append(_render_and_write(job))
             bar.update()
     else:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(os.getpid(),),
-                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+        from freespace.parallel import worker_pool
+
+        with worker_pool(workers, _init_worker, (os.getpid(),)) as pool:  # ends at once on Ctrl-C
             for row in pool.map(_render_and_write, jobs, chunksize=max(1, min(64, num // (4 * workers)))):
                 rows.append(row)
                 bar.update()
