@@ -248,8 +248,9 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     """``freespace datasets split``: the paper's train/val/test split by scenario, as list files."""
     from freespace.data.registry import get_dataset
     from freespace.data.splits import make_splits, write_splits
-    from freespace.io import check_outputs
+    from freespace.io import check_outputs, check_writable
 
+    check_writable(args.out, folder=True)
     check_outputs({"--out": args.out}, {"--root": args.root})
     dataset = get_dataset(args.dataset, args.root, args.split, disparity_mode="none")
     labelled = [(f.name, f.scenario) for f in dataset.labelled()]
@@ -338,13 +339,12 @@ def _evaluate_kitti_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
-    from freespace.io import write_json
+    from freespace.io import check_outputs, check_writable, write_json
     from freespace.kitti_eval import evaluate_kitti_dirs
-
-    from freespace.io import check_outputs
 
     if args.bev and not args.calib:
         raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
+    check_writable(args.out)
     check_outputs({"--out": args.out}, {"--gt": args.gt, "--pred": args.pred, "--calib": args.calib})
     results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib if args.bev else None)
     write_json(args.out, results)
@@ -374,10 +374,11 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
 def cmd_predict(args: argparse.Namespace) -> int:
     """``freespace predict``: road confidence PNGs (KITTI format) and overlays, or the overlaid video."""
     from freespace.infer import Predictor, predict_folder, predict_video
-    from freespace.io import check_outputs
+    from freespace.io import check_outputs, check_writable
     from freespace.shard import parse_shard
     from freespace.video import is_video_path
 
+    check_writable(args.out, folder=not is_video_path(args.out))  # before the model is loaded
     check_outputs({"--out": args.out}, {"--input": args.input, "--checkpoint": args.checkpoint, "--onnx": args.onnx})
     shard = parse_shard(args.shard) if args.shard is not None else None
     video = is_video_path(args.out)

@@ -19,7 +19,7 @@ from freespace.data.synthetic.dataset import MAX_FRAMES
 from freespace.errors import FreespaceError, InvalidOptionError, check_seed
 from freespace.generate import generate_dataset
 from freespace.geometry import compute_disparity, fit_road_model
-from freespace.io import PathLike, read_disparity, read_image, read_road_label, write_image, write_json
+from freespace.io import PathLike, check_writable, read_disparity, read_image, read_road_label, write_image, write_json
 from freespace.viz import caption, colorize_disparity, grid, overlay_road
 
 log = logging.getLogger(__name__)
@@ -63,7 +63,7 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
                                     f"and test)" if train else "") + f", got {num_frames}")
     if epochs is not None and epochs < 1:
         raise InvalidOptionError(f"--epochs must be ≥ 1, got {epochs}")
-    out = Path(out)
+    out = check_writable(out, folder=True)
     t0 = time.perf_counter()
     log.info("rendering %d stereo frames into %s", num_frames, out / "dataset")
     rows = write_dataset(out / "dataset", num_frames, seed=seed, config=config)

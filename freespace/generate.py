@@ -43,6 +43,7 @@ from freespace.io import (
     IMAGE_SUFFIXES,
     PathLike,
     check_outputs,
+    check_writable,
     encode_image,
     atomic_write_bytes,
     RoadLabel,
@@ -102,6 +103,13 @@ def check_output_image_path(path: PathLike) -> Path:
     if path.is_dir():
         raise InvalidOptionError(f"--out {path} is a folder; give an image file name")
     return path
+
+
+def _check_writable(outputs: dict[str, PathLike | None]) -> None:
+    """Every output file given (option → path) can be written: checked before any input is read."""
+    for flag, path in outputs.items():
+        if path is not None:
+            check_writable(path, flag)
 
 
 def _size(shape: tuple[int, ...]) -> str:
@@ -164,6 +172,7 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
     options.check()
     if out is not None:
         check_output_image_path(out)
+    _check_writable({"--out": out, "--model-json": model_json})
     check_outputs({"--out": out, "--model-json": model_json},
                   {"--reference": reference, "--target": target, "--road-mask": road_mask, "--disparity": disparity})
     t_start = time.perf_counter()
@@ -258,6 +267,7 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
         raise InvalidOptionError(f"--label-out {label_out} must be a lossless image file name ending in one of "
                                  f"{', '.join(lossless)} (labels must stay exact)")
     check_output_image_path(out)
+    _check_writable({"--out": out, "--label-out": label_out, "--model-json": model_json})
     check_outputs({"--out": out, "--label-out": label_out, "--model-json": model_json},
                   {"--reference": reference, "--road-mask": road_mask, "--calib": calib, "--disparity": disparity})
     t_start = time.perf_counter()
@@ -447,8 +457,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     if workers < 1:
         raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
     out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the generated dataset")
+    check_writable(out_dir, folder=True)
     check_outputs({"--out": out_dir}, {"--root": dataset.root})
     settings = _settings(dataset, options)
     if shard is not None:

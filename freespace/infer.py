@@ -22,6 +22,7 @@ from freespace.io import (
     PathLike,
     atomic_write_bytes,
     check_outputs,
+    check_writable,
     read_kitti_calib,
     staged_folder,
     write_image,
@@ -101,6 +102,7 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
     """
     if batch_size < 1:
         raise InvalidOptionError("--batch-size must be ≥ 1")
+    check_writable(out, folder=True)
     check_outputs({"--out": out}, {"--input": inputs})
     source = open_frames(inputs)
     check_outputs({"--out": out}, _input_paths(source))
@@ -168,8 +170,7 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
     out = Path(out)
     if out.suffix.lower() != ".mp4":
         raise InvalidOptionError(f"--out {out}: a video output must end in .mp4 (or give a folder for PNGs)")
-    if out.is_dir():
-        raise InvalidOptionError(f"--out {out} is a folder; give a .mp4 file name")
+    check_writable(out)
     check_outputs({"--out": out}, {"--input": inputs})
     source = open_frames(inputs)
     check_outputs({"--out": out}, _input_paths(source))
@@ -191,11 +192,12 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
 def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any]:
     """Export a checkpoint to ONNX (dynamic N, H, W; opset 17) or TorchScript (traced; dynamic H, W),
     validated against PyTorch at the training size and at an odd size. Returns the max abs differences."""
-    import torch
-
     if fmt not in ("onnx", "torchscript"):
         raise InvalidOptionError(f"--format must be onnx or torchscript, got {fmt!r}")
+    check_writable(out)
     check_outputs({"--out": out}, {"--checkpoint": checkpoint})
+    import torch
+
     model, hp = load_checkpoint(checkpoint)
     size = tuple(hp.get("image_size") or (384, 1248))
     example = torch.rand(1, 3, *size)
@@ -250,6 +252,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
     replaces an earlier submission there whole."""
     from freespace.data.kitti_road import KittiRoad
 
+    check_writable(out, folder=True)
     check_outputs({"--out": out}, {"--checkpoint": checkpoint, "--root": root})
     ds = KittiRoad(root, "testing", disparity_mode="none")
     missing = [f.name for f in ds.frames if f.calib is None]

@@ -68,6 +68,7 @@ __all__ = [
     "road_label_to_kitti",
     "read_kitti_calib",
     "check_outputs",
+    "check_writable",
 ]
 
 
@@ -105,6 +106,33 @@ def atomic_write_bytes(path: PathLike, data: bytes) -> Path:
 def atomic_write_text(path: PathLike, text: str) -> Path:
     """Write UTF-8 ``text`` to ``path`` atomically. Returns the path written."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def check_writable(path: PathLike, flag: str = "--out", *, folder: bool = False) -> Path:
+    """Refuse, before any work, an output that cannot be written where it is named.
+
+    Args:
+        path: the output file (``folder=False``) or folder (``folder=True``); it need not exist.
+        flag: the option that named it, for the message.
+
+    Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
+    folder is, and :class:`OutputError` when a folder on the way to it is a file, or the nearest existing
+    folder is not writable (folders on the way are created by the writers). Nothing is created.
+    """
+    path = Path(os.path.expanduser(os.fspath(path)))
+    if folder and path.exists() and not path.is_dir():
+        raise InvalidOptionError(f"{flag} {path} is a file; give a folder")
+    if not folder and path.is_dir():
+        raise InvalidOptionError(f"{flag} {path} is a folder; give a file name")
+    existing = path.absolute().parent
+    while not existing.exists() and not existing.is_symlink() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OutputError(f"cannot write {flag} {path}: {existing} is a file, not a folder; choose another path")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise OutputError(f"cannot write {flag} {path}: no permission to write in {existing}; choose a writable "
+                          f"folder")
+    return path
 
 
 def write_json(path: PathLike, obj: Any) -> Path:

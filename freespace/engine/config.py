@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Union, get_args, get_origin, get_type_hints
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, check_seed
-from freespace.io import MAX_IMAGE_SIDE, PathLike, atomic_write_text, check_outputs
+from freespace.io import MAX_IMAGE_SIDE, PathLike, atomic_write_text, check_outputs, check_writable
 
 __all__ = ["TrainConfig", "parse_size", "parse_augment", "parse_ranges", "AUGMENTS", "PRESETS", "STRATEGIES",
            "add_config_arguments", "config_from_args", "read_config_yaml"]
@@ -175,6 +175,7 @@ class TrainConfig:
             except ImportError:
                 raise InvalidOptionError("--tensorboard needs the tensorboard package: pip install tensorboard") from None
         check_dataset_root(self.root, get_dataset_class(self.dataset).name)
+        check_writable(self.out, folder=True)
         check_outputs({"--out": self.out}, {"--root": self.root, "--splits": self.splits_dir})
 
     def to_dict(self) -> dict[str, Any]:

@@ -42,7 +42,8 @@ import numpy as np
 from freespace.engine.config import TrainConfig, read_config_yaml
 from freespace.errors import DatasetError, FreespaceError, InvalidOptionError
 from freespace.experiments.stats import paired_gain
-from freespace.io import PathLike, atomic_write_bytes, atomic_write_text, write_csv, write_image, write_json
+from freespace.io import (PathLike, atomic_write_bytes, atomic_write_text, check_writable, write_csv, write_image,
+                          write_json)
 
 log = logging.getLogger(__name__)
 
@@ -248,7 +249,7 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str],
         raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
     options = dict(epochs=epochs, batch_size=batch_size, patience=patience, image_size=image_size, workers=workers,
                    max_frames=max_frames)
-    out = Path(out)
+    out = check_writable(out, folder=True)
     roots = parse_test_roots(test_root)
     if only is not None:
         model, variant, seed = parse_cell(only, seeds)

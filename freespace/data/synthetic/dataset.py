@@ -29,7 +29,7 @@ import numpy as np
 from freespace.data.synthetic.render import StereoSample, render_sample
 from freespace.data.synthetic.scene import SynthConfig
 from freespace.errors import InvalidOptionError, check_seed
-from freespace.io import (PathLike, atomic_write_text, road_label_to_kitti, write_csv, write_disparity, write_image,
+from freespace.io import (PathLike, atomic_write_text, check_writable, road_label_to_kitti, write_csv, write_disparity, write_image,
                           write_json)
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
@@ -132,8 +132,7 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
     if workers < 1:
         raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InvalidOptionError(f"--out {out} is a file; give a folder for the dataset")
+    check_writable(out, folder=True)
     settings = {"seed": seed, "config": json.loads(json.dumps(asdict(config)))}
     _claim_output(out, settings, overwrite)
     from freespace.log import progress_bar
