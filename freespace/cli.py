@@ -344,9 +344,12 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
 
     if args.bev and not args.calib:
         raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
+    if args.calib and not args.bev:
+        raise InvalidOptionError("--calib is only used with --bev (the bird's-eye view); add --bev, or leave out "
+                                 "--calib for the perspective view")
     check_writable(args.out)
     check_outputs({"--out": args.out}, {"--gt": args.gt, "--pred": args.pred, "--calib": args.calib})
-    results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib if args.bev else None)
+    results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib)
     write_json(args.out, results)
     print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
     for cat, r in results.items():
@@ -445,9 +448,9 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
     from freespace.engine.config import add_config_arguments
 
     add_config_arguments(p, REPRODUCE_OPTIONS, defaults={"dataset": None, "root": None})  # not with --tables
-    p.add_argument("--models", default="all", help="all or a comma-separated list (default all)")
+    p.add_argument("--models", help="all or a comma-separated list (default all)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
-    p.add_argument("--variants", default="X,HA-X,X-dup", help="comma-separated arms: X, HA-X (DS-Generator views), "
+    p.add_argument("--variants", help="comma-separated arms: X, HA-X (DS-Generator views), "
                    "X-dup (the control: X with HA-X's number of steps), HV-X (road-plane virtual views), HAV-X "
                    "(both) (default X,HA-X,X-dup)")
     p.add_argument("--test-root", metavar="[NAME=]DIR", action="append",
@@ -466,19 +469,24 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     """``freespace reproduce``: every network with and without the augmentation (and the control); tables,
     paired gains and figures; one cell with ``--only``, the tables alone with ``--tables``."""
     from freespace.engine.config import config_from_args
-    from freespace.experiments.reproduce import reproduce, write_tables
-    from freespace.models import list_models
+    from freespace.experiments.reproduce import parse_models, parse_variants, reproduce, write_tables
 
+    if args.models is not None:  # names checked in every mode
+        parse_models(args.models)
+    if args.variants is not None:
+        parse_variants(args.variants)
     if args.tables:
-        if args.only:
-            raise InvalidOptionError("--tables collects the finished cells; it takes no --only")
+        unused = [flag for flag, value in (("--only", args.only), ("--models", args.models),
+                                           ("--variants", args.variants), ("--test-root", args.test_root)) if value]
+        if unused:
+            raise InvalidOptionError(f"--tables collects the finished cells in --out, whatever they are; it takes no "
+                                     f"{', '.join(unused)}")
         r = write_tables(args.out)
     else:
         if args.dataset is None or args.root is None:
             raise InvalidOptionError("reproduce needs --dataset and --root (only --tables does without)")
-        models = list_models() if args.models == "all" else [m.strip() for m in args.models.split(",") if m.strip()]
         options = config_from_args(args, REPRODUCE_OPTIONS)
-        r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=models, seeds=args.seeds,
+        r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=args.models, seeds=args.seeds,
                       progress=not args.no_progress, variants=args.variants, test_root=args.test_root,
                       only=args.only, **options)
         if args.only:
