@@ -10,6 +10,7 @@ import json
 import logging
 import tempfile
 import time
+import warnings
 import zipfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -204,19 +205,17 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any
     checks = [torch.rand(1, 3, *size), torch.rand(2, 3, size[0] - 7, size[1] - 13)]
     out = Path(out)
     meta = {"model": hp["model"], "image_size": json.dumps(list(size)), "producer": "freespace"}
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        if not log.isEnabledFor(logging.DEBUG):  # torch's deprecations and tracer notes, unless -v
+            warnings.simplefilter("ignore")
         tmp_path = Path(tmp) / "model"
         if fmt == "onnx":
-            import warnings
-
             import onnx
             import onnxruntime as ort
 
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                torch.onnx.export(model, (example,), str(tmp_path), dynamo=False, opset_version=17,
-                                  input_names=["image"], output_names=["logits"],
-                                  dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}, "logits": {0: "n", 2: "h", 3: "w"}})
+            torch.onnx.export(model, (example,), str(tmp_path), dynamo=False, opset_version=17,
+                              input_names=["image"], output_names=["logits"],
+                              dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}, "logits": {0: "n", 2: "h", 3: "w"}})
             proto = onnx.load(str(tmp_path))
             for k, v in meta.items():
                 proto.metadata_props.add(key=k, value=v)

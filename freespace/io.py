@@ -22,6 +22,7 @@ import os
 import re
 import shutil
 import tempfile
+import zlib
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -253,8 +254,36 @@ def _read_bytes(path: PathLike, what: str) -> bytes:
         raise InputFileError(f"cannot read {what} {path}: {exc.strerror}") from None
 
 
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_damage(data: bytes) -> str | None:
+    """What is wrong with a damaged PNG file — cut short, or a critical chunk whose CRC does not match —
+    found before decoding (libpng would print its own complaint to stderr); None for a sound PNG or
+    another format."""
+    if not data.startswith(_PNG_SIGNATURE):
+        return None
+    view, pos = memoryview(data), len(_PNG_SIGNATURE)
+    while pos + 12 <= len(data):
+        length = int.from_bytes(view[pos:pos + 4], "big")
+        kind = bytes(view[pos + 4:pos + 8])
+        end = pos + 12 + length
+        if end > len(data):
+            return f"cut short in its {kind.decode('latin-1')} chunk"
+        critical = kind[:1].isupper()  # ancillary chunks with a bad CRC are skipped by libpng
+        if critical and zlib.crc32(view[pos + 4:end - 4]) != int.from_bytes(view[end - 4:end], "big"):
+            return f"its {kind.decode('latin-1')} chunk is damaged (CRC mismatch)"
+        if kind == b"IEND":
+            return None
+        pos = end
+    return "cut short (no IEND chunk)"
+
+
 def _decode(path: PathLike, what: str, flags: int) -> np.ndarray:
     data = _read_bytes(path, what)
+    damage = _png_damage(data)
+    if damage is not None:
+        raise CorruptFileError(f"cannot decode {what} {path}: a damaged PNG file ({damage})")
     img = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
     if img is None:
         raise CorruptFileError(f"cannot decode {what} {path}: not a readable image file (empty, truncated or "

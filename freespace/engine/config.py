@@ -6,6 +6,7 @@ are generated from these declarations (:func:`add_config_arguments`), and a YAML
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import types
 from collections.abc import Callable, Iterable, Mapping
@@ -24,6 +25,9 @@ AUGMENTS = ("none", "homography", "virtual", "homography,virtual", "duplicate") 
 _AUGMENT_TOKENS = ("homography", "virtual", "duplicate")
 PRESETS = ("light", "paper")
 STRATEGIES = ("auto", "ddp")
+
+#: the options that name files or folders (config.yaml keeps them resolved)
+PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir")
 
 # config.yaml keys of runs made before the names said which split and which disparity they mean
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_mode"}
@@ -179,12 +183,17 @@ class TrainConfig:
         check_outputs({"--out": self.out}, {"--root": self.root, "--splits": self.splits_dir})
 
     def to_dict(self) -> dict[str, Any]:
+        """The options as plain values, paths (:data:`PATH_OPTIONS`) resolved: absolute, symbolic links
+        followed, so that two spellings of one folder compare equal."""
         d = asdict(self)
         d["image_size"] = list(self.image_size) if self.image_size else None
+        for k in PATH_OPTIONS:
+            if d[k] is not None:
+                d[k] = os.path.realpath(os.path.expanduser(d[k]))
         return d
 
     def save(self, path: PathLike) -> None:
-        """Write as YAML (atomically)."""
+        """Write as YAML (atomically), paths resolved (:meth:`to_dict`): the file works from any folder."""
         import yaml
 
         atomic_write_text(path, yaml.safe_dump(self.to_dict(), sort_keys=False))
