@@ -593,7 +593,7 @@ def build_parser(commands: Collection[str] | None = None,
 
 def _raise_terminated(signum: int, frame: Any) -> None:
     """``SIGTERM`` handler: raise :class:`~freespace.errors.Terminated` once (so that clean-ups run, as on
-    Ctrl-C); further ``SIGTERM``\ s are ignored while they do."""
+    Ctrl-C); further ``SIGTERM`` signals are ignored while they do."""
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     raise Terminated()
 

@@ -203,6 +203,9 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         if changed:
             raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
                                      f"resume with the same options (only --epochs may grow)")
+        from freespace.models import create_model  # the run's network, named as in RoadModule: before any work
+
+        _check_fits(resumed, torch.nn.ModuleDict({"net": create_model(config.model, preset=config.preset)}), last)
     elif (run_dir / "config.yaml").is_file() and is_rank_zero():  # DDP children re-run the command: skip
         if last.is_file():
             raise InvalidOptionError(f"{run_dir} already holds a run; add --resume to continue it or choose another "
@@ -232,9 +235,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
     module = RoadModule(config.model, {"preset": config.preset}, config.lr, config.momentum, config.weight_decay,
                         image_size=list(size))
-    if resume:
-        _check_fits(resumed, module, last)
-    else:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
+    if not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
         module.net.prepare(train[i]["label"] for i in range(len(data["train"])))
     callbacks, ckpt = _callbacks(run_dir, config.patience)
     trainer = pl.Trainer(
