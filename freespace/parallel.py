@@ -58,8 +58,25 @@ def die_with_parent(parent: int, poll_seconds: float = 1.0) -> None:
 def init_worker(parent: int) -> None:
     """What every worker of :func:`worker_pool` does first: ignore Ctrl-C (the parent handles it and ends
     the workers) and :func:`die_with_parent`."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C that came while the worker started is dropped
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     die_with_parent(parent)
+
+
+class _Pool(ProcessPoolExecutor):
+    """A pool whose workers start with Ctrl-C blocked: ``submit`` starts them (``spawn``), and the blocked
+    signal mask passes on to them through ``exec``, until :func:`init_worker` ignores Ctrl-C. Without it a
+    Ctrl-C while a worker imports its modules prints that worker's traceback."""
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Any:
+        if not hasattr(signal, "pthread_sigmask"):
+            return super().submit(fn, *args, **kwargs)
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            return super().submit(fn, *args, **kwargs)
+        finally:  # a Ctrl-C that came meanwhile is raised here, in the parent
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 @contextmanager
@@ -76,8 +93,8 @@ def worker_pool(workers: int, initializer: Callable[..., None], initargs: tuple[
     workers terminated without waiting for the running ones, then the exception goes on.
     """
     # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=initializer, initargs=initargs,
-                               mp_context=multiprocessing.get_context("spawn"))
+    pool = _Pool(max_workers=workers, initializer=initializer, initargs=initargs,
+                 mp_context=multiprocessing.get_context("spawn"))
     try:
         yield pool
     except BaseException:
