@@ -73,7 +73,7 @@ def checkpoint_state_dict(ckpt: Any, path: PathLike) -> dict[str, Any]:
     import torch
 
     state = ckpt.get("state_dict") if isinstance(ckpt, dict) else None
-    if not isinstance(state, dict) or not state:
+    if not isinstance(state, dict):
         raise CorruptFileError(f"{path} is not a freespace training checkpoint (no state_dict mapping of weights)")
     for k, v in state.items():
         if not isinstance(k, str) or not isinstance(v, torch.Tensor):
@@ -98,8 +98,9 @@ def rebuild_model(name: str, options: dict[str, Any], path: PathLike) -> Segment
         if "encoder_weights" in model_options(name):
             options = {**options, "encoder_weights": None}
         return create_model(name, **options)
-    except (FreespaceError, TypeError, ValueError) as exc:
-        raise CorruptFileError(f"{path} names a network freespace cannot build ({exc})") from None
+    except (FreespaceError, TypeError, ValueError, RuntimeError, MemoryError) as exc:  # also absurd sizes
+        raise CorruptFileError(f"{path} names a network freespace cannot build "
+                               f"({str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__})") from None
 
 
 def check_weights(model: torch.nn.Module, state: dict[str, Any], path: PathLike) -> None:
