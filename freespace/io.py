@@ -267,12 +267,13 @@ def _png_damage(data: bytes) -> str | None:
     while pos + 12 <= len(data):
         length = int.from_bytes(view[pos:pos + 4], "big")
         kind = bytes(view[pos + 4:pos + 8])
+        name = kind.decode("ascii") if kind.isalpha() else repr(kind)  # crafted types stay on one line
         end = pos + 12 + length
         if end > len(data):
-            return f"cut short in its {kind.decode('latin-1')} chunk"
+            return f"cut short in its {name} chunk"
         critical = kind[:1].isupper()  # ancillary chunks with a bad CRC are skipped by libpng
         if critical and zlib.crc32(view[pos + 4:end - 4]) != int.from_bytes(view[end - 4:end], "big"):
-            return f"its {kind.decode('latin-1')} chunk is damaged (CRC mismatch)"
+            return f"its {name} chunk is damaged (CRC mismatch)"
         if kind == b"IEND":
             return None
         pos = end

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
+from freespace.errors import CorruptFileError, FreespaceError, InputFileError, InvalidOptionError
 from freespace.io import MAX_IMAGE_SIDE, PathLike
 
 if TYPE_CHECKING:
@@ -91,7 +91,6 @@ def rebuild_model(name: str, options: dict[str, Any], path: PathLike) -> Segment
     Raises:
         CorruptFileError: an unknown network, preset or option, or a bad option value.
     """
-    from freespace.errors import FreespaceError
     from freespace.models import create_model, model_options
 
     try:

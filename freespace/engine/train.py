@@ -131,7 +131,8 @@ def _check_training_state(checkpoint: Any, path: Path) -> None:
                if not isinstance(v, dict)]
         bad += [f"optimizer_states[{i}]" for i, o in enumerate(checkpoint.get("optimizer_states", []))
                 if not (isinstance(o, dict) and isinstance(o.get("state"), dict)
-                        and isinstance(o.get("param_groups"), list) and all(isinstance(g, dict) for g in o["param_groups"]))]
+                        and isinstance(o.get("param_groups"), list)
+                        and all(isinstance(g, dict) for g in o["param_groups"]))]
     if bad:
         raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged ({bad[0]} is not what "
                                f"Lightning saves); it was not loaded")
@@ -143,10 +144,10 @@ def _check_fits(checkpoint: dict[str, Any], module: torch.nn.Module, path: Path)
     params = list(module.parameters())
     for opt in checkpoint.get("optimizer_states") or []:
         for i, state in opt["state"].items():
-            shapes = [tuple(t.shape) for t in (state.values() if isinstance(state, dict) else [None])
-                      if isinstance(t, torch.Tensor) and t.dim() > 0]
-            if not (isinstance(i, int) and 0 <= i < len(params) and isinstance(state, dict)) \
-                    or any(shape != tuple(params[i].shape) for shape in shapes):
+            fits = isinstance(i, int) and 0 <= i < len(params) and isinstance(state, dict) and all(
+                tuple(t.shape) == tuple(params[i].shape) for t in state.values()
+                if isinstance(t, torch.Tensor) and t.dim() > 0)  # momentum buffers; a step count is a scalar
+            if not fits:
                 raise CorruptFileError(f"{path}: its optimizer state does not fit the run's network (parameter {i!r}); "
                                        f"it was not loaded")
 

@@ -47,8 +47,9 @@ from freespace.io import (PathLike, atomic_write_bytes, atomic_write_text, check
 
 log = logging.getLogger(__name__)
 
-__all__ = ["reproduce", "run_cell", "write_tables", "parse_models", "parse_variants", "parse_cell", "parse_test_roots",
-           "evaluate_test_set", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "METRICS", "GAINS", "TestRoots"]
+__all__ = ["reproduce", "run_cell", "write_tables", "parse_models", "parse_variants", "parse_cell",
+           "parse_test_roots", "evaluate_test_set", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "METRICS", "GAINS",
+           "TestRoots"]
 
 @dataclass(frozen=True)
 class Variant:
@@ -264,9 +265,8 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
 
 
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list[str] | None = None, seeds: int = 3,
-              epochs: int = 50,
-              image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4, workers: int = 0,
-              max_frames: int | None = None, figures: int = 3, progress: bool = True,
+              epochs: int = 50, image_size: tuple[int, int] | None = None, patience: int = 10, batch_size: int = 4,
+              workers: int = 0, max_frames: int | None = None, figures: int = 3, progress: bool = True,
               variants: str | tuple[str, ...] | None = None, test_root: TestRoots = None,
               only: str | None = None) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,

@@ -29,8 +29,8 @@ import numpy as np
 from freespace.data.synthetic.render import StereoSample, render_sample
 from freespace.data.synthetic.scene import SynthConfig
 from freespace.errors import InvalidOptionError, check_seed
-from freespace.io import (PathLike, atomic_write_text, check_writable, road_label_to_kitti, write_csv, write_disparity, write_image,
-                          write_json)
+from freespace.io import (PathLike, atomic_write_text, check_writable, road_label_to_kitti, write_csv,
+                          write_disparity, write_image, write_json)
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
 
