@@ -69,6 +69,7 @@ from freespace.io import (
     PathLike,
     RoadLabel,
     check_outputs,
+    check_writable_files,
     encode_image,
     encode_json,
     read_disparity,
@@ -77,7 +78,7 @@ from freespace.io import (
     road_label_to_kitti,
     write_json,
 )
-from freespace.outdir import check_writable, write_files_together
+from freespace.outdir import write_files_together
 
 log = logging.getLogger(__name__)
 
@@ -460,7 +461,7 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
         _lossless_png(confidence, "--confidence")
     check_outputs({"--out": out, "--confidence": confidence, "--model-json": model_json},
                   {"--reference": reference, "--target": target, "--disparity": disparity, "--calib": calib})
-    check_writable({"--out": out, "--confidence": confidence, "--model-json": model_json})
+    check_writable_files({"--out": out, "--confidence": confidence, "--model-json": model_json})
     t0 = time.perf_counter()
     left = read_image(reference, what="reference image")
     if calib is not None:

@@ -12,13 +12,15 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import signal
 import sys
+import threading
 from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from freespace import __version__
-from freespace.errors import FreespaceError, InvalidOptionError
+from freespace.errors import FreespaceError, InvalidOptionError, Terminated
 
 # --- options shared by several commands ----------------------------------------------------------------
 
@@ -344,9 +346,10 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     """``freespace datasets split``: the paper's train/val/test split by scenario, as list files."""
     from freespace.data.registry import get_dataset
     from freespace.data.splits import make_splits, write_splits
-    from freespace.io import check_outputs
+    from freespace.io import check_outputs, check_writable
     from freespace.outdir import claim_folder
 
+    check_writable(args.out, folder=True)
     check_outputs({"--out": args.out}, {"--root": args.root})
     dataset = get_dataset(args.dataset, args.root, args.split, disparity_mode="none")
     labelled = [(f.name, f.scenario) for f in dataset.labelled()]
@@ -436,15 +439,17 @@ def _evaluate_kitti_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
-    from freespace.io import write_json
+    from freespace.io import check_outputs, check_writable, write_json
     from freespace.kitti_eval import evaluate_kitti_dirs
-
-    from freespace.io import check_outputs
 
     if args.bev and not args.calib:
         raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
+    if args.calib and not args.bev:
+        raise InvalidOptionError("--calib is only used with --bev (the bird's-eye view); add --bev, or leave out "
+                                 "--calib for the perspective view")
+    check_writable(args.out)
     check_outputs({"--out": args.out}, {"--gt": args.gt, "--pred": args.pred, "--calib": args.calib})
-    results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib if args.bev else None)
+    results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib)
     write_json(args.out, results)
     print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
     for cat, r in results.items():
@@ -472,10 +477,11 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
 def cmd_predict(args: argparse.Namespace) -> int:
     """``freespace predict``: road confidence PNGs (KITTI format) and overlays, or the overlaid video."""
     from freespace.infer import Predictor, predict_folder, predict_video
-    from freespace.io import check_outputs
+    from freespace.io import check_outputs, check_writable
     from freespace.shard import parse_shard
     from freespace.video import is_video_path
 
+    check_writable(args.out, folder=not is_video_path(args.out))  # before the model is loaded
     check_outputs({"--out": args.out}, {"--input": args.input, "--checkpoint": args.checkpoint, "--onnx": args.onnx})
     shard = parse_shard(args.shard) if args.shard is not None else None
     video = is_video_path(args.out)
@@ -543,9 +549,9 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
     from freespace.engine.config import add_config_arguments
 
     add_config_arguments(p, REPRODUCE_OPTIONS, defaults={"dataset": None, "root": None})  # not with --tables
-    p.add_argument("--models", default="all", help="all or a comma-separated list (default all)")
+    p.add_argument("--models", help="all or a comma-separated list (default all)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
-    p.add_argument("--variants", default="X,HA-X,X-dup", help="comma-separated arms: X, HA-X (DS-Generator views), "
+    p.add_argument("--variants", help="comma-separated arms: X, HA-X (DS-Generator views), "
                    "X-dup (the control: X with HA-X's number of steps), X-long (X with twice the epochs and "
                    "patience), HV-X (road-plane virtual views), HAV-X (both), X-auto (training labels from "
                    "--autolabels), X-mix (the dataset's labels on 20%% of the training drives, --autolabels' on the "
@@ -568,19 +574,24 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     """``freespace reproduce``: every network with and without the augmentation (and the control); tables,
     paired gains and figures; one cell with ``--only``, the tables alone with ``--tables``."""
     from freespace.engine.config import config_from_args
-    from freespace.experiments.reproduce import reproduce, write_tables
-    from freespace.models import list_models
+    from freespace.experiments.reproduce import parse_models, parse_variants, reproduce, write_tables
 
+    if args.models is not None:  # names checked in every mode
+        parse_models(args.models)
+    if args.variants is not None:
+        parse_variants(args.variants)
     if args.tables:
-        if args.only:
-            raise InvalidOptionError("--tables collects the finished cells; it takes no --only")
+        unused = [flag for flag, value in (("--only", args.only), ("--models", args.models),
+                                           ("--variants", args.variants), ("--test-root", args.test_root)) if value]
+        if unused:
+            raise InvalidOptionError(f"--tables collects the finished cells in --out, whatever they are; it takes no "
+                                     f"{', '.join(unused)}")
         r = write_tables(args.out)
     else:
         if args.dataset is None or args.root is None:
             raise InvalidOptionError("reproduce needs --dataset and --root (only --tables does without)")
-        models = list_models() if args.models == "all" else [m.strip() for m in args.models.split(",") if m.strip()]
         options = config_from_args(args, REPRODUCE_OPTIONS)
-        r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=models, seeds=args.seeds,
+        r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=args.models, seeds=args.seeds,
                       progress=not args.no_progress, variants=args.variants, test_root=args.test_root,
                       only=args.only, autolabels=args.autolabels, **options)
         if args.only:
@@ -700,14 +711,25 @@ def _refuse_extra_arguments(parser: argparse.ArgumentParser, extra: list[str]) -
         raise InvalidOptionError(f"unexpected argument{'s' if len(extra) > 1 else ''} {shown}: the shell expanded an "
                                  f"unquoted wildcard into many files; quote the pattern, e.g. --input 'frames/*.png'")
     parser.error(f"unrecognized arguments: {' '.join(extra)}")
+def _raise_terminated(signum: int, frame: Any) -> None:
+    """``SIGTERM`` handler: raise :class:`~freespace.errors.Terminated` once (so that clean-ups run, as on
+    Ctrl-C); further ``SIGTERM`` signals are ignored while they do."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise Terminated()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``freespace`` console script; returns the exit code."""
+    """Entry point of the ``freespace`` console script; returns the exit code.
+
+    Ctrl-C ends a command with "interrupted" and exit code 130, ``SIGTERM`` (SLURM's time limit, ``kill``)
+    with "terminated" and 143; both after the command's clean-ups (``finally`` blocks) have run.
+    """
     from freespace.log import setup_logging
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)  # the global options take no value
+    main_thread = threading.current_thread() is threading.main_thread()  # signal handlers live there only
+    previous = signal.signal(signal.SIGTERM, _raise_terminated) if main_thread else None
     try:
         config = _config_file_options(argv) if command == "train" else None
         parser = build_parser({command} if command else (), config)
@@ -722,6 +744,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("freespace: interrupted", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        print("freespace: terminated (SIGTERM)", file=sys.stderr)
+        return exc.exit_code
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
 
 
 if __name__ == "__main__":

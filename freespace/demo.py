@@ -19,7 +19,7 @@ from freespace.data.synthetic.dataset import MAX_FRAMES
 from freespace.errors import FreespaceError, InvalidOptionError, check_seed
 from freespace.generate import generate_dataset
 from freespace.geometry import compute_disparity, fit_road_model
-from freespace.io import PathLike, read_disparity, read_image, read_road_label, write_image, write_json
+from freespace.io import PathLike, check_writable, read_disparity, read_image, read_road_label, write_image, write_json
 from freespace.outdir import claim_folder
 from freespace.viz import caption, colorize_disparity, grid, overlay_road
 
@@ -67,6 +67,7 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
                                     f"and test)" if train else "") + f", got {num_frames}")
     if epochs is not None and epochs < 1:
         raise InvalidOptionError(f"--epochs must be ≥ 1, got {epochs}")
+    check_writable(out, folder=True)
     with claim_folder(out, "demo", entries=OUT_ENTRIES):
         return _demo(Path(out), num_frames, seed, config, train, full, epochs, figures)
 

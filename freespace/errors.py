@@ -61,3 +61,12 @@ def check_seed(seed: int, flag: str = "--seed") -> int:
 
 class PretrainedWeightsError(FreespaceError, RuntimeError):
     """Pretrained weights cannot be loaded (no network to download them, or none exist for that configuration)."""
+
+
+class Terminated(BaseException):
+    """The command received ``SIGTERM`` (what SLURM and ``kill`` send; :func:`freespace.cli.main` raises it
+    from its handler). Like :class:`KeyboardInterrupt` it is no :class:`Exception`: ``except Exception``
+    does not swallow it, while ``finally`` blocks and ``except BaseException`` clean-ups run; the command
+    line ends with "terminated" and exit code 143 (128 + 15)."""
+
+    exit_code = 128 + 15

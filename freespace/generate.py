@@ -10,11 +10,10 @@ from __future__ import annotations
 import json
 import logging
 import math
-import multiprocessing
 import os
 import time
 from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
@@ -46,6 +45,8 @@ from freespace.io import (
     IMAGE_SUFFIXES,
     PathLike,
     check_outputs,
+    check_writable,
+    check_writable_files,
     encode_image,
     encode_json,
     atomic_write_bytes,
@@ -59,7 +60,7 @@ from freespace.io import (
     write_json,
 )
 from freespace.geometry.stereo import check_search_range
-from freespace.outdir import check_writable, claim_folder, write_files_together
+from freespace.outdir import claim_folder, write_files_together
 from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)
@@ -208,9 +209,9 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
     options.check()
     if out is not None:
         check_output_image_path(out)
+    check_writable_files({"--out": out, "--model-json": model_json})
     check_outputs({"--out": out, "--model-json": model_json},
                   {"--reference": reference, "--target": target, "--road-mask": road_mask, "--disparity": disparity})
-    check_writable({"--out": out, "--model-json": model_json})
     t_start = time.perf_counter()
     ref = read_image(reference, what="reference image")
     tgt = read_image(target, what="target image")
@@ -299,9 +300,9 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
         raise InvalidOptionError(f"--label-out {label_out} must be a lossless image file name ending in one of "
                                  f"{', '.join(lossless)} (labels must stay exact)")
     check_output_image_path(out)
+    check_writable_files({"--out": out, "--label-out": label_out, "--model-json": model_json})
     check_outputs({"--out": out, "--label-out": label_out, "--model-json": model_json},
                   {"--reference": reference, "--road-mask": road_mask, "--calib": calib, "--disparity": disparity})
-    check_writable({"--out": out, "--label-out": label_out, "--model-json": model_json})
     t_start = time.perf_counter()
     image = read_image(reference, what="reference image")
     label = read_road_label(road_mask)
@@ -384,9 +385,9 @@ def _process_frame(dataset: Any, index: int, out: Path, report: Path, options: F
 def _init_worker(dataset: Any, parent: int) -> None:
     import cv2
 
-    from freespace.parallel import die_with_parent
+    from freespace.parallel import init_worker
 
-    die_with_parent(parent)
+    init_worker(parent)
     global _DATASET
     _DATASET = dataset
     cv2.setNumThreads(1)
@@ -476,8 +477,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     if workers < 1:
         raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
     out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the generated dataset")
+    check_writable(out_dir, folder=True)
     check_outputs({"--out": out_dir}, {"--root": dataset.root})
     _check_sgbm_width(dataset, options)
     settings = _settings(dataset, options)
@@ -590,9 +590,9 @@ def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool, pro
             records[record["frame"]] = record
             bar.update()
     else:
-        # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(dataset, os.getpid()),
-                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+        from freespace.parallel import worker_pool
+
+        with worker_pool(workers, _init_worker, (dataset, os.getpid())) as pool:  # ends at once on Ctrl-C
             for future in as_completed([pool.submit(_in_worker, process, *job) for job in jobs]):
                 record = future.result()
                 records[record["frame"]] = record

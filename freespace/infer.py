@@ -10,6 +10,7 @@ import json
 import logging
 import tempfile
 import time
+import warnings
 import zipfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -22,6 +23,7 @@ from freespace.io import (
     PathLike,
     atomic_write_bytes,
     check_outputs,
+    check_writable,
     read_kitti_calib,
     write_image,
     write_json,
@@ -91,6 +93,7 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
     """
     if batch_size < 1:
         raise InvalidOptionError("--batch-size must be ≥ 1")
+    check_writable(out, folder=True)
     check_outputs({"--out": out}, {"--input": inputs})
     source = open_frames(inputs)
     check_outputs({"--out": out}, _input_paths(source))
@@ -156,8 +159,7 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
     out = Path(out)
     if out.suffix.lower() != ".mp4":
         raise InvalidOptionError(f"--out {out}: a video output must end in .mp4 (or give a folder for PNGs)")
-    if out.is_dir():
-        raise InvalidOptionError(f"--out {out} is a folder; give a .mp4 file name")
+    check_writable(out)
     check_outputs({"--out": out}, {"--input": inputs})
     source = open_frames(inputs)
     check_outputs({"--out": out}, _input_paths(source))
@@ -179,30 +181,29 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
 def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any]:
     """Export a checkpoint to ONNX (dynamic N, H, W; opset 17) or TorchScript (traced; dynamic H, W),
     validated against PyTorch at the training size and at an odd size. Returns the max abs differences."""
-    import torch
-
     if fmt not in ("onnx", "torchscript"):
         raise InvalidOptionError(f"--format must be onnx or torchscript, got {fmt!r}")
+    check_writable(out)
     check_outputs({"--out": out}, {"--checkpoint": checkpoint})
+    import torch
+
     model, hp = load_checkpoint(checkpoint)
     size = tuple(hp.get("image_size") or (384, 1248))
     example = torch.rand(1, 3, *size)
     checks = [torch.rand(1, 3, *size), torch.rand(2, 3, size[0] - 7, size[1] - 13)]
     out = Path(out)
     meta = {"model": hp["model"], "image_size": json.dumps(list(size)), "producer": "freespace"}
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        if not log.isEnabledFor(logging.DEBUG):  # torch's deprecations and tracer notes, unless -v
+            warnings.simplefilter("ignore")
         tmp_path = Path(tmp) / "model"
         if fmt == "onnx":
-            import warnings
-
             import onnx
             import onnxruntime as ort
 
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                torch.onnx.export(model, (example,), str(tmp_path), dynamo=False, opset_version=17,
-                                  input_names=["image"], output_names=["logits"],
-                                  dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}, "logits": {0: "n", 2: "h", 3: "w"}})
+            torch.onnx.export(model, (example,), str(tmp_path), dynamo=False, opset_version=17,
+                              input_names=["image"], output_names=["logits"],
+                              dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}, "logits": {0: "n", 2: "h", 3: "w"}})
             proto = onnx.load(str(tmp_path))
             for k, v in meta.items():
                 proto.metadata_props.add(key=k, value=v)
@@ -238,6 +239,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
     replaces the files of an earlier submission there (:mod:`freespace.outdir`)."""
     from freespace.data.kitti_road import KittiRoad
 
+    check_writable(out, folder=True)
     check_outputs({"--out": out}, {"--checkpoint": checkpoint, "--root": root})
     ds = KittiRoad(root, "testing", disparity_mode="none")
     missing = [f.name for f in ds.frames if f.calib is None]

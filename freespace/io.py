@@ -21,6 +21,7 @@ import math
 import os
 import re
 import tempfile
+import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,6 +68,8 @@ __all__ = [
     "read_kitti_calib",
     "check_outputs",
     "missing_input",
+    "check_writable",
+    "check_writable_files",
 ]
 
 
@@ -109,6 +112,41 @@ def atomic_write_text(path: PathLike, text: str) -> Path:
 def encode_json(obj: Any) -> bytes:
     """``obj`` as the bytes of an indented UTF-8 JSON file (NaN/inf are rejected: use None)."""
     return (json.dumps(obj, indent=2, allow_nan=False) + "\n").encode("utf-8")
+
+
+def check_writable(path: PathLike, flag: str = "--out", *, folder: bool = False) -> Path:
+    """Refuse, before any work, an output that cannot be written where it is named.
+
+    Args:
+        path: the output file (``folder=False``) or folder (``folder=True``); it need not exist.
+        flag: the option that named it, for the message.
+
+    Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
+    folder is, and :class:`OutputError` when a folder on the way to it is a file, or the nearest existing
+    folder is not writable (folders on the way are created by the writers). Nothing is created.
+    """
+    path = Path(os.path.expanduser(os.fspath(path)))
+    if folder and path.exists() and not path.is_dir():
+        raise InvalidOptionError(f"{flag} {path} is a file; give a folder")
+    if not folder and path.is_dir():
+        raise InvalidOptionError(f"{flag} {path} is a folder; give a file name")
+    existing = path.absolute().parent
+    while not existing.exists() and not existing.is_symlink() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OutputError(f"cannot write {flag} {path}: {existing} is a file, not a folder; choose another path")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise OutputError(f"cannot write {flag} {path}: no permission to write in {existing}; choose a writable "
+                          f"folder")
+    return path
+
+
+def check_writable_files(outputs: Mapping[str, PathLike | None]) -> None:
+    """:func:`check_writable` for every output file given (option → path; None = not given), before any
+    input is read."""
+    for flag, path in outputs.items():
+        if path is not None:
+            check_writable(path, flag)
 
 
 def write_json(path: PathLike, obj: Any) -> Path:
@@ -191,8 +229,37 @@ def _read_bytes(path: PathLike, what: str) -> bytes:
         raise InputFileError(f"cannot read {what} {path}: {exc.strerror}") from None
 
 
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_damage(data: bytes) -> str | None:
+    """What is wrong with a damaged PNG file — cut short, or a critical chunk whose CRC does not match —
+    found before decoding (libpng would print its own complaint to stderr); None for a sound PNG or
+    another format."""
+    if not data.startswith(_PNG_SIGNATURE):
+        return None
+    view, pos = memoryview(data), len(_PNG_SIGNATURE)
+    while pos + 12 <= len(data):
+        length = int.from_bytes(view[pos:pos + 4], "big")
+        kind = bytes(view[pos + 4:pos + 8])
+        name = kind.decode("ascii") if kind.isalpha() else repr(kind)  # crafted types stay on one line
+        end = pos + 12 + length
+        if end > len(data):
+            return f"cut short in its {name} chunk"
+        critical = kind[:1].isupper()  # ancillary chunks with a bad CRC are skipped by libpng
+        if critical and zlib.crc32(view[pos + 4:end - 4]) != int.from_bytes(view[end - 4:end], "big"):
+            return f"its {name} chunk is damaged (CRC mismatch)"
+        if kind == b"IEND":
+            return None
+        pos = end
+    return "cut short (no IEND chunk)"
+
+
 def _decode(path: PathLike, what: str, flags: int) -> np.ndarray:
     data = _read_bytes(path, what)
+    damage = _png_damage(data)
+    if damage is not None:
+        raise CorruptFileError(f"cannot decode {what} {path}: a damaged PNG file ({damage})")
     img = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
     if img is None:
         raise CorruptFileError(f"cannot decode {what} {path}: not a readable image file (empty, truncated or "

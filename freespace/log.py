@@ -65,6 +65,8 @@ def quiet_lightning() -> None:
     debug = logging.getLogger("freespace").isEnabledFor(logging.DEBUG)
     if not debug:  # Lightning's own deprecation inside its pytree helper, raised on every fit and test
         warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)")
+        # on every resume: the run's own checkpoints/ folder holds last.ckpt, as it should
+        warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
     for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
         logger = logging.getLogger(name)
         logger.handlers = [h for h in logger.handlers if not isinstance(h, logging.StreamHandler)]

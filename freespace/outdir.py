@@ -18,9 +18,8 @@ The folder itself is never renamed or replaced, so an ``--out`` that is a symbol
 ``--out .`` works. Files are listed in the manifest **before** they are written (in place or by a
 stage), so a run killed half-way leaves only files that its next run knows.
 
-Also here: :func:`check_writable` (every output path checked before any work) and
-:func:`write_files_together` (several output files written all or nothing, earlier files kept when it
-fails). Only the standard library is imported.
+Also here: :func:`write_files_together` (several output files written all or nothing, earlier files kept
+when it fails). Only the standard library is imported.
 """
 
 from __future__ import annotations
@@ -45,7 +44,7 @@ MANIFEST = "manifest.json"
 _LOCK = "lock"
 _STAGE = "stage-"
 
-__all__ = ["OwnedFolder", "claim_folder", "check_writable", "write_files_together", "META"]
+__all__ = ["OwnedFolder", "claim_folder", "write_files_together", "META"]
 
 
 def _umask() -> int:
@@ -297,34 +296,7 @@ def _remove_stale_stages(meta: Path, alone: bool) -> None:
 
 
 # ---------------------------------------------------------------------------------------------------
-# single output files
-
-
-def check_writable(outputs: Mapping[str, PathLike | None]) -> None:
-    """Check, before any work, that every output file can be written.
-
-    Args:
-        outputs: option name → output file path (None = not given).
-
-    Raises:
-        InvalidOptionError: a path is an existing folder, or its parent is a file.
-        OutputError: its folder cannot be created or written.
-    """
-    for flag, path in outputs.items():
-        if path is None:
-            continue
-        path = Path(path)
-        if path.is_dir():
-            raise InvalidOptionError(f"{flag} {path} is a folder; give a file name")
-        parent = path.parent
-        while not parent.exists() and parent != parent.parent:
-            parent = parent.parent
-        if not parent.is_dir():
-            raise InvalidOptionError(f"{flag} {path}: {parent} is a file, not a folder; choose another path")
-        if not os.access(parent, os.W_OK | os.X_OK):
-            raise OutputError(f"cannot write {flag} {path}: {parent} is not writable; choose a writable path")
-        if path.exists() and not os.access(path, os.W_OK) and not os.access(path.parent, os.W_OK):
-            raise OutputError(f"cannot write {flag} {path}: permission denied; choose a writable path")
+# output files
 
 
 def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:

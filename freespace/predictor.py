@@ -9,46 +9,116 @@ imported only to read a checkpoint, onnxruntime only to read an ONNX file.
 from __future__ import annotations
 
 import json
-import pickle
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InvalidOptionError
+from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError
 from freespace.io import MAX_IMAGE_SIDE, PathLike, missing_input
 
 if TYPE_CHECKING:
+    import torch
+
     from freespace.models import SegmentationModel
 
-__all__ = ["load_checkpoint", "Predictor"]
+__all__ = ["load_checkpoint", "checkpoint_state_dict", "rebuild_model", "check_weights", "Predictor"]
 
 
 def load_checkpoint(path: PathLike) -> tuple[SegmentationModel, dict[str, Any]]:
     """A network (in eval mode) and its hyper-parameters from a training checkpoint.
 
-    The file is read with ``torch.load(weights_only=True)``: it runs no code.
+    The file is read with ``torch.load(weights_only=True)``: it runs no code. The network is rebuilt
+    without pretrained weights (``encoder_weights=None``: the checkpoint holds every weight, and no
+    network access is needed), then the checkpoint's weights are loaded into it.
 
     Raises:
-        InputFileError: the file is missing. CorruptFileError: it is not a freespace training checkpoint.
+        InputFileError: the file is missing. CorruptFileError: it is not a freespace training checkpoint,
+        or its weights do not fit the network (the message says which).
     """
-    import torch
+    import warnings
 
-    from freespace.models import create_model
+    import torch
 
     path = Path(path)
     if not path.is_file():
         raise missing_input(path, "checkpoint")
     try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-        hp = ckpt["hyper_parameters"]
-        model = create_model(hp["model"], **hp.get("model_options", {}))
-        state = {k[len("net."):]: v for k, v in ckpt["state_dict"].items() if k.startswith("net.")}
-        model.load_state_dict(state)
-    except (KeyError, RuntimeError, ValueError, TypeError, EOFError, OSError, pickle.UnpicklingError) as exc:
-        raise CorruptFileError(f"{path} is not a freespace training checkpoint ({type(exc).__name__})") from None
+        with warnings.catch_warnings():  # torch warns about the pickle protocol of crafted files
+            warnings.simplefilter("ignore")
+            ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # pickle, zip and torch errors: the file is not a plain checkpoint
+        raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged "
+                               f"({type(exc).__name__})") from None
+    state = checkpoint_state_dict(ckpt, path)
+    hp = ckpt.get("hyper_parameters")
+    if not isinstance(hp, dict) or not isinstance(hp.get("model"), str) \
+            or not isinstance(hp.get("model_options", {}), dict):
+        raise CorruptFileError(f"{path} is not a freespace training checkpoint (no network name and options in "
+                               f"its hyper_parameters)")
+    model = rebuild_model(hp["model"], hp.get("model_options", {}), path)
+    state = {k[len("net."):]: v for k, v in state.items() if k.startswith("net.")}
+    check_weights(model, state, path)
+    model.load_state_dict(state)
     return model.eval(), hp
+
+
+def checkpoint_state_dict(ckpt: Any, path: PathLike) -> dict[str, Any]:
+    """The ``state_dict`` of a loaded checkpoint, checked: a mapping of parameter names to finite tensors.
+
+    Raises:
+        CorruptFileError: ``ckpt`` is not a mapping with such a ``state_dict``.
+    """
+    import torch
+
+    state = ckpt.get("state_dict") if isinstance(ckpt, dict) else None
+    if not isinstance(state, dict):
+        raise CorruptFileError(f"{path} is not a freespace training checkpoint (no state_dict mapping of weights)")
+    for k, v in state.items():
+        if not isinstance(k, str) or not isinstance(v, torch.Tensor):
+            raise CorruptFileError(f"{path} is not a freespace training checkpoint (its state_dict maps {k!r} to a "
+                                   f"{type(v).__name__}, not a tensor)")
+        if v.is_floating_point() and not bool(torch.isfinite(v).all()):
+            raise CorruptFileError(f"{path} holds non-finite weights ({k} has NaN or infinity); it cannot predict")
+    return state
+
+
+def rebuild_model(name: str, options: dict[str, Any], path: PathLike) -> SegmentationModel:
+    """The network ``name`` with ``options`` as a checkpoint states them, built without pretrained weights
+    (whatever ``encoder_weights`` the options ask for: the checkpoint's own weights replace them).
+
+    Raises:
+        CorruptFileError: an unknown network, preset or option, or a bad option value.
+    """
+    from freespace.models import create_model, model_options
+
+    try:
+        if "encoder_weights" in model_options(name):
+            options = {**options, "encoder_weights": None}
+        return create_model(name, **options)
+    except (FreespaceError, TypeError, ValueError, RuntimeError, MemoryError) as exc:  # also absurd sizes
+        raise CorruptFileError(f"{path} names a network freespace cannot build "
+                               f"({str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__})") from None
+
+
+def check_weights(model: torch.nn.Module, state: dict[str, Any], path: PathLike) -> None:
+    """Check that ``state`` has exactly the names of ``model``'s weights, each of the same shape (what a
+    strict ``load_state_dict`` needs), before loading it.
+
+    Raises:
+        CorruptFileError: names missing or unexpected, or tensors of another shape; the message counts
+        them and names the first.
+    """
+    own = model.state_dict()
+    missing = [k for k in own if k not in state]
+    unexpected = [k for k in state if k not in own]
+    shapes = [k for k in own if k in state and tuple(state[k].shape) != tuple(own[k].shape)]
+    if missing or unexpected or shapes:
+        first = (f"first missing: {missing[0]}" if missing else f"first unexpected: {unexpected[0]}" if unexpected
+                 else f"{shapes[0]} is {tuple(state[shapes[0]].shape)}, expected {tuple(own[shapes[0]].shape)}")
+        raise CorruptFileError(f"{path}: its weights do not fit the network ({len(missing)} missing, "
+                               f"{len(unexpected)} unexpected, {len(shapes)} of another shape; {first})")
 
 
 def _image_size(size: Any, source: PathLike) -> tuple[int, int] | None:
@@ -62,23 +132,37 @@ def _image_size(size: Any, source: PathLike) -> tuple[int, int] | None:
     return int(size[0]), int(size[1])
 
 
+_EXPORT_HINT = "export one with freespace export --format onnx"
+
+
 def _check_onnx_signature(session: Any, path: Path) -> None:
-    """Refuse an ONNX model that does not take one N×3×H×W image and give N×C×H×W logits (C ≥ 2)."""
+    """Refuse an ONNX model that does not take one float32 N×3×H×W image, or does not give N×C×H×W
+    logits (C ≥ 2) first; the message says whether the input or the output is wrong."""
     inputs, outputs = session.get_inputs(), session.get_outputs()
-    ok = (len(inputs) == 1 and len(outputs) >= 1 and len(inputs[0].shape) == 4 and inputs[0].shape[1] in (3, "3")
-          and "float" in inputs[0].type and len(outputs[0].shape) == 4
-          and not (isinstance(outputs[0].shape[1], int) and outputs[0].shape[1] < 2))
-    if not ok:
-        got = ", ".join(f"{i.name} {i.shape}" for i in inputs)
+    if len(inputs) != 1 or len(inputs[0].shape) != 4 or inputs[0].shape[1] not in (3, "3") \
+            or inputs[0].type != "tensor(float)":
+        got = ", ".join(f"{i.name} {i.shape} {i.type}" for i in inputs)
         raise CorruptFileError(f"{path} is not a freespace road model: its input is {got or 'nothing'}, expected one "
-                               f"float image N×3×H×W (export one with freespace export --format onnx)")
+                               f"float32 image N×3×H×W ({_EXPORT_HINT})")
+    first = outputs[0] if outputs else None
+    if first is None or len(first.shape) != 4 or (isinstance(first.shape[1], int) and first.shape[1] < 2):
+        got = f"{first.name} {first.shape}" if first is not None else "nothing"
+        raise CorruptFileError(f"{path} is not a freespace road model: its output is {got}, expected N×C×H×W "
+                               f"class scores with C ≥ 2 (non-road, road) ({_EXPORT_HINT})")
+
+
+def _fixed(dim: Any) -> int | None:
+    """An ONNX input dimension as a number when the model fixes it, else None (a name or unknown)."""
+    return dim if isinstance(dim, int) and not isinstance(dim, bool) and dim > 0 else None
 
 
 class Predictor:
     """Road probabilities from a training checkpoint (PyTorch) or an exported ONNX model (onnxruntime).
 
     Images are resized to the model's training size (kept in the checkpoint / the ONNX metadata) and the
-    probabilities back to each image's own size.
+    probabilities back to each image's own size. An ONNX model whose input height and width are fixed gets
+    its images resized to that size (whatever its metadata says: it takes no other), and one whose batch
+    size is fixed gets batches of that size (the last padded).
     """
 
     def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None) -> None:
@@ -89,7 +173,7 @@ class Predictor:
             self.model, hp = load_checkpoint(checkpoint)
             self.image_size = _image_size(hp.get("image_size"), checkpoint)
             self.name = hp["model"]
-            self.session = None
+            self.session, self.batch = None, None
         else:
             import onnxruntime as ort
 
@@ -97,7 +181,9 @@ class Predictor:
             if not path.is_file():
                 raise missing_input(path, "ONNX model")
             try:
-                self.session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+                options = ort.SessionOptions()
+                options.log_severity_level = 4  # its failures become one-line errors here, not log lines
+                self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
             except Exception as exc:  # onnxruntime raises its own types for corrupt files
                 raise CorruptFileError(f"cannot load {path} as an ONNX model ({type(exc).__name__})") from None
             _check_onnx_signature(self.session, path)
@@ -106,7 +192,15 @@ class Predictor:
                 size = json.loads(meta["image_size"]) if meta.get("image_size") else None
             except ValueError:
                 size = "unreadable"
+            shape = self.session.get_inputs()[0].shape
+            fixed = (_fixed(shape[2]), _fixed(shape[3]))
+            if all(fixed):
+                size = list(fixed)
+            elif any(fixed):
+                raise CorruptFileError(f"{path} fixes one side of its input only ({shape}); freespace resizes images "
+                                       f"to a fixed height and width, or to none ({_EXPORT_HINT})")
             self.image_size = _image_size(size, path)
+            self.batch = _fixed(shape[0])
             self.name = meta.get("model", path.stem)
             self.model = None
 
@@ -116,7 +210,20 @@ class Predictor:
 
             with torch.no_grad():
                 return torch.softmax(self.model(torch.from_numpy(batch)), 1)[:, 1].numpy()
-        logits = self.session.run(None, {self.session.get_inputs()[0].name: batch})[0]
+        n = len(batch)
+        if self.batch is not None and n != self.batch:  # a fixed batch size: chunks of it, the last padded
+            chunks = [batch[i:i + self.batch] for i in range(0, n, self.batch)]
+            chunks[-1] = np.concatenate([chunks[-1], np.zeros((self.batch - len(chunks[-1]), *batch.shape[1:]),
+                                                              batch.dtype)])
+            return np.concatenate([self._run(c) for c in chunks])[:n]
+        try:
+            logits = self.session.run(None, {self.session.get_inputs()[0].name: batch})[0]
+        except Exception as exc:  # onnxruntime's own error types: the graph cannot run on this input
+            raise CorruptFileError(f"the ONNX model failed on a batch of {n}×3×{batch.shape[2]}×{batch.shape[3]} "
+                                   f"images: {str(exc).splitlines()[0][:200]}") from None
+        if logits.ndim != 4 or logits.shape[0] != n or logits.shape[1] < 2:
+            raise CorruptFileError(f"the ONNX model gave {list(logits.shape)} for {n} images, expected {n}×C×H×W "
+                                   f"class scores with C ≥ 2 ({_EXPORT_HINT})")
         e = np.exp(logits - logits.max(1, keepdims=True))
         return (e[:, 1] / e.sum(1)).astype(np.float32)
 

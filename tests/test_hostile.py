@@ -1129,3 +1129,391 @@ def test_issue20_a_file_where_a_folder_is_wanted_and_back(argv: list[str], match
     before = snapshot(tmp_path)
     refused(capsys, [a.format(**fill) for a in argv], match=match.format(**fill))
     assert snapshot(tmp_path) == before and sorted(tmp_path.iterdir()) == [folder, file]
+# ======================================================================================================
+# issue 20: tracebacks and signals
+# Crafted checkpoints and ONNX models, unusable reproduce cells, outputs checked before the work, options
+# that were ignored, Ctrl-C and SIGTERM on every kind of command, library noise.
+# ======================================================================================================
+def _crafted_checkpoint(trained: dict[str, Path], tmp_path: Path, edit, name: str = "crafted.ckpt",
+                        source: str = "ckpt") -> Path:
+    """A copy of the trained checkpoint (``source``: ``ckpt`` = best, ``last``) changed in place by
+    ``edit(ckpt)``; a list that ``edit`` returns is saved instead (a checkpoint that is no mapping)."""
+    import torch
+
+    path = trained["ckpt"] if source == "ckpt" else trained["run"] / "checkpoints" / "last.ckpt"
+    ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    result = edit(ckpt)
+    out = tmp_path / name
+    torch.save(result if isinstance(result, list) else ckpt, out)
+    return out
+
+
+def _first_weight(ckpt: dict) -> str:
+    return next(iter(ckpt["state_dict"]))
+
+
+def _zeros(*shape: int):
+    import torch
+
+    return torch.zeros(*shape)
+
+
+CRAFTED_CHECKPOINTS = {
+    "state_dict is a list": (lambda c: c.update(state_dict=list(c["state_dict"].values())), "state_dict"),
+    "state_dict keys are numbers": (lambda c: c.update(state_dict={1: 2}), "state_dict"),
+    "a weight missing": (lambda c: c["state_dict"].pop(_first_weight(c)), "1 missing"),
+    "a weight of another shape": (lambda c: c["state_dict"].__setitem__(_first_weight(c), _zeros(3, 3)),
+                                  "another shape"),
+    "another preset's weights": (lambda c: c["hyper_parameters"]["model_options"].update(preset="paper"),
+                                 "do not fit"),
+    "NaN weights": (lambda c: c["state_dict"][_first_weight(c)].fill_(float("nan")), "non-finite"),
+    "a list, not a mapping": (lambda c: [1, 2, 3], "not a freespace training checkpoint"),
+    "hyper_parameters a list": (lambda c: c.update(hyper_parameters=[1]), "hyper_parameters"),
+    "an unknown network": (lambda c: c["hyper_parameters"].update(model="fcn"), "unknown model 'fcn'"),
+}
+
+
+@pytest.mark.parametrize("case", list(CRAFTED_CHECKPOINTS))
+def test_crafted_checkpoint_is_one_line(case: str, trained: dict[str, Path], tmp_path: Path,
+                                        capsys: pytest.CaptureFixture) -> None:
+    edit, match = CRAFTED_CHECKPOINTS[case]
+    crafted = _crafted_checkpoint(trained, tmp_path, edit)
+    _predict_refused(capsys, trained, tmp_path, ["--checkpoint", str(crafted)], match)
+
+
+@pytest.mark.parametrize("command", ["export", "evaluate"])
+def test_crafted_checkpoint_in_export_and_evaluate(command: str, trained: dict[str, Path], tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture) -> None:
+    crafted = _crafted_checkpoint(trained, tmp_path, CRAFTED_CHECKPOINTS["state_dict is a list"][0])
+    out = tmp_path / ("m.onnx" if command == "export" else "eval")
+    argv = (["export", "--format", "onnx"] if command == "export" else
+            ["evaluate", "--dataset", "synth", "--root", str(trained["data"]), "--subset", "all", "--no-progress"])
+    refused(capsys, argv + ["--checkpoint", str(crafted), "--out", str(out)], match="state_dict")
+    assert not out.exists()
+
+
+def test_checkpoint_asking_for_imagenet_weights_loads_offline(trained: dict[str, Path], tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture) -> None:
+    """Rebuilding a network from a checkpoint never fetches pretrained weights: the checkpoint has them all."""
+    import segmentation_models_pytorch as smp
+
+    def no_network(*args, **kwargs):
+        raise AssertionError("pretrained weights were asked for")
+
+    monkeypatch.setattr(smp.encoders, "get_encoder", no_network)  # any encoder download would go through here
+    crafted = _crafted_checkpoint(trained, tmp_path,
+                                  lambda c: c["hyper_parameters"]["model_options"].update(encoder_weights="imagenet"))
+    images = trained["data"] / "data_road" / "training" / "image_2"
+    assert main(["predict", "--checkpoint", str(crafted), "--input", str(images), "--out", str(tmp_path / "p"),
+                 "--no-progress"]) == 0, capsys.readouterr().err
+    assert len(list((tmp_path / "p").glob("*.png"))) == len(list(images.iterdir()))
+
+
+RESUME_CRAFTED = {
+    "state_dict is a list": (lambda c: c.update(state_dict=list(c["state_dict"].values())), "state_dict"),
+    "optimizer state a number": (lambda c: c.update(optimizer_states=[1]), "optimizer_states"),
+    "loops a list": (lambda c: c.update(loops=[1]), "loops"),
+    "callbacks a list": (lambda c: c.update(callbacks=[1]), "callbacks"),
+    "a weight of another shape": (lambda c: c["state_dict"].__setitem__(_first_weight(c), _zeros(3, 3)),
+                                  "another shape"),
+    "a momentum buffer of another shape": (
+        lambda c: c["optimizer_states"][0].update(state={0: {"momentum_buffer": _zeros(2)}}),
+        "optimizer state"),
+}
+
+
+@pytest.mark.parametrize("case", list(RESUME_CRAFTED))
+def test_resume_from_a_crafted_last_checkpoint(case: str, trained: dict[str, Path], tmp_path: Path,
+                                               capsys: pytest.CaptureFixture) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(trained["run"], run)
+    edit, match = RESUME_CRAFTED[case]
+    _crafted_checkpoint(trained, run / "checkpoints", edit, name="last.ckpt", source="last")
+    before = snapshot(run)
+    refused(capsys, ["train", "--dataset", "synth", "--root", str(trained["data"]), "--model", "segnet", "--epochs",
+                     "2", "--image-size", "64x64", "--no-progress", "--out", str(run), "--resume"], match=match)
+    assert snapshot(run) == before
+
+
+def _onnx_model(path: Path, inputs, outputs, nodes, initializers=()) -> Path:
+    import onnx
+    from onnx import helper
+
+    graph = helper.make_graph(nodes, path.stem, inputs, outputs, initializer=list(initializers))
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), path)
+    return path
+
+
+def _two_class_scores(path: Path, shape: list) -> Path:
+    """An ONNX model N×3×H×W → N×2×H×W (the first two channels), input ``shape`` (numbers fix a side)."""
+    from onnx import TensorProto, helper
+
+    x = helper.make_tensor_value_info("image", TensorProto.FLOAT, shape)
+    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, [shape[0], 2, shape[2], shape[3]])
+    consts = [helper.make_tensor(n, TensorProto.INT64, [1], [v]) for n, v in (("s", 0), ("e", 2), ("a", 1))]
+    return _onnx_model(path, [x], [y], [helper.make_node("Slice", ["image", "s", "e", "a"], ["logits"])], consts)
+
+
+@pytest.mark.parametrize("shape", [[1, 3, 48, 40], ["n", 3, 48, 40], [1, 3, "h", "w"]])
+def test_onnx_with_a_fixed_input_size_or_batch(shape: list, trained: dict[str, Path], tmp_path: Path,
+                                               capsys: pytest.CaptureFixture) -> None:
+    """A fixed input size: frames are resized to it (and the maps back); a fixed batch: batches of it."""
+    from freespace.io import read_image
+
+    model = _two_class_scores(tmp_path / "fixed.onnx", shape)
+    images = trained["data"] / "data_road" / "training" / "image_2"
+    assert main(["predict", "--onnx", str(model), "--input", str(images), "--out", str(tmp_path / "p"),
+                 "--batch-size", "3", "--no-progress"]) == 0, capsys.readouterr().err
+    maps = sorted((tmp_path / "p").glob("*.png"))
+    assert len(maps) == 8 and all(read_image(m).shape == (128, 160) for m in maps)
+
+
+def test_onnx_refused_for_its_output_names_the_output(trained: dict[str, Path], tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture) -> None:
+    from onnx import TensorProto, helper
+
+    x = helper.make_tensor_value_info("image", TensorProto.FLOAT, ["n", 3, "h", "w"])
+    y = helper.make_tensor_value_info("y", TensorProto.FLOAT, ["n", 1, "h", "w"])
+    consts = [helper.make_tensor(n, TensorProto.INT64, [1], [v]) for n, v in (("s", 0), ("e", 1), ("a", 1))]
+    model = _onnx_model(tmp_path / "one.onnx", [x], [y], [helper.make_node("Slice", ["image", "s", "e", "a"], ["y"])],
+                        consts)
+    err = refused(capsys, ["predict", "--onnx", str(model), "--input", str(trained["data"] / "data_road" / "training"
+                                                                            / "image_2"), "--out", str(tmp_path / "p")])
+    assert "its output is" in err and "its input is" not in err
+    assert not (tmp_path / "p").exists()
+
+
+def test_onnx_failing_at_run_time(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from onnx import TensorProto, helper
+
+    x = helper.make_tensor_value_info("image", TensorProto.FLOAT, ["n", 3, "h", "w"])
+    y = helper.make_tensor_value_info("y", TensorProto.FLOAT, ["n", "c", "h", "w"])
+    shape = helper.make_tensor("shape", TensorProto.INT64, [4], [1, 2, 10, 10])
+    model = _onnx_model(tmp_path / "reshape.onnx", [x], [y], [helper.make_node("Reshape", ["image", "shape"], ["y"])],
+                        [shape])
+    _predict_refused(capsys, trained, tmp_path, ["--onnx", str(model)], "the ONNX model failed")
+
+
+def _fake_cell(runs: Path, seed: int, metrics: str | None) -> Path:
+    """A run folder of reproduce's X arm for segnet (config.yaml) with ``metrics`` as its metrics.json."""
+    run = runs / f"segnet-orig-s{seed}"
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text(f"dataset: synth\nroot: /data\nout: {run}\nmodel: segnet\naugment: none\n"
+                                     f"seed: {seed}\n")
+    if metrics is not None:
+        (run / "metrics.json").write_text(metrics)
+    return run
+
+
+def test_tables_skip_unusable_cells_and_write_no_nan(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    good = {"accuracy": 0.9, "precision": 0.8, "recall": 0.7, "f_score": 0.75, "iou": 0.6, "max_f": 0.8, "ap": 0.85}
+    runs = tmp_path / "out" / "runs"
+    _fake_cell(runs, 0, json.dumps(good))
+    _fake_cell(runs, 1, "{not json")
+    _fake_cell(runs, 2, json.dumps({"accuracy": 0.9}))
+    _fake_cell(runs, 3, json.dumps(good).replace("0.75", "NaN"))
+    shifted = _fake_cell(runs, 4, json.dumps(good)) / "shifted"
+    shifted.mkdir()
+    (shifted / "metrics.json").write_text(json.dumps({**good, "iou": "high"}))
+    capsys.readouterr()
+    assert main(["reproduce", "--tables", "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    warned = [line for line in err.splitlines() if "skipped" in line]
+    assert len(warned) == 4, err
+    for run, why in (("s1", "JSON"), ("s2", "no precision"), ("s3", "f_score is nan"), ("s4/shifted", "iou is 'high'")):
+        assert any(f"segnet-orig-{run}" in line and why in line for line in warned), (run, err)
+
+    def no_constants(text: str) -> None:
+        raise AssertionError(f"{text} written into JSON")
+
+    index = json.loads((tmp_path / "out" / "index.json").read_text(), parse_constant=no_constants)
+    assert [e["status"] for e in index][:4] == ["done", "skipped: not readable as JSON (JSONDecodeError)",
+                                                 "skipped: no precision, recall, f_score, iou, max_f, ap",
+                                                 "skipped: f_score is nan, not a fraction in [0, 1]"]
+    import csv
+
+    rows = list(csv.DictReader((tmp_path / "out" / "results.csv").open()))
+    assert [(r["test_set"], r["n"]) for r in rows] == [("test", "2")]  # seeds 0 and 4; no shifted row
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["export", "--checkpoint", "{ckpt}", "--format", "onnx", "--out", "{tmp}/folder"], "is a folder"),
+    (["export", "--checkpoint", "{ckpt}", "--format", "torchscript", "--out", "{tmp}/file/m.pt"], "is a file"),
+    (["evaluate-kitti", "--gt", "{gt}", "--pred", "{gt}", "--out", "{tmp}/folder"], "is a folder"),
+    (["predict", "--checkpoint", "{ckpt}", "--input", "{images}", "--out", "{tmp}/file/v.mp4"], "is a file"),
+    (["predict", "--checkpoint", "{ckpt}", "--input", "{images}", "--out", "{tmp}/file"], "is a file"),
+    (["evaluate", "--checkpoint", "{ckpt}", "--dataset", "synth", "--root", "{data}", "--out", "{tmp}/file/e"],
+     "is a file"),
+    (["kitti-submit", "--checkpoint", "{ckpt}", "--root", "{data}", "--out", "{tmp}/file/k"], "is a file"),
+    (["generate", "--reference", "{tmp}/L.png", "--target", "{tmp}/R.png", "--road-mask", "{tmp}/M.png",
+      "--out", "{tmp}/G.png", "--model-json", "{tmp}/folder"], "is a folder"),
+    (["train", "--dataset", "synth", "--root", "{data}", "--out", "{tmp}/file/run"], "is a file"),
+    (["reproduce", "--dataset", "synth", "--root", "{data}", "--out", "{tmp}/file/r"], "is a file"),
+    (["datasets", "split", "--dataset", "synth", "--root", "{data}", "--out", "{tmp}/file"], "is a file"),
+])
+def test_outputs_are_checked_before_the_work(argv: list[str], match: str, trained: dict[str, Path],
+                                             pair: dict[str, Path], tmp_path: Path,
+                                             capsys: pytest.CaptureFixture) -> None:
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "folder" / "keep.txt").write_text("mine")
+    (tmp_path / "file").write_text("mine")
+    training = trained["data"] / "data_road" / "training"
+    argv = [a.format(tmp=tmp_path, ckpt=trained["ckpt"], data=trained["data"], gt=training / "gt_image_2",
+                     images=training / "image_2") for a in argv]
+    before = set(tmp_path.rglob("*"))
+    t0 = time.perf_counter()
+    refused(capsys, argv, match=match)
+    assert time.perf_counter() - t0 < 5, "refused after the work"
+    assert set(tmp_path.rglob("*")) == before
+    assert (tmp_path / "file").read_text() == "mine" and (tmp_path / "folder" / "keep.txt").read_text() == "mine"
+
+
+def test_duplicate_without_right_images_is_named_and_leaves_nothing(trained: dict[str, Path], tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture) -> None:
+    root = _kitti_root(trained, tmp_path)
+    shutil.rmtree(root / "data_road_right")
+    run = tmp_path / "run"
+    err = refused(capsys, ["train", "--dataset", "synth", "--root", str(root), "--augment", "duplicate", "--model",
+                           "segnet", "--image-size", "64x64", "--no-progress", "--out", str(run)], match="right images")
+    assert "--augment duplicate" in err and "homography" not in err.split("(")[0]
+    assert not run.exists()
+
+
+def test_config_yaml_keeps_resolved_paths(trained: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                          capsys: pytest.CaptureFixture) -> None:
+    """A run's config.yaml names its data and folder absolutely: `train --config` works from any folder and
+    `--resume` takes the paths spelled another way; a resume says nothing about its checkpoint folder."""
+    import yaml
+
+    here, elsewhere = tmp_path / "here", tmp_path / "elsewhere"
+    here.mkdir()
+    elsewhere.mkdir()
+    (here / "data").symlink_to(trained["data"])
+    monkeypatch.chdir(here)
+    common = ["--model", "segnet", "--image-size", "64x64", "--batch-size", "4", "--no-progress"]
+    assert main(["train", "--dataset", "synth", "--root", "data", "--out", "run", "--epochs", "1", *common]) == 0
+    config = yaml.safe_load((here / "run" / "config.yaml").read_text())
+    assert config["root"] == str(trained["data"].resolve()) and config["out"] == str((here / "run").resolve())
+    monkeypatch.chdir(elsewhere)
+    assert main(["train", "--config", str(here / "run" / "config.yaml"), "--out", "copy", "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["train", "--dataset", "synth", "--root", str(here / "data"), "--out", str(here / "run"),
+                 "--epochs", "2", "--resume", *common]) == 0
+    assert "exists and is not empty" not in capsys.readouterr().err
+
+
+def test_export_prints_no_library_warnings(trained: dict[str, Path], tmp_path: Path) -> None:
+    for fmt in ("torchscript", "onnx"):
+        res = run_cli("export", "--checkpoint", str(trained["ckpt"]), "--format", fmt, "--out", str(tmp_path / fmt))
+        assert res.returncode == 0 and res.stderr == "", res.stderr[-2000:]
+
+
+def test_truncated_png_is_one_line_without_libpng_noise(trained: dict[str, Path], tmp_path: Path) -> None:
+    image = tmp_path / "cut.png"
+    data = sorted((trained["data"] / "data_road" / "training" / "image_2").iterdir())[0].read_bytes()
+    image.write_bytes(data[: len(data) // 2])
+    res = run_cli("predict", "--checkpoint", str(trained["ckpt"]), "--input", str(image), "--out", str(tmp_path / "p"))
+    refused_process(res, match="cut short")
+    assert "libpng" not in res.stderr
+
+
+@pytest.mark.parametrize("extra,match", [
+    (["--test-root", "train={data}"], "'train' cannot name a test set"),
+    (["--test-root", "val={other}"], "'val' cannot name a test set"),
+    (["--test-root", "same={data}"], "--root's own frames"),
+    (["--test-root", "{link}"], "--root's own frames"),
+    (["--only", "segnet,X,0", "--variants", "X,FOO"], "unknown variants ['FOO']"),
+    (["--only", "segnet,X,0", "--models", "nonexistent"], "unknown models ['nonexistent']"),
+    (["--only", "segnet,X,0", "--models", "unet"], "not among --models"),
+    (["--only", "segnet,HV-X,0", "--variants", "X,HA-X"], "not among --variants"),
+])
+def test_reproduce_refuses_test_sets_and_names_before_any_work(extra: list[str], match: str,
+                                                               trained: dict[str, Path], tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture) -> None:
+    other = _kitti_root(trained, tmp_path)
+    (tmp_path / "link").symlink_to(trained["data"])
+    extra = [a.format(data=trained["data"], other=other, link=tmp_path / "link") for a in extra]
+    refused(capsys, ["reproduce", "--dataset", "synth", "--root", str(trained["data"]), "--epochs", "1",
+                     "--out", str(tmp_path / "r"), *extra], match=match)
+    assert not (tmp_path / "r").exists()
+
+
+def test_ignored_options_are_refused(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    gt = trained["data"] / "data_road" / "training" / "gt_image_2"
+    refused(capsys, ["evaluate-kitti", "--gt", str(gt), "--pred", str(gt), "--calib", str(tmp_path),
+                     "--out", str(tmp_path / "s.json")], match="--calib is only used with --bev")
+    refused(capsys, ["reproduce", "--tables", "--models", "unet", "--out", str(tmp_path)], match="takes no --models")
+    assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------------------- Ctrl-C and SIGTERM
+def _signalled(args: list[str], sig: int, *, ready: str | None = None, children: int = 0,
+               timeout: float = 120) -> tuple[int, str, float, list[int]]:
+    """Start ``freespace ARGS``, wait until stderr shows ``ready`` (or ``children`` child processes run),
+    send ``sig`` (SIGINT to the process group, as a terminal does; SIGTERM to the command only, as
+    ``kill`` does) and return the exit code, stderr, the seconds from the signal to the exit, and the
+    child processes seen."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "freespace.cli", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+    lines: list[str] = []
+    seen: list[int] = []
+    try:
+        deadline = time.time() + timeout
+        if ready is not None:
+            for line in proc.stderr:  # type: ignore[union-attr]
+                lines.append(line)
+                if ready in line or time.time() > deadline:
+                    break
+        while len(seen) < children and time.time() < deadline:
+            time.sleep(0.1)
+            seen = _children(proc.pid)
+        assert proc.poll() is None, "finished before the signal: " + "".join(lines)[-2000:]
+        t0 = time.perf_counter()
+        os.killpg(proc.pid, sig) if sig == signal.SIGINT else proc.send_signal(sig)
+        rest = proc.stderr.read()  # type: ignore[union-attr]
+        code = proc.wait(timeout=60)
+        return code, "".join(lines) + rest, time.perf_counter() - t0, seen
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _ended_by_signal(code: int, err: str, sig: int) -> None:
+    expected = (130, "freespace: interrupted") if sig == signal.SIGINT else (143, "freespace: terminated (SIGTERM)")
+    assert code == expected[0], (code, err[-2000:])
+    assert err.rstrip().splitlines()[-1] == expected[1], err[-2000:]
+    assert "Traceback" not in err and "Detected KeyboardInterrupt" not in err, err[-2000:]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_generate_workers_stop_at_once(sig: int, tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    write_dataset(data, 40, seed=1, config=SMALL, progress=False)
+    code, err, seconds, workers = _signalled(
+        ["generate", "--dataset", "synth", "--root", str(data), "--out", str(tmp_path / "gen"), "--workers", "2",
+         "--disparity-source", "sgbm", "--cache-dir", str(tmp_path / "cache")], sig, children=2)
+    _ended_by_signal(code, err, sig)
+    assert seconds < 5, f"took {seconds:.1f} s to stop"
+    assert len(list((tmp_path / "gen").glob("*.png"))) < 40, "every frame was still generated"
+    time.sleep(0.5)
+    alive = [c for c in workers if _alive(c)]
+    for c in alive:
+        os.kill(c, signal.SIGKILL)
+    assert not alive, "workers outlived the command"
+
+
+@pytest.mark.parametrize("command,sig", [("train", signal.SIGINT), ("train", signal.SIGTERM),
+                                         ("reproduce", signal.SIGINT)])
+def test_training_commands_end_like_the_others(command: str, sig: int, trained: dict[str, Path],
+                                               tmp_path: Path) -> None:
+    args = ["--dataset", "synth", "--root", str(trained["data"]), "--epochs", "1000", "--patience", "1000",
+            "--image-size", "64x64", "--batch-size", "4", "--no-progress", "--out", str(tmp_path / "out")]
+    args = (["train", "--model", "segnet", *args] if command == "train" else
+            ["reproduce", "--models", "segnet", "--variants", "X", "--seeds", "1", *args])
+    code, err, seconds, _ = _signalled(args, sig, ready="epoch 1/")
+    _ended_by_signal(code, err, sig)
+    assert seconds < 20

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from freespace.errors import InvalidOptionError, OutputError
-from freespace.outdir import META, check_writable, claim_folder, write_files_together
+from freespace.outdir import META, claim_folder, write_files_together
 
 
 def _manifest(folder: Path) -> dict:
@@ -121,12 +121,3 @@ def test_write_files_together_keeps_earlier_files_when_one_fails(tmp_path: Path)
         write_files_together({a: b"A2", tmp_path / "blocker" / "c.json": b"C"})
     assert a.read_bytes() == b"A1" and b.read_bytes() == b"B1"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "b.json", "blocker"]
-
-
-def test_check_writable(tmp_path: Path) -> None:
-    (tmp_path / "file").write_text("x")
-    check_writable({"--out": tmp_path / "new" / "deeper" / "x.png", "--model-json": None})
-    with pytest.raises(InvalidOptionError, match="is a folder"):
-        check_writable({"--out": tmp_path})
-    with pytest.raises(InvalidOptionError, match="not a folder"):
-        check_writable({"--out": tmp_path / "file" / "x.png"})

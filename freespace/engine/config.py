@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import functools
 import math
+import os
 import re
 import types
 from collections.abc import Callable, Iterable, Mapping
@@ -16,7 +17,7 @@ from pathlib import Path
 from typing import Any, Union, get_args, get_origin, get_type_hints
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, check_seed
-from freespace.io import MAX_IMAGE_SIDE, PathLike, atomic_write_text, check_outputs
+from freespace.io import MAX_IMAGE_SIDE, PathLike, atomic_write_text, check_outputs, check_writable
 
 __all__ = ["TrainConfig", "parse_size", "parse_augment", "parse_ranges", "AUGMENTS", "PRESETS", "STRATEGIES",
            "add_config_arguments", "config_from_args", "read_config_yaml"]
@@ -26,6 +27,9 @@ AUGMENTS = ("none", "homography", "virtual", "homography,virtual", "duplicate") 
 _AUGMENT_TOKENS = ("homography", "virtual", "duplicate")
 PRESETS = ("light", "paper")
 STRATEGIES = ("auto", "ddp")
+
+#: the options that name files or folders (config.yaml keeps them resolved)
+PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir")
 
 # config.yaml keys of runs made before the names said which split and which disparity they mean
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_mode"}
@@ -206,6 +210,7 @@ class TrainConfig:
         if self.labels is not None and not Path(self.labels).is_dir():
             raise InputFileError(f"--labels {self.labels} not found; give the folder `freespace autolabel --dataset` "
                                  f"wrote")
+        check_writable(self.out, folder=True)
         weights_file = self.encoder_weights if self.encoder_weights and Path(self.encoder_weights).is_file() else None
         check_outputs({"--out": self.out}, {"--root": self.root, "--splits": self.splits_dir, "--labels": self.labels,
                                             "--encoder-weights": weights_file})
@@ -216,12 +221,17 @@ class TrainConfig:
         return {"preset": self.preset, **({"encoder_name": self.encoder_name} if self.encoder_name else {})}
 
     def to_dict(self) -> dict[str, Any]:
+        """The options as plain values, paths (:data:`PATH_OPTIONS`) resolved: absolute, symbolic links
+        followed, so that two spellings of one folder compare equal."""
         d = asdict(self)
         d["image_size"] = list(self.image_size) if self.image_size else None
+        for k in PATH_OPTIONS:
+            if d[k] is not None:
+                d[k] = os.path.realpath(os.path.expanduser(d[k]))
         return d
 
     def save(self, path: PathLike) -> None:
-        """Write as YAML (atomically)."""
+        """Write as YAML (atomically), paths resolved (:meth:`to_dict`): the file works from any folder."""
         import yaml
 
         atomic_write_text(path, yaml.safe_dump(self.to_dict(), sort_keys=False))

@@ -84,8 +84,6 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
         splits = read_splits(split_dir, known=names)
     else:
         splits = make_splits([(f.name, f.scenario) for f in labelled], seed=config.seed)
-    if is_rank_zero():
-        write_splits(split_dir, splits)
     if not all(splits[k] for k in ("train", "val", "test")):
         raise DatasetError(f"a split is empty ({', '.join(f'{k} {len(v)}' for k, v in splits.items())}); use more "
                            f"frames or scenarios, or give --splits")
@@ -101,18 +99,27 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
         ds = ds.with_labels(config.labels, [n for n in train if n not in human])
         splits = {**splits, "train": train}
     index = {f.name: ds.index(f.name) for f in labelled}
-    items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
     augments = parse_augment(config.augment)
+    stereo = [n for n in splits["train"] if ds.frames[index[n]].right is not None]
+    needs_right = [a for a in ("homography", "duplicate") if a in augments]
+    if needs_right and not stereo:  # checked before anything is written
+        why = {"homography": "the DS-Generator warps them", "duplicate": "it repeats the frames that have a "
+               "DS-Generator view"}[needs_right[0]]
+        raise DatasetError(f"--augment {needs_right[0]} needs right images ({why}); none of the "
+                           f"{len(splits['train'])} training frames has one")
     virtual = None
     if "virtual" in augments:  # before the DS-Generator views: a --virtual-shift no frame allows is refused first
         shift = parse_ranges(config.virtual_shift, "--virtual-shift")
         virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]], shift), shift=shift,
                                  rotate=parse_ranges(config.virtual_rotate, "--virtual-rotate"),
                                  prob=config.virtual_prob)
+    if is_rank_zero():
+        write_splits(split_dir, splits)
+    items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
     if "homography" in augments:
-        items["train"] += _generated_views(ds, [index[n] for n in splits["train"]], run_dir / "generated")
+        items["train"] += _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
     elif "duplicate" in augments:  # the control: the same frames again, their own left images
-        views = _generated_views(ds, [index[n] for n in splits["train"]], run_dir / "generated")
+        views = _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
         items["train"] += [Item(it.index, it.name) for it in views]
     size = config.image_size or tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
     return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
@@ -188,12 +195,11 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int],
 
 
 def _generated_views(ds: StereoRoadDataset, indices: list[int], folder: Path) -> list[Item]:
-    """DS-Generator views of the given frames (made once, resumable), as items with the frames' labels."""
+    """DS-Generator views of the given frames (which have right images; made once, resumable), as items with
+    the frames' labels."""
     from freespace.generate import generate_dataset
 
-    sub = ds.subset(ds.frames[i].name for i in indices if ds.frames[i].right is not None)
-    if not sub.frames:
-        raise DatasetError("--augment homography needs right images; this dataset has none")
+    sub = ds.subset(ds.frames[i].name for i in indices)
     if is_rank_zero():
         summary = generate_dataset(sub, folder)
         if summary["failed"]:

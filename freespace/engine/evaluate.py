@@ -16,7 +16,7 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError
-from freespace.io import PathLike, check_outputs, write_image, write_json
+from freespace.io import PathLike, check_outputs, check_writable, write_image, write_json
 from freespace.metrics import RoadEvaluator
 from freespace.outdir import claim_folder
 from freespace.predictor import Predictor
@@ -65,6 +65,7 @@ def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out:
     if subset not in ("train", "val", "test", "all"):
         raise InvalidOptionError(f"--subset must be train, val, test or all, got {subset!r}")
     checkpoint, out = Path(checkpoint), Path(out)
+    check_writable(out, folder=True)
     check_outputs({"--out": out}, {"--checkpoint": checkpoint, "--root": root})
     predictor = Predictor(checkpoint=checkpoint)
     ds = get_dataset(dataset, root, split, disparity_mode="none")

@@ -29,6 +29,7 @@ from freespace.io import atomic_write_bytes, write_csv, write_json
 from freespace.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
 from freespace.outdir import claim_folder
+from freespace.predictor import check_weights, checkpoint_state_dict
 
 log = logging.getLogger(__name__)
 
@@ -85,7 +86,7 @@ def _callbacks(run_dir: Path, patience: int, monitor: str):
 RUN_ENTRIES = ("config.yaml", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/", "tensorboard/")
 
 
-def _checkpoint_io(run_dir: Path):
+def _checkpoint_io(run_dir: Path, module: torch.nn.Module | None = None):
     from lightning.pytorch.plugins.io import TorchCheckpointIO
 
     class RunCheckpointIO(TorchCheckpointIO):
@@ -95,6 +96,7 @@ def _checkpoint_io(run_dir: Path):
         Loading uses ``torch.load(weights_only=True)`` (a checkpoint runs no code), refuses a corrupt or
         crafted file with one line, and points every path that the checkpoint callback stored back into
         this run folder: a copied or moved run, or a crafted file, never reads or deletes files elsewhere.
+        With ``module``, weights and optimizer state that do not fit it are refused too.
         """
 
         def save_checkpoint(self, checkpoint: dict[str, Any], path, storage_options=None) -> None:
@@ -110,14 +112,51 @@ def _checkpoint_io(run_dir: Path):
             except Exception as exc:  # pickle, zip and torch errors: the file is not a plain checkpoint
                 raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged "
                                        f"({type(exc).__name__}); it was not loaded") from None
-            if not isinstance(checkpoint, dict) or "state_dict" not in checkpoint:
-                raise CorruptFileError(f"{path} is not a freespace training checkpoint")
+            _check_training_state(checkpoint, path)
+            if module is not None:
+                _check_fits(checkpoint, module, path)
             for state in (checkpoint.get("callbacks") or {}).values():
                 if isinstance(state, dict) and "dirpath" in state:
                     _confine_paths(state, Path(os.path.realpath(run_dir / "checkpoints")))  # as Lightning keeps it
             return checkpoint
 
     return RunCheckpointIO()
+
+
+#: the parts of a checkpoint that Lightning restores on resume, and their types
+_RESTORED = {"loops": dict, "callbacks": dict, "optimizer_states": list, "lr_schedulers": list, "epoch": int,
+             "global_step": int}
+
+
+def _check_training_state(checkpoint: Any, path: Path) -> None:
+    """Refuse a checkpoint whose weights, or the parts of it that Lightning restores, are not of the types
+    Lightning expects (a damaged or crafted file would otherwise end in a traceback deep inside it)."""
+    checkpoint_state_dict(checkpoint, path)
+    bad = [k for k, kind in _RESTORED.items() if k in checkpoint and not isinstance(checkpoint[k], kind)]
+    if not bad:
+        bad = [f"{part}[{k!r}]" for part in ("callbacks", "loops") for k, v in checkpoint.get(part, {}).items()
+               if not isinstance(v, dict)]
+        bad += [f"optimizer_states[{i}]" for i, o in enumerate(checkpoint.get("optimizer_states", []))
+                if not (isinstance(o, dict) and isinstance(o.get("state"), dict)
+                        and isinstance(o.get("param_groups"), list)
+                        and all(isinstance(g, dict) for g in o["param_groups"]))]
+    if bad:
+        raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged ({bad[0]} is not what "
+                               f"Lightning saves); it was not loaded")
+
+
+def _check_fits(checkpoint: dict[str, Any], module: torch.nn.Module, path: Path) -> None:
+    """Refuse a checkpoint whose weights or optimizer state do not fit ``module`` (the run's network)."""
+    check_weights(module, checkpoint["state_dict"], path)
+    params = list(module.parameters())
+    for opt in checkpoint.get("optimizer_states") or []:
+        for i, state in opt["state"].items():
+            fits = isinstance(i, int) and 0 <= i < len(params) and isinstance(state, dict) and all(
+                tuple(t.shape) == tuple(params[i].shape) for t in state.values()
+                if isinstance(t, torch.Tensor) and t.dim() > 0)  # momentum buffers; a step count is a scalar
+            if not fits:
+                raise CorruptFileError(f"{path}: its optimizer state does not fit the run's network (parameter {i!r}); "
+                                       f"it was not loaded")
 
 
 def _confine_paths(state: dict[str, Any], folder: Path) -> None:
@@ -173,7 +212,7 @@ def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> None:
         raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
                                  f"{run_dir} has none")
     saved = TrainConfig.load(run_dir / "config.yaml")
-    _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
+    resumed = _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
     if config.image_size is None:
         config.image_size = saved.image_size  # "auto" was resolved when the run started
     changed = [k for k, v in saved.to_dict().items()
@@ -182,6 +221,9 @@ def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> None:
     if changed:
         raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
                                  f"resume with the same options (only --epochs may grow)")
+    from freespace.models import create_model  # the run's network, named as in RoadModule: before any work
+
+    _check_fits(resumed, torch.nn.ModuleDict({"net": create_model(config.model, **config.model_options())}), last)
 
 
 def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
@@ -222,15 +264,16 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
         devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",
-        max_epochs=config.epochs, callbacks=callbacks, plugins=[_checkpoint_io(run_dir)],
+        max_epochs=config.epochs, callbacks=callbacks, plugins=[_checkpoint_io(run_dir, module)],
         logger=_logger(config, run_dir),
         default_root_dir=str(run_dir), num_sanity_val_steps=0, deterministic=True,
         enable_progress_bar=progress and on_terminal(), enable_model_summary=False, use_distributed_sampler=False,
         log_every_n_steps=1)
-    trainer.fit(module, loader(train, True), loader(val, False), ckpt_path=str(last) if resume else None)
+    _interruptible(trainer.fit, module, loader(train, True), loader(val, False),
+                   ckpt_path=str(last) if resume else None)
     best = run_dir / "checkpoints" / "best.ckpt"  # this folder's, whatever a resumed checkpoint recorded
     best = best if best.is_file() else last
-    trainer.test(module, loader(test, False), ckpt_path=str(best), verbose=False)
+    _interruptible(trainer.test, module, loader(test, False), ckpt_path=str(best), verbose=False)
     metrics = {**module.test_metrics, "best_epoch": _best_epoch(run_dir, monitored(config.val_window)),
                "epochs_run": trainer.current_epoch,
                "frames": {k: len(data[k]) for k in ("train", "val", "test")}, "image_size": list(size),
@@ -238,6 +281,29 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     if trainer.is_global_zero:
         write_json(run_dir / "metrics.json", metrics)
     return metrics
+
+
+def _interruptible(step: Any, *args: Any, **kwargs: Any) -> Any:
+    """``trainer.fit`` or ``trainer.test`` (``step``), where Ctrl-C stays a :class:`KeyboardInterrupt`.
+
+    Lightning catches Ctrl-C, tears the run down, ignores Ctrl-C from then on and calls ``sys.exit(1)``;
+    here that exit becomes the :class:`KeyboardInterrupt` again (the command line then says "interrupted",
+    exit code 130) and Ctrl-C is handled as before. Other exceptions, ``SIGTERM``'s
+    :class:`~freespace.errors.Terminated` included, Lightning passes on as they are.
+    """
+    import signal
+
+    trainer = step.__self__
+    handler = signal.getsignal(signal.SIGINT)
+    try:
+        return step(*args, **kwargs)
+    except SystemExit:
+        if trainer.interrupted:
+            raise KeyboardInterrupt from None
+        raise
+    finally:
+        if handler is not None and signal.getsignal(signal.SIGINT) is not handler:
+            signal.signal(signal.SIGINT, handler)
 
 
 def _logger(config: TrainConfig, run_dir: Path):

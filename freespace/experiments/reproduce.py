@@ -40,15 +40,17 @@ from typing import Any
 import numpy as np
 
 from freespace.engine.config import TrainConfig, read_config_yaml
-from freespace.errors import DatasetError, FreespaceError, InvalidOptionError
+from freespace.errors import CorruptFileError, DatasetError, FreespaceError, InvalidOptionError
 from freespace.experiments.stats import paired_gain
-from freespace.io import PathLike, atomic_write_bytes, atomic_write_text, write_csv, write_image, write_json
+from freespace.io import (PathLike, atomic_write_bytes, atomic_write_text, check_writable, write_csv, write_image,
+                          write_json)
 from freespace.outdir import claim_folder
 
 log = logging.getLogger(__name__)
 
-__all__ = ["reproduce", "run_cell", "write_tables", "parse_variants", "parse_cell", "parse_test_roots",
-           "evaluate_test_set", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "METRICS", "GAINS", "TestRoots"]
+__all__ = ["reproduce", "run_cell", "write_tables", "parse_models", "parse_variants", "parse_cell",
+           "parse_test_roots", "evaluate_test_set", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "METRICS", "GAINS",
+           "TestRoots"]
 
 @dataclass(frozen=True)
 class Variant:
@@ -95,7 +97,8 @@ GAIN_METRICS = ("f_score", "iou")
 #: the name of a ``--test-root`` given without one
 DEFAULT_TEST_SET = "shifted"
 #: names a further test set cannot take: the test split's, and the run folder's own entries
-_RESERVED_TEST_SETS = {"test", "metrics", "config", "splits", "generated", "checkpoints", "tensorboard"}
+_RESERVED_TEST_SETS = {"train", "val", "test", "metrics", "config", "splits", "generated", "checkpoints",
+                       "tensorboard"}
 _TEST_SET_NAME = re.compile(r"[a-z][a-z0-9_-]*")
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
 PAPER_GAINS = "HA gain in the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points"
@@ -112,6 +115,24 @@ OUT_ENTRIES = ("runs/", "index.json", "results.csv", "gains.csv", "results.md", 
 def _name(model: str, variant: str, seed: int) -> str:
     """The run folder of a cell: ``<model>-<tag>-s<seed>`` (``variant``: a table name)."""
     return f"{model}-{VARIANTS[variant].tag}-s{seed}"
+
+
+def parse_models(text: str | list[str] | tuple[str, ...] | None) -> list[str]:
+    """``"unet,segnet"`` (``--models``) → the networks, in the given order; ``"all"`` or None → every
+    registered network.
+
+    Raises:
+        InvalidOptionError: an unknown network, or none.
+    """
+    from freespace.models import list_models
+
+    if text is None or text == "all":
+        return list_models()
+    names = list(dict.fromkeys(n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()))
+    unknown = [n for n in names if n not in list_models()]
+    if unknown or not names:
+        raise InvalidOptionError(f"unknown models {unknown}; choose from {', '.join(list_models())} or all")
+    return names
 
 
 def parse_variants(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
@@ -181,15 +202,25 @@ def parse_test_roots(test_root: TestRoots) -> dict[str, Path]:
     return roots
 
 
-def _check_test_roots(dataset: str, roots: dict[str, Path]) -> None:
-    """Refuse a ``--test-root`` that is not a ``dataset`` tree with labelled frames, before any work."""
+def _check_test_roots(dataset: str, roots: dict[str, Path], train_root: PathLike) -> None:
+    """Refuse a ``--test-root`` that is not a ``dataset`` tree with labelled frames, or that holds frames of
+    the training data ``train_root`` (the same images, by resolved path: the same folder, or one inside
+    it), before any work."""
     from freespace.data.base import check_dataset_root
     from freespace.data.registry import get_dataset, get_dataset_class
 
-    for root in roots.values():
+    training: set[Path] | None = None
+    for name, root in roots.items():
         check_dataset_root(root, get_dataset_class(dataset).name)
-        if not get_dataset(dataset, root, disparity_mode="none").labelled().frames:
+        frames = get_dataset(dataset, root, disparity_mode="none").labelled().frames
+        if not frames:
             raise DatasetError(f"--test-root {root} has no labelled frames to test on")
+        if training is None:
+            training = {f.left.resolve() for f in get_dataset(dataset, train_root, disparity_mode="none").frames}
+        shared = [f.name for f in frames if f.left.resolve() in training]
+        if shared:
+            raise InvalidOptionError(f"--test-root {name}={root} holds {len(shared)} of --root's own frames (e.g. "
+                                     f"{shared[0]}); a further test set must be other data than the training set")
 
 
 def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, seed: int,
@@ -270,10 +301,15 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     path = run_dir / name / "metrics.json"
     root = str(Path(test_root).resolve())
     if path.is_file():
-        done = json.loads(path.read_text())
-        if done.get("root") == root:
+        done = _read_metrics(path)
+        if isinstance(done, dict) and done.get("root") == root:
             return done
-    checkpoint = run_dir / json.loads((run_dir / "metrics.json").read_text())["checkpoint"]
+    run = _read_metrics(run_dir / "metrics.json")
+    checkpoint = run_dir / str(run.get("checkpoint") if isinstance(run, dict) else "")
+    if isinstance(run, str) or not checkpoint.is_file() or not checkpoint.resolve().is_relative_to(run_dir.resolve()):
+        raise CorruptFileError(f"{run_dir / 'metrics.json'} names no checkpoint of the run "
+                               f"({run if isinstance(run, str) else 'checkpoint: ' + repr(checkpoint.name)}); "
+                               f"remove it to train the run again")
     predictor = Predictor(checkpoint=checkpoint)
     ds = get_dataset(dataset, test_root, disparity_mode="none")
     names = [f.name for f in ds.labelled().frames]
@@ -289,55 +325,55 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     return metrics
 
 
-def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: list[str], seeds: int = 3, epochs: int = 50,
-              image_size: tuple[int, int] | None = None, patience: int = 10, val_window: int = 1,
-              batch_size: int = 4, workers: int = 0,
-              max_frames: int | None = None, figures: int = 3, progress: bool = True,
-              variants: str | tuple[str, ...] = DEFAULT_VARIANTS, test_root: TestRoots = None,
-              only: str | None = None, encoder_name: str | None = None,
-              encoder_weights: str | None = None, autolabels: PathLike | None = None) -> dict[str, Any]:
+def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list[str] | None = None, seeds: int = 3,
+              epochs: int = 50, image_size: tuple[int, int] | None = None, patience: int = 10, val_window: int = 1,
+              batch_size: int = 4, workers: int = 0, max_frames: int | None = None, figures: int = 3,
+              progress: bool = True, variants: str | tuple[str, ...] | None = None, test_root: TestRoots = None,
+              only: str | None = None, encoder_name: str | None = None, encoder_weights: str | None = None,
+              autolabels: PathLike | None = None) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
     "runs": index}``.
 
-    ``variants``: table names from :data:`VARIANTS` (``X`` is always run: gains are against it); a variant's
-    ``budget`` multiplies ``epochs`` and ``patience`` (X-long).
+    ``models``: networks (:func:`parse_models`; None = all). ``variants``: table names from :data:`VARIANTS`
+    (None = :data:`DEFAULT_VARIANTS`; ``X`` is always run: gains are against it); a variant's ``budget``
+    multiplies ``epochs`` and ``patience`` (X-long).
     ``test_root``: further test sets (:func:`parse_test_roots`). ``autolabels``: the label tree of ``root``
     that X-auto and X-mix train on (``freespace autolabel --dataset``).
     ``encoder_name``, ``encoder_weights``: every run's encoder and its initial weights (``"imagenet"`` or a
     state-dict file; see :mod:`freespace.models.weights`), for the networks that take them.
-    ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell (``models`` and ``variants`` are then not used)
-    and writes only its run folder; the returned table and gains are then empty (collect the cells with
-    :func:`write_tables`).
+    ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell and writes only its run folder; ``models`` and
+    ``variants``, when given, must include it (a cluster job's command line stays consistent). The returned
+    table and gains are then empty (collect the cells with :func:`write_tables`).
     """
-    from freespace.models import list_models
-
     if not 1 <= seeds <= MAX_SEEDS:
         raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
     options = dict(epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window,
                    image_size=image_size, workers=workers, max_frames=max_frames, encoder_name=encoder_name,
                    encoder_weights=encoder_weights)
-    out = Path(out)
+    out = check_writable(out, folder=True)
     roots = parse_test_roots(test_root)
+    chosen_models = parse_models(models)
+    chosen = parse_variants(variants if variants is not None else DEFAULT_VARIANTS)
     if only is not None:
         model, variant, seed = parse_cell(only, seeds)
+        if (models is not None and model not in chosen_models) or (variants is not None and variant not in chosen):
+            what = (f"network {model!r} is not among --models" if model not in chosen_models
+                    else f"variant {variant!r} is not among --variants")
+            raise InvalidOptionError(f"--only {only}: its {what}; include it there, or leave the option out")
         config = _config(dataset, root, out, model, variant, seed, options, autolabels)
-        _check_test_roots(dataset, roots)
+        _check_test_roots(dataset, roots, root)
         with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
             status = run_cell(config, test_root=roots, progress=progress)
         entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": variant,
                  "augment": VARIANTS[variant].augment, "seed": seed, "status": status}
         return {"table": [], "gains": [], "runs": [entry]}
-    unknown = [m for m in models if m not in list_models()]
-    if unknown or not models:
-        raise InvalidOptionError(f"unknown models {unknown}; choose from {', '.join(list_models())} or all")
-    chosen = parse_variants(variants)
     configs = [_config(dataset, root, out, model, variant, seed, options, autolabels)  # all checked before any work
-               for model in models for variant in chosen for seed in range(seeds)]
+               for model in chosen_models for variant in chosen for seed in range(seeds)]
     changed = next(((c, ch) for c in configs if (ch := _cell_changes(c, Path(c.out)))), None)
     if changed is not None:
         raise InvalidOptionError(f"{changed[0].out} was started with other settings ({'; '.join(changed[1])}); rerun "
                                  f"with its settings, or give another --out for the new ones")
-    _check_test_roots(dataset, roots)
+    _check_test_roots(dataset, roots, root)
     statuses: dict[str, str] = {}
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
         for config in configs:
@@ -373,7 +409,12 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
                                  "variant": variant.name, "augment": variant.augment, "seed": int(config.get("seed", 0)),
                                  "status": "unfinished"}
         if (run_dir / "metrics.json").is_file():
-            metrics = json.loads((run_dir / "metrics.json").read_text())
+            metrics = _read_metrics(run_dir / "metrics.json")
+            if isinstance(metrics, str):
+                log.warning("%s skipped: %s", run_dir / "metrics.json", metrics)
+                entry["status"] = f"skipped: {metrics}"
+                entries.append(entry)
+                continue
             entry["status"] = (statuses or {}).get(run_dir.name, "done")
             entry["metrics"] = {k: metrics[k] for k in (*METRICS, "max_f", "ap")}
             entry.update(_convergence(metrics, config))
@@ -381,12 +422,11 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
                 name = path.parent.name
                 if name in _RESERVED_TEST_SETS:
                     continue
-                try:
-                    extra = json.loads(path.read_text())
-                    entry.setdefault("test_sets", {})[name] = {k: float(extra[k]) for k in (*METRICS, "max_f", "ap")}
-                except (ValueError, KeyError, TypeError) as exc:
-                    log.warning("%s skipped: not a test set's metrics (%s)", path, exc)
+                extra = _read_metrics(path)
+                if isinstance(extra, str):
+                    log.warning("%s skipped: %s", path, extra)
                     continue
+                entry.setdefault("test_sets", {})[name] = {k: extra[k] for k in (*METRICS, "max_f", "ap")}
                 settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
         for key in ("dataset", "root", "epochs", "patience", "val_window", "batch_size", "max_frames", *_PER_NETWORK):
             value = config.get(key)
@@ -415,6 +455,25 @@ def _convergence(metrics: dict[str, Any], config: dict[str, Any]) -> dict[str, A
     found["stopped_by"] = None if found["epochs_run"] is None or not isinstance(cap, int) else \
         "cap" if found["epochs_run"] >= cap else "patience"
     return found
+
+
+def _read_metrics(path: Path) -> dict[str, Any] | str:
+    """A run's (or a further test set's) ``metrics.json``, its scores checked: fractions in [0, 1]; or, for a
+    file that cannot be used (damaged, scores missing, NaN or out of range), the reason as one line."""
+    try:
+        metrics = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        return f"not readable as JSON ({type(exc).__name__})"
+    if not isinstance(metrics, dict):
+        return "not a mapping of metrics"
+    missing = [k for k in (*METRICS, "max_f", "ap") if k not in metrics]
+    if missing:
+        return f"no {', '.join(missing)}"
+    bad = [k for k in (*METRICS, "max_f", "ap") if isinstance(metrics[k], bool)
+           or not isinstance(metrics[k], (int, float)) or not 0 <= metrics[k] <= 1]  # NaN fails 0 <= NaN
+    if bad:
+        return f"{bad[0]} is {metrics[bad[0]]!r}, not a fraction in [0, 1]"
+    return {**metrics, **{k: float(metrics[k]) for k in (*METRICS, "max_f", "ap")}}
 
 
 def _values(entries: list[dict[str, Any]], model: str, variant: str, test_set: str) -> dict[int, dict[str, float]]:
@@ -534,7 +593,10 @@ def _write_tables(out: Path, entries: list[dict[str, Any]], differ: list[str], f
     if figures > 0:
         for model in _models(entries):
             _gain_figure(out, model, [g for g in gains if g["network"] == model])
-            _figure(out, model, entries, figures)
+            try:
+                _figure(out, model, entries, figures)
+            except FreespaceError as exc:  # a moved dataset, a damaged checkpoint: the tables stand without it
+                log.warning("figures/%s.png skipped: %s", model, exc)
     return {"table": table, "gains": gains, "runs": entries}
 
 
@@ -544,10 +606,12 @@ _NAMES = {"accuracy": "Accuracy", "precision": "Precision", "recall": "Recall", 
 def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[str, Any]],
                     gains: list[dict[str, Any]], differ: list[str]) -> None:
     finished = sum("metrics" in e for e in entries)
-    md = [f"Results of {finished} finished run{'s' if finished != 1 else ''} ({len(entries) - finished} unfinished): "
-          f"test set `test` = the dataset's test split, any other = every labelled frame of the `--test-root` of "
-          f"that name (`shifted` when it was given none); "
-          f"%, mean ± std over the `n` seeds finished.", ""]
+    skipped = sum(e["status"].startswith("skipped") for e in entries)
+    md = [f"Results of {finished} finished run{'s' if finished != 1 else ''} ({len(entries) - finished - skipped} "
+          "unfinished" + (f", {skipped} skipped for unusable metrics.json" if skipped else "") + "): "
+          "test set `test` = the dataset's test split, any other = every labelled frame of the `--test-root` of "
+          "that name (`shifted` when it was given none); "
+          "%, mean ± std over the `n` seeds finished.", ""]
     if differ:
         md += [f"**Warning: the runs differ in {'; '.join(differ)}.**", ""]
     md += ["| Network | Variant | Test set | n | " + " | ".join(_NAMES.values()) + " |",

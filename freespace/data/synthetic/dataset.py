@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import csv
 import json
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -31,8 +29,8 @@ import numpy as np
 from freespace.data.synthetic.render import StereoSample, render_sample
 from freespace.data.synthetic.scene import SynthConfig
 from freespace.errors import InvalidOptionError, check_seed
-from freespace.io import (PathLike, atomic_write_text, road_label_to_kitti, write_csv, write_disparity, write_image,
-                          write_json)
+from freespace.io import (PathLike, atomic_write_text, check_writable, road_label_to_kitti, write_csv,
+                          write_disparity, write_image, write_json)
 from freespace.outdir import claim_folder
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
@@ -84,9 +82,9 @@ def _render_and_write(job: tuple[int, int, SynthConfig, str]) -> dict[str, Any]:
 def _init_worker(parent: int) -> None:
     import cv2
 
-    from freespace.parallel import die_with_parent
+    from freespace.parallel import init_worker
 
-    die_with_parent(parent)
+    init_worker(parent)
     cv2.setNumThreads(1)
 
 
@@ -141,8 +139,7 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
     if workers < 1:
         raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InvalidOptionError(f"--out {out} is a file; give a folder for the dataset")
+    check_writable(out, folder=True)
     # pitch_sign: index.csv's pitch_deg and --pitches were positive up before they followed the package
     settings = {"seed": seed, "pitch_sign": PITCH_SIGN, "config": json.loads(json.dumps(asdict(config)))}
     with claim_folder(out, "synth", entries=OUT_ENTRIES) as folder:
@@ -167,8 +164,9 @@ def _render_frames(out: Path, num: int, seed: int, config: SynthConfig, settings
             rows.append(_render_and_write(job))
             bar.update()
     else:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(os.getpid(),),
-                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+        from freespace.parallel import worker_pool
+
+        with worker_pool(workers, _init_worker, (os.getpid(),)) as pool:  # ends at once on Ctrl-C
             for row in pool.map(_render_and_write, jobs, chunksize=max(1, min(64, num // (4 * workers)))):
                 rows.append(row)
                 bar.update()
