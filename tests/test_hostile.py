@@ -1295,6 +1295,14 @@ def test_onnx_failing_at_run_time(trained: dict[str, Path], tmp_path: Path, caps
     _predict_refused(capsys, trained, tmp_path, ["--onnx", str(model)], "the ONNX model failed")
 
 
+def _reproduce_folder(out: Path):
+    """``out`` claimed as reproduce's output folder (its manifest), for run folders made by hand inside."""
+    from freespace.experiments.reproduce import OUT_ENTRIES
+    from freespace.outdir import claim_folder
+
+    return claim_folder(out, "reproduce", entries=OUT_ENTRIES)
+
+
 def _fake_cell(runs: Path, seed: int, metrics: str | None) -> Path:
     """A run folder of reproduce's X arm for segnet (config.yaml) with ``metrics`` as its metrics.json."""
     run = runs / f"segnet-orig-s{seed}"
@@ -1309,13 +1317,14 @@ def _fake_cell(runs: Path, seed: int, metrics: str | None) -> Path:
 def test_tables_skip_unusable_cells_and_write_no_nan(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     good = {"accuracy": 0.9, "precision": 0.8, "recall": 0.7, "f_score": 0.75, "iou": 0.6, "max_f": 0.8, "ap": 0.85}
     runs = tmp_path / "out" / "runs"
-    _fake_cell(runs, 0, json.dumps(good))
-    _fake_cell(runs, 1, "{not json")
-    _fake_cell(runs, 2, json.dumps({"accuracy": 0.9}))
-    _fake_cell(runs, 3, json.dumps(good).replace("0.75", "NaN"))
-    shifted = _fake_cell(runs, 4, json.dumps(good)) / "shifted"
-    shifted.mkdir()
-    (shifted / "metrics.json").write_text(json.dumps({**good, "iou": "high"}))
+    with _reproduce_folder(tmp_path / "out"):
+        _fake_cell(runs, 0, json.dumps(good))
+        _fake_cell(runs, 1, "{not json")
+        _fake_cell(runs, 2, json.dumps({"accuracy": 0.9}))
+        _fake_cell(runs, 3, json.dumps(good).replace("0.75", "NaN"))
+        shifted = _fake_cell(runs, 4, json.dumps(good)) / "shifted"
+        shifted.mkdir()
+        (shifted / "metrics.json").write_text(json.dumps({**good, "iou": "high"}))
     capsys.readouterr()
     assert main(["reproduce", "--tables", "--out", str(tmp_path / "out")]) == 0
     err = capsys.readouterr().err
