@@ -13,11 +13,14 @@
 # test-set metrics; never checkpoints or views) are copied to runs/ beside this script, and the tables are
 # rebuilt there; on a new machine the copied cells are restored into WORK first, so they are not run again.
 #
-# Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace; STOP_AT: a `date` time after
-#        which no new cell starts, e.g. "14:10"; CELLS="net,variant,seed ..." to run only those)
+# Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace, PYTHON=its python; STOP_AT: a
+#        `date` time after which no new cell starts, e.g. "14:10"; CELLS="net,variant,seed ..." to run only
+#        those; KEEP=DIR to keep the finished cells elsewhere than beside this script). Run it from a git
+#        worktree pinned at one commit (git worktree add --detach DIR COMMIT), so that other work does not
+#        change the code under the cells; the commit of each session's cells is in plan.md.
 set -euo pipefail
 FS=${FREESPACE:-freespace}
-HERE=$(cd "$(dirname "$0")" && pwd)
+HERE=${KEEP:-$(cd "$(dirname "$0")" && pwd)}  # where finished cells are kept (default: beside this script)
 WORK=$1
 STOP_AT=$(date -d "${2:-tomorrow}" +%s)
 mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
