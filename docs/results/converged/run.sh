@@ -13,6 +13,8 @@
 # test-set metrics; never checkpoints or views) are copied to runs/ beside this script, and the tables are
 # rebuilt there; on a new machine the copied cells are restored into WORK first, so they are not run again.
 #
+# The control of pretraining (X with the Lite encoders from scratch, kept in res-scratch/ beside this script):
+#   RES=res-scratch WEIGHTS= NETS="unet dupsampling" VARIANTS=X bash run.sh WORK
 # Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace, PYTHON=its python; STOP_AT: a
 #        `date` time after which no new cell starts, e.g. "14:10"; CELLS="net,variant,seed ..." to run only
 #        those; KEEP=DIR to keep the finished cells elsewhere than beside this script). Run it from a git
@@ -21,6 +23,9 @@
 set -euo pipefail
 FS=${FREESPACE:-freespace}
 HERE=${KEEP:-$(cd "$(dirname "$0")" && pwd)}  # where finished cells are kept (default: beside this script)
+RES=${RES:-res}                      # the reproduce folder in WORK; res-scratch: encoders from scratch
+WEIGHTS=${WEIGHTS-imagenet}          # the Lite encoders' initial weights; WEIGHTS= (empty) for from scratch
+[ "$RES" = res ] || HERE="$HERE/$RES"
 WORK=$1
 STOP_AT=$(date -d "${2:-tomorrow}" +%s)
 mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
@@ -38,30 +43,32 @@ mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
 NETS=${NETS:-"unet dupsampling segnet denseaspp deeplabv3plus"}
 VARIANTS=${VARIANTS:-"X HA-X X-dup X-long"}
 SEEDS=${SEEDS:-10}
-export FS WORK HERE STOP_AT
+export FS WORK HERE STOP_AT RES WEIGHTS
 COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root matched=matched
         --test-root same-rigs=same-rigs --seeds 10
-        --epochs 100 --patience 10 --val-window 3 --batch-size 2 --no-progress --out res"
+        --epochs 100 --patience 10 --val-window 3 --batch-size 2 --no-progress --out $RES"
 export COMMON
 
 PY=${PYTHON:-$(dirname "$(command -v "$FS")")/python}
-export PY
+SYNC=$(cd "$(dirname "$0")" && pwd)/sync.py
+export PY SYNC
 # restore the cells finished on another machine (their small files; a finished cell is never trained again)
-$PY "$HERE/sync.py" restore "$HERE" res
+$PY "$SYNC" restore "$HERE" "$RES"
 
 cell() {  # net,variant,seed
   IFS=, read -r net variant seed <<< "$1"
   [ "$(date +%s)" -lt "$STOP_AT" ] || { echo "$(date +%T) not started (STOP_AT) $1"; return 0; }
   case $net in
-    deeplabv3plus) opts="--image-size 320x416 --encoder-name efficientnet-lite0 --encoder-weights imagenet" ;;
+    deeplabv3plus) opts="--image-size 320x416 --encoder-name efficientnet-lite0" ;;
     denseaspp) opts="--image-size 224x288" ;;
-    unet|dupsampling) opts="--image-size 192x256 --encoder-name efficientnet-lite0 --encoder-weights imagenet" ;;
+    unet|dupsampling) opts="--image-size 192x256 --encoder-name efficientnet-lite0" ;;
     segnet) opts="--image-size 192x256" ;;
   esac
-  log="logs/$(echo "$1" | tr , _).log"
+  case $net in deeplabv3plus|unet|dupsampling) opts="$opts${WEIGHTS:+ --encoder-weights $WEIGHTS}" ;; esac
+  log="logs/$RES-$(echo "$1" | tr , _).log"
   if OMP_NUM_THREADS=1 $FS reproduce $COMMON $opts --only "$1" > "$log" 2>&1; then
     run=$(grep -o 'runs/[^:]*' "$log" | tail -1)
-    $PY "$HERE/sync.py" save res "${run#runs/}" "$HERE"
+    $PY "$SYNC" save "$RES" "${run#runs/}" "$HERE"
     echo "$(date +%T) done $1"
   else
     echo "$(date +%T) FAILED $1 (see $WORK/$log)"
@@ -76,6 +83,6 @@ else
 fi | xargs -P 2 -I{} bash -c 'cell {}'
 
 # the tables of every finished cell, copied beside this script
-$FS reproduce --tables --out res > logs/tables.log 2>&1 || { tail -3 logs/tables.log; exit 1; }
-cp res/results.md res/results.csv res/gains.csv res/index.json "$HERE/"
-mkdir -p "$HERE/figures" && cp res/figures/gains_*.png "$HERE/figures/" 2>/dev/null || true
+$FS reproduce --tables --out "$RES" > "logs/$RES-tables.log" 2>&1 || { tail -3 "logs/$RES-tables.log"; exit 1; }
+cp "$RES"/results.md "$RES"/results.csv "$RES"/gains.csv "$RES"/index.json "$HERE/"
+mkdir -p "$HERE/figures" && cp "$RES"/figures/gains_*.png "$HERE/figures/" 2>/dev/null || true
