@@ -23,7 +23,23 @@ if TYPE_CHECKING:
 
     from freespace.models import SegmentationModel
 
-__all__ = ["load_checkpoint", "checkpoint_state_dict", "rebuild_model", "check_weights", "Predictor"]
+__all__ = ["load_checkpoint", "read_checkpoint_file", "checkpoint_state_dict", "rebuild_model", "check_weights", "Predictor"]
+
+
+def read_checkpoint_file(path: PathLike) -> Any:
+    """``torch.load(path, weights_only=True)`` on the CPU: a checkpoint runs no code. A damaged or crafted
+    file (pickle, zip or torch errors) ends in one :class:`CorruptFileError` line."""
+    import warnings
+
+    import torch
+
+    try:
+        with warnings.catch_warnings():  # torch warns about the pickle protocol of crafted files
+            warnings.simplefilter("ignore")
+            return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # pickle, zip and torch errors: the file is not a plain checkpoint
+        raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged "
+                               f"({type(exc).__name__}); it was not loaded") from None
 
 
 def load_checkpoint(path: PathLike) -> tuple[SegmentationModel, dict[str, Any]]:
@@ -37,20 +53,10 @@ def load_checkpoint(path: PathLike) -> tuple[SegmentationModel, dict[str, Any]]:
         InputFileError: the file is missing. CorruptFileError: it is not a freespace training checkpoint,
         or its weights do not fit the network (the message says which).
     """
-    import warnings
-
-    import torch
-
     path = Path(path)
     if not path.is_file():
         raise missing_input(path, "checkpoint")
-    try:
-        with warnings.catch_warnings():  # torch warns about the pickle protocol of crafted files
-            warnings.simplefilter("ignore")
-            ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # pickle, zip and torch errors: the file is not a plain checkpoint
-        raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged "
-                               f"({type(exc).__name__})") from None
+    ckpt = read_checkpoint_file(path)
     state = checkpoint_state_dict(ckpt, path)
     hp = ckpt.get("hyper_parameters")
     if not isinstance(hp, dict) or not isinstance(hp.get("model"), str) \

@@ -14,7 +14,6 @@ import csv
 import io as _io
 import logging
 import os
-import warnings
 import time
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ from freespace.io import atomic_write_bytes, write_csv, write_json
 from freespace.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
 from freespace.outdir import claim_folder
-from freespace.predictor import check_weights, checkpoint_state_dict
+from freespace.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 
 log = logging.getLogger(__name__)
 
@@ -105,13 +104,7 @@ def _checkpoint_io(run_dir: Path, module: torch.nn.Module | None = None):
             atomic_write_bytes(path, buf.getvalue())
 
         def load_checkpoint(self, path, map_location=None, weights_only=None) -> dict[str, Any]:
-            try:
-                with warnings.catch_warnings():  # torch warns about the pickle protocol of crafted files
-                    warnings.simplefilter("ignore")
-                    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-            except Exception as exc:  # pickle, zip and torch errors: the file is not a plain checkpoint
-                raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged "
-                                       f"({type(exc).__name__}); it was not loaded") from None
+            checkpoint = read_checkpoint_file(path)
             _check_training_state(checkpoint, path)
             if module is not None:
                 _check_fits(checkpoint, module, path)
