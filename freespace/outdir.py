@@ -80,13 +80,6 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def _shown(name: object) -> str:
-    """``name`` for a one-line message: as it is, or quoted with escapes when it holds a newline or
-    another unprintable character."""
-    text = str(name)
-    return text if text.isprintable() else ascii(text)
-
-
 def _valid_entry(entry: str) -> bool:
     """Whether ``entry`` is a manifest entry: plain names joined by ``/`` (``"dir/"`` a subtree), no ``..``,
     ``.``, empty or absolute path, and not inside :data:`META`."""
@@ -162,12 +155,12 @@ class OwnedFolder:
         link on the way leads out of it)."""
         target = self.path / rel
         if not target.parent.resolve().is_relative_to(self.path.resolve()):
-            raise OutputError(f"{self.flag} {_shown(self.path)}: {_shown(rel)} lies outside it through a symbolic "
+            raise OutputError(f"{self.flag} {self.path}: {rel} lies outside it through a symbolic "
                               f"link; remove that link or choose another {self.flag}")
         return target
 
     def _clash(self, rel: str) -> OutputError:
-        return OutputError(f"{self.flag} {_shown(self.path)} has a folder {_shown(rel)} where freespace "
+        return OutputError(f"{self.flag} {self.path} has a folder {rel} where freespace "
                            f"{self.command} writes a file; move it away or choose another {self.flag}")
 
     # -- staged output --------------------------------------------------------------------------------
@@ -223,7 +216,7 @@ def _read_manifest(path: Path) -> tuple[str | None, list[str]]:
         return None, []
     bad = next((e for e in entries if not _valid_entry(e)), None)
     if bad is not None:
-        raise CorruptFileError(f"{_shown(path)} lists {bad!r}, which is no path inside its folder (edited by hand?); "
+        raise CorruptFileError(f"{path} lists {bad!r}, which is no path inside its folder (edited by hand?); "
                                f"freespace follows no such entry: remove it from the manifest")
     return command, entries
 
@@ -249,7 +242,7 @@ def _open_lock(path: Path) -> int:
     try:
         return os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666 & ~_umask())
     except OSError as exc:
-        raise OutputError(f"cannot write {_shown(path)}: {exc.strerror}; remove it or choose another output "
+        raise OutputError(f"cannot write {path}: {exc.strerror}; remove it or choose another output "
                           f"folder") from None
 
 
@@ -314,24 +307,24 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
     """
     out = Path(out)
     if out.exists() and not out.is_dir():
-        raise InvalidOptionError(f"{flag} {_shown(out)} is a file; give a folder")
+        raise InvalidOptionError(f"{flag} {out} is a file; give a folder")
     meta = out / META
     if meta.is_symlink() or (meta.exists() and not meta.is_dir()):
-        raise InvalidOptionError(f"{flag} {_shown(out)} holds {META}, which is not a folder but a link or a file; "
+        raise InvalidOptionError(f"{flag} {out} holds {META}, which is not a folder but a link or a file; "
                                  f"freespace keeps its manifest there: move it away or choose another {flag}")
     enclosing = _enclosing(out)
     if enclosing is not None:
-        raise InvalidOptionError(f"{flag} {_shown(out)} lies inside {_shown(enclosing[2])} of {_shown(enclosing[0])}, "
+        raise InvalidOptionError(f"{flag} {out} lies inside {enclosing[2]} of {enclosing[0]}, "
                                  f"the output of freespace {enclosing[1]}, which replaces it; choose a folder "
                                  f"outside it")
     owner, known = _read_manifest(meta / MANIFEST)
     if out.is_dir():
         if owner is not None and owner != command:
-            raise InvalidOptionError(f"{flag} {_shown(out)} holds the output of freespace {owner}; choose another "
+            raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another "
                                      f"{flag} for freespace {command}")
         stray = _unknown_file(out, set(known))
         if stray is not None:
-            raise InvalidOptionError(f"{flag} {_shown(out)} holds {_shown(stray)}, which freespace {command} did not "
+            raise InvalidOptionError(f"{flag} {out} holds {stray}, which freespace {command} did not "
                                      f"write; choose a new or empty folder, or move that file away")
     existing = out
     while not existing.exists() and existing != existing.parent:
@@ -339,7 +332,7 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
     try:
         meta.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise OutputError(f"cannot write {_shown(out)}: {exc.strerror}; choose a writable output folder") from None
+        raise OutputError(f"cannot write {out}: {exc.strerror}; choose a writable output folder") from None
     fd = _open_lock(meta / _LOCK)
     held = out.resolve()
     try:
@@ -348,11 +341,11 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         except OSError as exc:
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
                 raise
-            raise InvalidOptionError(f"another freespace run is writing to {flag} {_shown(out)}; wait for it to end "
+            raise InvalidOptionError(f"another freespace run is writing to {flag} {out}; wait for it to end "
                                      f"or choose another {flag}") from None
         owner, known = _read_manifest(meta / MANIFEST)  # as it is now that the lock is held
         if owner is not None and owner != command:
-            raise InvalidOptionError(f"{flag} {_shown(out)} holds the output of freespace {owner}; choose another "
+            raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another "
                                      f"{flag}")
         _remove_stale_stages(meta, alone=not shared)
         if not shared:

@@ -280,12 +280,3 @@ def test_a_folder_inside_another_commands_subtree_is_refused(tmp_path: Path) -> 
         with claim_folder(tmp_path / "demo" / "dataset", "synth"):  # by hand, later: the demo's own
             pass
 
-
-def test_a_name_with_a_newline_stays_on_one_line(tmp_path: Path) -> None:
-    out = tmp_path / "out\nput"
-    out.mkdir()
-    (out / "notes\n.txt").write_text("mine")
-    with pytest.raises(InvalidOptionError) as info:
-        with claim_folder(out, "predict"):
-            pass
-    assert "\n" not in str(info.value) and "notes\\n.txt" in str(info.value)

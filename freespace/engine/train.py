@@ -181,8 +181,10 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
     deterministic = torch.are_deterministic_algorithms_enabled()
     try:
         return _run(config, resume, progress)
-    finally:  # Lightning's deterministic mode is process-wide: give the caller its own setting back
-        torch.use_deterministic_algorithms(deterministic)
+    finally:  # Lightning's deterministic mode is process-wide: give the caller its own setting back (only when
+        # changed: the call imports torch._inductor, which fails after Ctrl-C cut an import of Lightning short)
+        if torch.are_deterministic_algorithms_enabled() != deterministic:
+            torch.use_deterministic_algorithms(deterministic)
 
 
 def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
