@@ -1595,3 +1595,16 @@ def test_issue20b_ctrl_c_during_the_lightning_import_stays_an_interrupt(monkeypa
     monkeypatch.setattr(torch, "use_deterministic_algorithms", broken)
     with pytest.raises(KeyboardInterrupt):
         train.run_training(None, False, False)  # type: ignore[arg-type]
+
+
+def test_issue20b_a_mistake_found_before_the_first_checkpoint_leaves_no_run(trained: dict[str, Path], tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture) -> None:
+    """A corrupt frame found once training has started writing its run folder: one line, and the new
+    folder (with the folders made for it) is gone, as for every other command."""
+    data = tmp_path / "data"
+    shutil.copytree(trained["data"], data)
+    sorted((data / "data_road" / "training" / "image_2").iterdir())[0].write_bytes(b"junk")
+    refused(capsys, ["train", "--dataset", "synth", "--root", str(data), "--model", "segnet", "--epochs", "1",
+                     "--image-size", "64x64", "--no-progress", "--out", str(tmp_path / "new" / "run")],
+            match="cannot decode")
+    assert not (tmp_path / "new").exists()
