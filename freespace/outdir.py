@@ -56,7 +56,8 @@ META = ".freespace"
 MANIFEST = "manifest.json"
 _LOCK = "lock"
 _STAGE = "stage-"
-#: what a killed :func:`tempfile.mkstemp`-based atomic write leaves beside its target NAME
+#: what a killed atomic write (:func:`freespace.io.atomic_write_bytes`, :func:`write_files_together`: a
+#: :func:`tempfile.mkstemp` file) leaves beside its target NAME
 _TEMP = re.compile(r"\.(.+)\.[a-z0-9_]{8}\.tmp")
 #: folders (resolved) that this process holds now: a folder claimed inside one of them is its own nesting
 _HELD: dict[Path, int] = {}
@@ -87,15 +88,21 @@ def _valid_entry(entry: str) -> bool:
     return "\0" not in entry and parts[0] != META and all(p not in ("", ".", "..") for p in parts)
 
 
+def _written_by_a_killed_write(rel: str) -> str | None:
+    """The path whose atomic write left ``rel`` (a POSIX path relative to the folder) when it was killed,
+    or None when ``rel`` is no such temporary file."""
+    head, _, name = rel.rpartition("/")
+    temp = _TEMP.fullmatch(name)
+    return None if temp is None else (head + "/" if head else "") + temp.group(1)
+
+
 def _known(rel: str, entries: set[str]) -> bool:
     """Whether ``rel`` (a POSIX path relative to the folder) is an entry or lies in a ``"dir/"`` entry;
     a ``"dir/"`` path (a folder) is covered by ``"dir/"`` entries only, and so is a temporary file that a
     killed atomic write left beside an entry."""
     if rel in entries:
         return True
-    head, _, name = rel.rpartition("/")
-    temp = _TEMP.fullmatch(name)
-    if temp is not None and (head + "/" if head else "") + temp.group(1) in entries:
+    if _written_by_a_killed_write(rel) in entries:
         return True
     parts = rel.split("/")
     return any("/".join(parts[:i]) + "/" in entries for i in range(1, len(parts)))
@@ -155,13 +162,13 @@ class OwnedFolder:
         link on the way leads out of it)."""
         target = self.path / rel
         if not target.parent.resolve().is_relative_to(self.path.resolve()):
-            raise OutputError(f"{self.flag} {self.path}: {rel} lies outside it through a symbolic "
-                              f"link; remove that link or choose another {self.flag}")
+            raise OutputError(f"{self.flag} {self.path}: {rel} lies outside it through a symbolic link; remove that "
+                              f"link or choose another {self.flag}")
         return target
 
     def _clash(self, rel: str) -> OutputError:
-        return OutputError(f"{self.flag} {self.path} has a folder {rel} where freespace "
-                           f"{self.command} writes a file; move it away or choose another {self.flag}")
+        return OutputError(f"{self.flag} {self.path} has a folder {rel} where freespace {self.command} writes a "
+                           f"file; move it away or choose another {self.flag}")
 
     # -- staged output --------------------------------------------------------------------------------
 
@@ -188,13 +195,13 @@ class OwnedFolder:
             written = {p.relative_to(stage).as_posix() for p in files}
             stale = self.entries() - written if replace else set()
             stale = {e for e in stale if not any(w.startswith(e) for w in written if e.endswith("/"))}
-            targets = [self._inside(w) for w in sorted(written)]
-            clash = next((w for w, t in zip(sorted(written), targets) if t.is_dir() and not t.is_symlink()), None)
+            targets = {w: self._inside(w) for w in sorted(written)}
+            clash = next((w for w, t in targets.items() if t.is_dir() and not t.is_symlink()), None)
             if clash is not None:
                 raise self._clash(clash)
             self.record(written)
             for path in files:
-                target = self._inside(path.relative_to(stage).as_posix())
+                target = targets[path.relative_to(stage).as_posix()]
                 target.parent.mkdir(parents=True, exist_ok=True)
                 os.replace(path, target)
             if stale:
@@ -242,8 +249,7 @@ def _open_lock(path: Path) -> int:
     try:
         return os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666 & ~_umask())
     except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror}; remove it or choose another output "
-                          f"folder") from None
+        raise OutputError(f"cannot write {path}: {exc.strerror}; remove it or choose another output folder") from None
 
 
 def _enclosing(out: Path) -> tuple[Path, str, str] | None:
@@ -320,12 +326,12 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
     owner, known = _read_manifest(meta / MANIFEST)
     if out.is_dir():
         if owner is not None and owner != command:
-            raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another "
-                                     f"{flag} for freespace {command}")
+            raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another {flag} for "
+                                     f"freespace {command}")
         stray = _unknown_file(out, set(known))
         if stray is not None:
-            raise InvalidOptionError(f"{flag} {out} holds {stray}, which freespace {command} did not "
-                                     f"write; choose a new or empty folder, or move that file away")
+            raise InvalidOptionError(f"{flag} {out} holds {stray}, which freespace {command} did not write; choose a "
+                                     f"new or empty folder, or move that file away")
     existing = out
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent  # the folders below it are created here, and removed if left empty
@@ -341,12 +347,11 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         except OSError as exc:
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
                 raise
-            raise InvalidOptionError(f"another freespace run is writing to {flag} {out}; wait for it to end "
-                                     f"or choose another {flag}") from None
+            raise InvalidOptionError(f"another freespace run is writing to {flag} {out}; wait for it to end or "
+                                     f"choose another {flag}") from None
         owner, known = _read_manifest(meta / MANIFEST)  # as it is now that the lock is held
         if owner is not None and owner != command:
-            raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another "
-                                     f"{flag}")
+            raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another {flag}")
         _remove_stale_stages(meta, alone=not shared)
         if not shared:
             _remove_killed_writes(out, set(known))
@@ -406,8 +411,8 @@ def _remove_killed_writes(out: Path, entries: set[str]) -> None:
         if not folder.is_dir() or not folder.resolve().is_relative_to(out.resolve()):
             continue
         for path in folder.iterdir():
-            temp = _TEMP.fullmatch(path.name)
-            if temp is not None and (f"{rel}/" if rel else "") + temp.group(1) in entries and not path.is_dir():
+            if _written_by_a_killed_write(f"{rel}/{path.name}" if rel else path.name) in entries \
+                    and not path.is_dir():
                 path.unlink(missing_ok=True)
 
 
