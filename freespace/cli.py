@@ -738,8 +738,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             _refuse_extra_arguments(parser, extra)
         setup_logging(-1 if args.quiet else args.verbose)
         return int(args.func(args))
-    except FreespaceError as exc:
-        print(f"freespace: error: {exc}", file=sys.stderr)
+    except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
+        message = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in str(exc))
+        print(f"freespace: error: {message}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
         print("freespace: interrupted", file=sys.stderr)

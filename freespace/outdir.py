@@ -14,6 +14,18 @@ name and every entry it wrote (``"name"`` a file, ``"name/"`` a whole subtree, e
   into place file by file (one atomic rename each) when the block ends; an interrupted stage
   (SIGINT, SIGTERM, or SIGKILL) is removed by the next run that claims the folder.
 
+Entries are confined to the folder. A manifest entry must be a relative POSIX path of plain names (no
+``..``, ``.``, empty or absolute path, nor one inside ``.freespace``); a manifest that lists another is
+refused in one line (it was edited by hand or crafted), never followed. A file entry (``"name"``) covers a
+file (or link) only, never a folder of that name; entries are deleted or written only where their parent
+folder lies inside the output folder (a symbolic link inside it that leads out is refused), and a link is
+deleted as a link, never followed. ``.freespace`` must be a real folder, not a link. An output folder that
+lies inside a ``"dir/"`` entry of another command's output folder (which that command may replace) is
+refused, unless the command writing that enclosing folder is this very run (``demo`` writes its
+``dataset/`` with ``synth``, ``reproduce`` its ``runs/`` with ``train``). Temporary files that a killed
+atomic write leaves beside an entry (``.NAME.XXXXXXXX.tmp``) count as the command's and are removed by the
+next run that holds the folder alone.
+
 The folder itself is never renamed or replaced, so an ``--out`` that is a symbolic link stays one, and
 ``--out .`` works. Files are listed in the manifest **before** they are written (in place or by a
 stage), so a run killed half-way leaves only files that its next run knows.
@@ -28,13 +40,14 @@ import errno
 import fcntl
 import json
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 
-from freespace.errors import InvalidOptionError, OutputError
+from freespace.errors import CorruptFileError, InvalidOptionError, OutputError
 
 PathLike = str | os.PathLike[str]
 
@@ -43,6 +56,11 @@ META = ".freespace"
 MANIFEST = "manifest.json"
 _LOCK = "lock"
 _STAGE = "stage-"
+#: what a killed atomic write (:func:`freespace.io.atomic_write_bytes`, :func:`write_files_together`: a
+#: :func:`tempfile.mkstemp` file) leaves beside its target NAME
+_TEMP = re.compile(r"\.(.+)\.[a-z0-9_]{8}\.tmp")
+#: folders (resolved) that this process holds now: a folder claimed inside one of them is its own nesting
+_HELD: dict[Path, int] = {}
 
 __all__ = ["OwnedFolder", "claim_folder", "write_files_together", "META"]
 
@@ -63,9 +81,28 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _valid_entry(entry: str) -> bool:
+    """Whether ``entry`` is a manifest entry: plain names joined by ``/`` (``"dir/"`` a subtree), no ``..``,
+    ``.``, empty or absolute path, and not inside :data:`META`."""
+    parts = (entry[:-1] if entry.endswith("/") else entry).split("/")
+    return "\0" not in entry and parts[0] != META and all(p not in ("", ".", "..") for p in parts)
+
+
+def _written_by_a_killed_write(rel: str) -> str | None:
+    """The path whose atomic write left ``rel`` (a POSIX path relative to the folder) when it was killed,
+    or None when ``rel`` is no such temporary file."""
+    head, _, name = rel.rpartition("/")
+    temp = _TEMP.fullmatch(name)
+    return None if temp is None else (head + "/" if head else "") + temp.group(1)
+
+
 def _known(rel: str, entries: set[str]) -> bool:
-    """Whether ``rel`` (a POSIX path relative to the folder) is an entry or lies in a ``"dir/"`` entry."""
+    """Whether ``rel`` (a POSIX path relative to the folder) is an entry or lies in a ``"dir/"`` entry;
+    a ``"dir/"`` path (a folder) is covered by ``"dir/"`` entries only, and so is a temporary file that a
+    killed atomic write left beside an entry."""
     if rel in entries:
+        return True
+    if _written_by_a_killed_write(rel) in entries:
         return True
     parts = rel.split("/")
     return any("/".join(parts[:i]) + "/" in entries for i in range(1, len(parts)))
@@ -92,9 +129,13 @@ class OwnedFolder:
     def record(self, entries: Iterable[str]) -> None:
         """Add ``entries`` (POSIX paths relative to the folder; ``"dir/"`` for a whole subtree) to the
         manifest, before they are written."""
+        added = {str(e) for e in entries}
+        bad = next((e for e in sorted(added) if not _valid_entry(e)), None)
+        if bad is not None:
+            raise ValueError(f"{bad!r} is no entry of an output folder (a relative path of plain names)")
         with _exclusive(self._meta / "manifest.lock"):
             old = self.entries()
-            new = old | {str(e) for e in entries}
+            new = old | added
             if new != old:
                 _write_manifest(self._meta / MANIFEST, self.command, new)
 
@@ -107,12 +148,27 @@ class OwnedFolder:
             for entry in sorted(gone):
                 if entry not in known:
                     raise ValueError(f"{entry!r} is not in the manifest of {self.path}")
-                target = self.path / entry.rstrip("/")
+                target = self._inside(entry.rstrip("/"))
                 if target.is_dir() and not target.is_symlink():
+                    if not entry.endswith("/"):
+                        raise self._clash(entry)
                     shutil.rmtree(target)
                 else:
-                    target.unlink(missing_ok=True)
+                    target.unlink(missing_ok=True)  # a link is removed as a link, never followed
             _write_manifest(self._meta / MANIFEST, self.command, known - gone)
+
+    def _inside(self, rel: str) -> Path:
+        """``self.path / rel``, after checking that its parent folder lies inside the folder (no symbolic
+        link on the way leads out of it)."""
+        target = self.path / rel
+        if not target.parent.resolve().is_relative_to(self.path.resolve()):
+            raise OutputError(f"{self.flag} {self.path}: {rel} lies outside it through a symbolic link; remove that "
+                              f"link or choose another {self.flag}")
+        return target
+
+    def _clash(self, rel: str) -> OutputError:
+        return OutputError(f"{self.flag} {self.path} has a folder {rel} where freespace {self.command} writes a "
+                           f"file; move it away or choose another {self.flag}")
 
     # -- staged output --------------------------------------------------------------------------------
 
@@ -139,13 +195,13 @@ class OwnedFolder:
             written = {p.relative_to(stage).as_posix() for p in files}
             stale = self.entries() - written if replace else set()
             stale = {e for e in stale if not any(w.startswith(e) for w in written if e.endswith("/"))}
-            clash = next((w for w in sorted(written) if (self.path / w).is_dir()), None)
+            targets = {w: self._inside(w) for w in sorted(written)}
+            clash = next((w for w, t in targets.items() if t.is_dir() and not t.is_symlink()), None)
             if clash is not None:
-                raise OutputError(f"{self.flag} {self.path} has a folder {clash} where {self.command} writes a file; "
-                                  f"move it away or choose another {self.flag}")
+                raise self._clash(clash)
             self.record(written)
             for path in files:
-                target = self.path / path.relative_to(stage)
+                target = targets[path.relative_to(stage).as_posix()]
                 target.parent.mkdir(parents=True, exist_ok=True)
                 os.replace(path, target)
             if stale:
@@ -155,15 +211,21 @@ class OwnedFolder:
 
 
 def _read_manifest(path: Path) -> tuple[str | None, list[str]]:
-    """``(command, entries)`` of a manifest file, ``(None, [])`` when there is none or it is unreadable."""
+    """``(command, entries)`` of a manifest file, ``(None, [])`` when there is none or it is unreadable
+    (its folder's files are then nobody's); a :class:`CorruptFileError` when it lists an entry that is no
+    path inside the folder (see :func:`_valid_entry`)."""
     try:
         data = json.loads(path.read_text())
         command, entries = data["command"], data["entries"]
-        if isinstance(command, str) and isinstance(entries, list) and all(isinstance(e, str) for e in entries):
-            return command, entries
+        if not (isinstance(command, str) and isinstance(entries, list) and all(isinstance(e, str) for e in entries)):
+            return None, []
     except (OSError, ValueError, KeyError, TypeError):
-        pass
-    return None, []
+        return None, []
+    bad = next((e for e in entries if not _valid_entry(e)), None)
+    if bad is not None:
+        raise CorruptFileError(f"{path} lists {bad!r}, which is no path inside its folder (edited by hand?); "
+                               f"freespace follows no such entry: remove it from the manifest")
+    return command, entries
 
 
 def _write_manifest(path: Path, command: str, entries: set[str]) -> None:
@@ -173,12 +235,38 @@ def _write_manifest(path: Path, command: str, entries: set[str]) -> None:
 
 @contextmanager
 def _exclusive(path: Path) -> Iterator[None]:
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+    fd = _open_lock(path)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
         yield
     finally:
         os.close(fd)
+
+
+def _open_lock(path: Path) -> int:
+    """A file descriptor of the lock file ``path`` (created if missing; a symbolic link is refused, so a
+    planted link never makes a file elsewhere)."""
+    try:
+        return os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666 & ~_umask())
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror}; remove it or choose another output folder") from None
+
+
+def _enclosing(out: Path) -> tuple[Path, str, str] | None:
+    """The nearest folder above ``out`` whose manifest has ``out`` inside one of its entries and that this
+    process does not hold: ``(folder, its command, the entry)``, or None."""
+    real = out.resolve()
+    for folder in real.parents:
+        try:
+            owner, entries = _read_manifest(folder / META / MANIFEST)
+        except CorruptFileError:
+            continue
+        rel = real.relative_to(folder).as_posix()
+        entry = next((e for e in sorted(entries) if rel == e.rstrip("/") or rel.startswith(e) and e.endswith("/")),
+                     None)
+        if owner is not None and entry is not None:
+            return None if folder in _HELD else (folder, owner, entry)
+    return None
 
 
 def _unknown_file(out: Path, entries: set[str]) -> str | None:
@@ -194,7 +282,7 @@ def _unknown_file(out: Path, entries: set[str]) -> str | None:
                 return prefix + name
         for name in list(dirs):
             rel = prefix + name
-            if _known(rel + "/", entries) or _known(rel, entries):
+            if _known(rel + "/", entries):
                 dirs.remove(name)  # a whole subtree of the command's
             elif not any(e.startswith(rel + "/") for e in entries):
                 if not any(os.scandir(out / rel)):
@@ -227,6 +315,14 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
     if out.exists() and not out.is_dir():
         raise InvalidOptionError(f"{flag} {out} is a file; give a folder")
     meta = out / META
+    if meta.is_symlink() or (meta.exists() and not meta.is_dir()):
+        raise InvalidOptionError(f"{flag} {out} holds {META}, which is not a folder but a link or a file; "
+                                 f"freespace keeps its manifest there: move it away or choose another {flag}")
+    enclosing = _enclosing(out)
+    if enclosing is not None:
+        raise InvalidOptionError(f"{flag} {out} lies inside {enclosing[2]} of {enclosing[0]}, "
+                                 f"the output of freespace {enclosing[1]}, which replaces it; choose a folder "
+                                 f"outside it")
     owner, known = _read_manifest(meta / MANIFEST)
     if out.is_dir():
         if owner is not None and owner != command:
@@ -241,9 +337,10 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         existing = existing.parent  # the folders below it are created here, and removed if left empty
     try:
         meta.mkdir(parents=True, exist_ok=True)
-        fd = os.open(meta / _LOCK, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
     except OSError as exc:
         raise OutputError(f"cannot write {out}: {exc.strerror}; choose a writable output folder") from None
+    fd = _open_lock(meta / _LOCK)
+    held = out.resolve()
     try:
         try:
             fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
@@ -256,11 +353,19 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         if owner is not None and owner != command:
             raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another {flag}")
         _remove_stale_stages(meta, alone=not shared)
+        if not shared:
+            _remove_killed_writes(out, set(known))
         folder = OwnedFolder(out, command, flag)
         if owner is None:
             _write_manifest(meta / MANIFEST, command, set(known))
         folder.record(entries)
-        yield folder
+        _HELD[held] = _HELD.get(held, 0) + 1
+        try:
+            yield folder
+        finally:
+            _HELD[held] -= 1
+            if not _HELD[held]:
+                del _HELD[held]
     finally:
         _leave(out, existing, fd)
 
@@ -272,11 +377,11 @@ def _leave(out: Path, existing: Path, fd: int) -> None:
         if any(p.name != META for p in out.iterdir()):
             return
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # no other shard is in the folder
+        shutil.rmtree(out / META, ignore_errors=True)  # under the lock: a run that claims it next starts anew
     except OSError:
         return
     finally:
         os.close(fd)
-    shutil.rmtree(out / META, ignore_errors=True)
     folder = out
     while folder != existing and folder != folder.parent:
         try:
@@ -291,8 +396,24 @@ def _remove_stale_stages(meta: Path, alone: bool) -> None:
     those whose process is gone."""
     for stage in meta.glob(f"{_STAGE}*"):
         pid = stage.name[len(_STAGE):].partition("-")[0]
-        if alone or not (pid.isdigit() and _pid_alive(int(pid))):
+        if stage.is_symlink():
+            stage.unlink()  # never one of ours: removed as a link, never followed
+        elif alone or not (pid.isdigit() and _pid_alive(int(pid))):
             shutil.rmtree(stage, ignore_errors=True)
+
+
+def _remove_killed_writes(out: Path, entries: set[str]) -> None:
+    """Remove the temporary files that killed atomic writes left beside the entries (files directly in
+    the folder or in folders the entries name; not inside ``"dir/"`` subtrees, whose writers clean up)."""
+    folders = {""} | {e.rpartition("/")[0] for e in entries if not e.endswith("/") and "/" in e}
+    for rel in sorted(folders):
+        folder = out / rel
+        if not folder.is_dir() or not folder.resolve().is_relative_to(out.resolve()):
+            continue
+        for path in folder.iterdir():
+            if _written_by_a_killed_write(f"{rel}/{path.name}" if rel else path.name) in entries \
+                    and not path.is_dir():
+                path.unlink(missing_ok=True)
 
 
 # ---------------------------------------------------------------------------------------------------

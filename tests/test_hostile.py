@@ -1526,3 +1526,94 @@ def test_training_commands_end_like_the_others(command: str, sig: int, trained: 
     code, err, seconds, _ = _signalled(args, sig, ready="epoch 1/")
     _ended_by_signal(code, err, sig)
     assert seconds < 20
+
+
+# ------------------------------------------------------------- issue 20: second look at output folders
+@pytest.mark.parametrize("command", ["predict", "train"])
+def test_issue20b_a_crafted_manifest_deletes_nothing_outside(command: str, trained: dict[str, Path], tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture) -> None:
+    """A manifest edited to list ``../victim.txt``: a predict rerun (which replaces its output) and a train
+    restart (which deletes its run first) are refused in one line; nothing inside or outside is touched."""
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    out = tmp_path / "out"
+    train = ["train", "--dataset", "synth", "--root", str(trained["data"]), "--model", "segnet", "--epochs", "1",
+             "--image-size", "64x64", "--no-progress", "--out", str(out)]
+    if command == "predict":
+        assert main(_predict(trained, out)) == 0
+    else:
+        shutil.copytree(trained["run"], out)
+        shutil.rmtree(out / "checkpoints")  # a run that never reached a checkpoint: a rerun starts it again
+    manifest = out / ".freespace" / "manifest.json"
+    data = json.loads(manifest.read_text())
+    manifest.write_text(json.dumps({**data, "entries": [*data["entries"], "../victim.txt"]}))
+    before = snapshot(out, victim)
+    refused(capsys, _predict(trained, out) if command == "predict" else train, match="manifest.json lists")
+    assert snapshot(out, victim) == before
+
+
+def test_issue20b_names_with_newlines_are_shown_on_one_line(trained: dict[str, Path], tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "out\nü put"
+    out.mkdir()
+    (out / "notes\n.txt").write_text("mine")
+    err = refused(capsys, _predict(trained, out), match="did not write")
+    assert "notes\\n.txt" in err and "out\\nü put" in err
+
+
+def test_issue20b_out_inside_another_commands_subtree(trained: dict[str, Path], tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    """``predict --out RUN/checkpoints/preds``: train replaces checkpoints/ when it starts the run again,
+    so the folder is refused and not made."""
+    run = tmp_path / "run"
+    shutil.copytree(trained["run"], run)
+    before = snapshot(run)
+    refused(capsys, _predict(trained, run / "checkpoints" / "preds"), match="inside checkpoints/ of")
+    assert snapshot(run) == before and not (run / "checkpoints" / "preds").exists()
+
+
+def test_issue20b_a_write_killed_half_way_does_not_block_the_resume(trained: dict[str, Path],
+                                                                   tmp_path: Path) -> None:
+    """SIGKILL during a frame's atomic write leaves ``.<frame>.png.XXXXXXXX.tmp`` beside it: the next run
+    resumes (it is the command's own leftover, removed), rather than refusing the folder as the user's."""
+    gen = tmp_path / "gen"
+    argv = ["generate", "--dataset", "synth", "--root", str(trained["data"]), "--out", str(gen)]
+    assert main(argv) == 0
+    frame = sorted(gen.glob("*.png"))[0]
+    frame.unlink()
+    leftover = gen / f".{frame.name}.k1ll3d_x.tmp"
+    leftover.write_bytes(b"half a png")
+    assert main(argv) == 0
+    assert frame.is_file() and not leftover.exists()
+
+
+def test_issue20b_ctrl_c_during_the_lightning_import_stays_an_interrupt(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C that cuts the import of Lightning short leaves torch half-imported; giving the caller its
+    deterministic setting back must not then replace the interrupt with an AttributeError (a traceback)."""
+    import torch
+
+    from freespace.engine import train
+
+    def interrupted(*args: object) -> None:
+        raise KeyboardInterrupt
+
+    def broken(mode: bool) -> None:
+        raise AttributeError("module 'torch._dynamo' has no attribute 'utils'")
+
+    monkeypatch.setattr(train, "_run", interrupted)
+    monkeypatch.setattr(torch, "use_deterministic_algorithms", broken)
+    with pytest.raises(KeyboardInterrupt):
+        train.run_training(None, False, False)  # type: ignore[arg-type]
+
+
+def test_issue20b_a_mistake_found_before_the_first_checkpoint_leaves_no_run(trained: dict[str, Path], tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture) -> None:
+    """A corrupt frame found once training has started writing its run folder: one line, and the new
+    folder (with the folders made for it) is gone, as for every other command."""
+    data = tmp_path / "data"
+    shutil.copytree(trained["data"], data)
+    sorted((data / "data_road" / "training" / "image_2").iterdir())[0].write_bytes(b"junk")
+    refused(capsys, ["train", "--dataset", "synth", "--root", str(data), "--model", "segnet", "--epochs", "1",
+                     "--image-size", "64x64", "--no-progress", "--out", str(tmp_path / "new" / "run")],
+            match="cannot decode")
+    assert not (tmp_path / "new").exists()

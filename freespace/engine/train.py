@@ -23,7 +23,7 @@ import torch
 from freespace.engine.config import TrainConfig
 from freespace.data.torch_dataset import RoadSegmentationDataset
 from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
-from freespace.errors import CorruptFileError, InvalidOptionError
+from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError
 from freespace.io import atomic_write_bytes, write_csv, write_json
 from freespace.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
@@ -174,8 +174,10 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
     deterministic = torch.are_deterministic_algorithms_enabled()
     try:
         return _run(config, resume, progress)
-    finally:  # Lightning's deterministic mode is process-wide: give the caller its own setting back
-        torch.use_deterministic_algorithms(deterministic)
+    finally:  # Lightning's deterministic mode is process-wide: give the caller its own setting back (only when
+        # changed: the call imports torch._inductor, which fails after Ctrl-C cut an import of Lightning short)
+        if torch.are_deterministic_algorithms_enabled() != deterministic:
+            torch.use_deterministic_algorithms(deterministic)
 
 
 def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
@@ -193,7 +195,12 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
             config.check()
             log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
             folder.forget(RUN_ENTRIES)
-        return _train(config, resume, progress)
+        try:
+            return _train(config, resume, progress)
+        except FreespaceError as exc:  # a user's mistake (a corrupt frame) before the first checkpoint: no output
+            if exc.exit_code == 2 and not last.is_file():
+                folder.forget(RUN_ENTRIES)
+            raise
 
 
 def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> None:
