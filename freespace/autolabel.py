@@ -77,8 +77,8 @@ from freespace.io import (
     read_kitti_calib,
     road_label_to_kitti,
     write_json,
+    write_files_together,
 )
-from freespace.outdir import write_files_together
 
 log = logging.getLogger(__name__)
 

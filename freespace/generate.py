@@ -58,9 +58,10 @@ from freespace.io import (
     road_label_to_kitti,
     write_csv,
     write_json,
+    write_files_together,
 )
 from freespace.geometry.stereo import check_search_range
-from freespace.outdir import claim_folder, write_files_together
+from freespace.outdir import claim_folder
 from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)

@@ -51,6 +51,7 @@ __all__ = [
     "IMAGE_SUFFIXES",
     "RoadLabel",
     "atomic_write_bytes",
+    "write_files_together",
     "atomic_write_text",
     "encode_json",
     "write_json",
@@ -85,23 +86,39 @@ def atomic_write_bytes(path: PathLike, data: bytes) -> Path:
 
     Parent folders are created. Returns the path written.
     """
-    path = Path(path)
+    return write_files_together({path: data})[0]
+
+
+def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:
+    """Write several output files all or nothing: each goes to a temporary file beside its target, and
+    only when every one is written are they renamed into place. When any write fails, the temporary
+    files are removed and every earlier file at the targets is left as it was.
+
+    Returns the paths written.
+    """
+    staged: list[tuple[str, Path]] = []
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror}; choose a writable output folder") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; outputs get the usual permissions
-        os.replace(tmp, path)
-    except BaseException as exc:
-        Path(tmp).unlink(missing_ok=True)
-        if isinstance(exc, OSError):
-            raise OutputError(f"cannot write {path}: {exc.strerror}; choose a writable output path") from None
+        for target, data in files.items():
+            target = Path(target)
+            try:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+            except OSError as exc:
+                raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
+            staged.append((tmp, target))
+            try:
+                with os.fdopen(fd, "wb") as f:
+                    f.write(data)
+                os.chmod(tmp, 0o666 & ~_UMASK)
+            except OSError as exc:
+                raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
+        for tmp, target in staged:
+            os.replace(tmp, target)
+    except BaseException:
+        for tmp, _ in staged:
+            Path(tmp).unlink(missing_ok=True)
         raise
-    return path
+    return [target for _, target in staged]
 
 
 def atomic_write_text(path: PathLike, text: str) -> Path:

@@ -30,7 +30,7 @@ The folder itself is never renamed or replaced, so an ``--out`` that is a symbol
 ``--out .`` works. Files are listed in the manifest **before** they are written (in place or by a
 stage), so a run killed half-way leaves only files that its next run knows.
 
-Also here: :func:`write_files_together` (several output files written all or nothing, earlier files kept
+Also here: :func:`freespace.io.write_files_together` (several output files written all or nothing, earlier files kept
 when it fails). Only the standard library is imported.
 """
 
@@ -43,11 +43,12 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError
+from freespace.io import write_files_together
 
 PathLike = str | os.PathLike[str]
 
@@ -56,13 +57,13 @@ META = ".freespace"
 MANIFEST = "manifest.json"
 _LOCK = "lock"
 _STAGE = "stage-"
-#: what a killed atomic write (:func:`freespace.io.atomic_write_bytes`, :func:`write_files_together`: a
-#: :func:`tempfile.mkstemp` file) leaves beside its target NAME
+#: what a killed atomic write (:func:`freespace.io.write_files_together`: a :func:`tempfile.mkstemp` file)
+#: leaves beside its target NAME
 _TEMP = re.compile(r"\.(.+)\.[a-z0-9_]{8}\.tmp")
 #: folders (resolved) that this process holds now: a folder claimed inside one of them is its own nesting
 _HELD: dict[Path, int] = {}
 
-__all__ = ["OwnedFolder", "claim_folder", "write_files_together", "META"]
+__all__ = ["OwnedFolder", "claim_folder", "META"]
 
 
 def _umask() -> int:
@@ -414,40 +415,3 @@ def _remove_killed_writes(out: Path, entries: set[str]) -> None:
             if _written_by_a_killed_write(f"{rel}/{path.name}" if rel else path.name) in entries \
                     and not path.is_dir():
                 path.unlink(missing_ok=True)
-
-
-# ---------------------------------------------------------------------------------------------------
-# output files
-
-
-def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:
-    """Write several output files all or nothing: each goes to a temporary file beside its target, and
-    only when every one is written are they renamed into place. When any write fails, the temporary
-    files are removed and every earlier file at the targets is left as it was.
-
-    Returns the paths written.
-    """
-    mask = _umask()
-    staged: list[tuple[str, Path]] = []
-    try:
-        for target, data in files.items():
-            target = Path(target)
-            try:
-                target.parent.mkdir(parents=True, exist_ok=True)
-                fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-            except OSError as exc:
-                raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
-            staged.append((tmp, target))
-            try:
-                with os.fdopen(fd, "wb") as f:
-                    f.write(data)
-                os.chmod(tmp, 0o666 & ~mask)
-            except OSError as exc:
-                raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
-        for tmp, target in staged:
-            os.replace(tmp, target)
-    except BaseException:
-        for tmp, _ in staged:
-            Path(tmp).unlink(missing_ok=True)
-        raise
-    return [target for _, target in staged]

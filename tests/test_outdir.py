@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError
-from freespace.outdir import META, claim_folder, write_files_together
+from freespace.io import write_files_together
+from freespace.outdir import META, claim_folder
 
 
 def _manifest(folder: Path) -> dict:
