@@ -22,7 +22,7 @@ def save(res: Path, run: str, keep: Path) -> None:
     src, dst = res / "runs" / run, keep / "runs" / run
     for path in sorted(src.rglob("*")):
         rel = path.relative_to(src)
-        if path.is_file() and rel.parts[0] not in SKIP and path.name != "lock" and not path.name.endswith(".tmp"):
+        if path.is_file() and rel.parts[0] not in SKIP and not path.name.endswith((".tmp", "lock")):
             (dst / rel).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(path, dst / rel)
 
