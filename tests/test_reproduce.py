@@ -253,8 +253,9 @@ def _fake_run(out: Path, data: Path, model: str, variant: str, seed: int, f: flo
 def test_x_long_budget_and_convergence_in_the_index(data: Path, tmp_path: Path) -> None:
     from freespace.experiments.reproduce import _collect, _config, _convergence_lines
 
-    long = _config("synth", data, tmp_path, "unet", "X-long", 0, dict(epochs=10, patience=3))
-    assert (long.augment, long.epochs, long.patience, Path(long.out).name) == ("none", 20, 6, "unet-long-s0")
+    long = _config("synth", data, tmp_path, "unet", "X-long", 0, dict(epochs=10, patience=3, lr=0.01))
+    assert (long.augment, long.epochs, long.patience, long.lr, Path(long.out).name) == \
+        ("none", 20, 6, 0.01, "unet-long-s0")
     _fake_run(tmp_path, data, "unet", "X", 0, 0.8, best=4, run=8)      # early stopping fired after epoch 8
     _fake_run(tmp_path, data, "unet", "X-long", 0, 0.82, best=19, run=20)  # ran to its cap of 20
     _fake_run(tmp_path, data, "segnet", "X", 0, 0.7, best=2, run=5, size=(96, 128))
