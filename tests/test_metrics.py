@@ -12,8 +12,9 @@ import pytest
 
 from freespace.cli import main
 from freespace.errors import ShapeMismatchError
-from freespace.io import RoadLabel, road_label_to_kitti, write_image
-from freespace.metrics import (Counts, KittiCounts, RoadEvaluator, confusion_counts, kitti_counts, kitti_scores,
+from freespace.io.codecs import road_label_to_kitti, write_image
+from freespace.labels import RoadLabel
+from freespace.evaluation.metrics import (Counts, KittiCounts, RoadEvaluator, confusion_counts, kitti_counts, kitti_scores,
                                to_confidence)
 
 
