@@ -32,9 +32,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, write_section  # noqa: E402
 
+from freespace.data.synthetic import SynthConfig, render_sample  # noqa: E402
 from freespace.datagen.autolabel import autolabel  # noqa: E402
 from freespace.errors import RoadFitError  # noqa: E402
-from freespace.data.synthetic import SynthConfig, render_sample  # noqa: E402
 from freespace.geometry import compute_disparity  # noqa: E402
 from freespace.geometry.depth import depth_to_disparity, rig_from_kitti  # noqa: E402
 from freespace.io.codecs import read_depth, read_disparity, read_image, read_road_label  # noqa: E402

@@ -174,8 +174,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 
 def _autolabel_parser(p: argparse.ArgumentParser) -> None:
-    from freespace.datagen.autolabel import AutolabelOptions
     from freespace.data.disparity import DISPARITY_MODES
+    from freespace.datagen.autolabel import AutolabelOptions
     from freespace.geometry import SGBM_MAX_DISPARITY
 
     one = p.add_argument_group("one image")
@@ -419,7 +419,7 @@ def _evaluate_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """``freespace evaluate``: a checkpoint on a subset (train/val/test/all) of a dataset's on-disk split."""
-    from freespace.engine.evaluate import evaluate_checkpoint
+    from freespace.inference.evaluate import evaluate_checkpoint
 
     m = evaluate_checkpoint(args.checkpoint, args.dataset, args.root, args.out, subset=args.subset,
                             splits_dir=args.splits_dir, split=args.split, progress=not args.no_progress)
@@ -439,8 +439,8 @@ def _evaluate_kitti_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
-    from freespace.io.files import check_outputs, check_writable, write_json
     from freespace.evaluation.kitti import evaluate_kitti_dirs
+    from freespace.io.files import check_outputs, check_writable, write_json
 
     if args.bev and not args.calib:
         raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
@@ -478,8 +478,8 @@ def cmd_predict(args: argparse.Namespace) -> int:
     """``freespace predict``: road confidence PNGs (KITTI format) and overlays, or the overlaid video."""
     from freespace.inference.predict import Predictor, predict_folder, predict_video
     from freespace.io.files import check_outputs, check_writable
-    from freespace.shard import parse_shard
     from freespace.io.video import is_video_path
+    from freespace.shard import parse_shard
 
     check_writable(args.out, folder=not is_video_path(args.out))  # before the model is loaded
     check_outputs({"--out": args.out}, {"--input": args.input, "--checkpoint": args.checkpoint, "--onnx": args.onnx})

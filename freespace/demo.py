@@ -16,13 +16,13 @@ import numpy as np
 from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.data.synthetic.dataset import MAX_FRAMES
-from freespace.errors import FreespaceError, InvalidOptionError, check_seed
 from freespace.datagen.generate import generate_dataset
+from freespace.errors import FreespaceError, InvalidOptionError, check_seed
+from freespace.evaluation.viz import caption, colorize_disparity, grid, overlay_road
 from freespace.geometry import compute_disparity, fit_road_model
 from freespace.io.codecs import read_disparity, read_image, read_road_label, write_image
 from freespace.io.files import PathLike, check_writable, write_json
 from freespace.io.outdir import claim_folder
-from freespace.evaluation.viz import caption, colorize_disparity, grid, overlay_road
 
 log = logging.getLogger(__name__)
 

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from freespace.datagen.autolabel import AutolabelOptions, autolabel
 from freespace.cli import main
 from freespace.data.registry import get_dataset
 from freespace.data.synthetic import SynthConfig, render_sample, write_dataset
+from freespace.datagen.autolabel import AutolabelOptions, autolabel
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, RoadFitError
 from freespace.io.codecs import read_disparity, read_image, read_road_label, write_disparity, write_image
 

@@ -239,8 +239,8 @@ def test_unwritable_model_json_leaves_no_image(pair_files: dict[str, Path], tmp_
 
 
 def test_unusable_inputs_raise_typed_errors() -> None:
-    from freespace.errors import RoadFitError
     from freespace.datagen.generate import generate_arrays
+    from freespace.errors import RoadFitError
 
     image = np.zeros((40, 60, 3), np.uint8)
     road = np.zeros((40, 60), bool)

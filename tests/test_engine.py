@@ -214,7 +214,7 @@ def test_ddp_two_cpu_processes(tiny: Path, tmp_path: Path) -> None:
     assert len(list(csv.DictReader((run / "metrics.csv").open()))) == 2
     # the test metrics were counted on two processes (disjoint halves of the test split) and summed: they
     # equal a single-process evaluation of the same checkpoint on the same frames
-    from freespace.engine.evaluate import evaluate_checkpoint
+    from freespace.inference.evaluate import evaluate_checkpoint
 
     m = json.loads((run / "metrics.json").read_text())
     test_names = (run / "splits" / "test.txt").read_text().split()

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from freespace.cli import main
+from freespace.evaluation.metrics import to_confidence
+from freespace.evaluation.viz import overlay_road
 from freespace.inference.predict import predict_video
 from freespace.io.codecs import read_image, write_image
-from freespace.evaluation.metrics import to_confidence
 from freespace.io.video import VideoWriter, open_frames
-from freespace.evaluation.viz import overlay_road
 
 from helpers import textured_image
 

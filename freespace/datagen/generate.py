@@ -41,14 +41,14 @@ from freespace.geometry import (
     virtual_homography,
     virtual_view,
 )
+from freespace.geometry.stereo import check_search_range
 from freespace.io.codecs import (IMAGE_SUFFIXES, encode_image, read_disparity, read_image, read_road_label,
     road_label_to_kitti)
 from freespace.io.files import (PathLike, check_outputs, check_writable, check_writable_files, encode_json,
     atomic_write_bytes, write_csv, write_json, write_files_together)
 from freespace.io.kitti import read_kitti_calib
-from freespace.labels import RoadLabel
-from freespace.geometry.stereo import check_search_range
 from freespace.io.outdir import claim_folder
+from freespace.labels import RoadLabel
 from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)

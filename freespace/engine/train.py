@@ -23,15 +23,15 @@ import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
-from freespace.engine.config import TrainConfig
 from freespace.data.torch_dataset import RoadSegmentationDataset
+from freespace.engine.config import TrainConfig
 from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError
+from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
+from freespace.io.outdir import claim_folder
 from freespace.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
-from freespace.io.outdir import claim_folder
-from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 
 log = logging.getLogger(__name__)
 

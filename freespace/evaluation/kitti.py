@@ -17,10 +17,10 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, ShapeMismatchError
 from freespace.evaluation.bev import to_bev
+from freespace.evaluation.metrics import KITTI_CATEGORIES, RoadEvaluator
 from freespace.io.codecs import read_image, road_label_from_image
 from freespace.io.files import PathLike, missing_input
 from freespace.io.kitti import read_kitti_calib
-from freespace.evaluation.metrics import KITTI_CATEGORIES, RoadEvaluator
 
 __all__ = ["evaluate_kitti_dirs", "read_confidence"]
 

@@ -294,7 +294,7 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     ``RUN/<name>/metrics.json`` (accuracy, precision, recall, f_score, iou at p ≥ 0.5, max_f, ap as
     fractions; frames; the resolved root). Skipped when that file exists for the same root."""
     from freespace.data.registry import get_dataset
-    from freespace.engine.evaluate import evaluate_frames
+    from freespace.inference.evaluate import evaluate_frames
     from freespace.inference.predictor import Predictor
 
     run_dir = Path(run_dir)
@@ -712,8 +712,8 @@ def _figure(out: Path, model: str, entries: list[dict[str, Any]], frames: int) -
     (TP/FN/FP), X first."""
     from freespace.data.registry import get_dataset
     from freespace.data.splits import read_splits
-    from freespace.inference.predictor import Predictor
     from freespace.evaluation.viz import caption, grid, overlay_errors
+    from freespace.inference.predictor import Predictor
 
     runs = {e["variant"]: out / e["run"] for e in entries
             if e["model"] == model and e["seed"] == 0 and (out / e["run"] / "checkpoints" / "best.ckpt").is_file()

@@ -19,14 +19,14 @@ from typing import Any
 import numpy as np
 
 from freespace.errors import InputFileError, InvalidOptionError
+from freespace.evaluation.metrics import to_confidence
+from freespace.inference.predictor import Predictor, load_checkpoint
 from freespace.io.codecs import write_image
 from freespace.io.files import PathLike, atomic_write_bytes, check_outputs, check_writable, write_json
 from freespace.io.kitti import read_kitti_calib
-from freespace.evaluation.metrics import to_confidence
 from freespace.io.outdir import claim_folder
-from freespace.inference.predictor import Predictor, load_checkpoint
-from freespace.shard import select_shard
 from freespace.io.video import FrameSource, VideoFrame, VideoWriter, open_frames
+from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)
 

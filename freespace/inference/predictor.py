@@ -1,7 +1,7 @@
 """Trained networks for prediction: :func:`load_checkpoint` and :class:`Predictor` (a checkpoint or an
 exported ONNX model → road probabilities at each image's own size).
 
-Used by ``freespace evaluate`` (:mod:`freespace.engine.evaluate`), ``predict``/``export``/``kitti-submit``
+Used by ``freespace evaluate`` (:mod:`freespace.inference.evaluate`), ``predict``/``export``/``kitti-submit``
 (:mod:`freespace.inference.predict`) and ``reproduce``'s figures (:mod:`freespace.experiments.reproduce`). PyTorch is
 imported only to read a checkpoint, onnxruntime only to read an ONNX file.
 """
