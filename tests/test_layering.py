@@ -130,6 +130,14 @@ def test_no_import_cycles() -> None:
     assert cycles == []
 
 
+def test_geometry_reads_no_files() -> None:
+    """The geometry is functions of arrays (kornia style): files are read and written by the io layer."""
+    graph = _graph()
+    found = [f"{m} imports {d} at line {line}" for m, deps in graph.items() for d, line in deps.items()
+             if m.startswith("freespace.geometry") and d.startswith("freespace.io")]
+    assert found == []
+
+
 def test_checker_sees_a_cycle_and_an_upward_import() -> None:
     graph = {"freespace.io": {"freespace.data.base": 1}, "freespace.data.base": {"freespace.io": 1}}
     assert _cycles(graph) == [frozenset(graph)]
