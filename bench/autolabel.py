@@ -32,12 +32,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, write_section  # noqa: E402
 
-from freespace.autolabel import autolabel  # noqa: E402
-from freespace.errors import RoadFitError  # noqa: E402
 from freespace.data.synthetic import SynthConfig, render_sample  # noqa: E402
+from freespace.datagen.autolabel import autolabel  # noqa: E402
+from freespace.errors import RoadFitError  # noqa: E402
 from freespace.geometry import compute_disparity  # noqa: E402
-from freespace.geometry.depth import disparity_from_depth_file  # noqa: E402
-from freespace.io import RoadLabel, read_disparity, read_image, read_kitti_calib, read_road_label  # noqa: E402
+from freespace.geometry.depth import depth_to_disparity, rig_from_kitti  # noqa: E402
+from freespace.io.codecs import read_depth, read_disparity, read_image, read_road_label  # noqa: E402
+from freespace.io.kitti import read_kitti_calib  # noqa: E402
+from freespace.labels import RoadLabel  # noqa: E402
 
 SETS = {"test": (SynthConfig(width=320, height=240, frames_per_scenario=5), 0),
         "shifted": (SynthConfig(width=320, height=240, frames_per_scenario=5, max_roll_deg=6.0,
@@ -74,8 +76,8 @@ def kitti_road_depth(shared: Path) -> Iterator[Case]:
     root = shared / "kitti_road_depth"
     for (split, name), polygon in sorted(ROAD_POLYGONS.items()):
         base = root / split
-        disparity, rig = disparity_from_depth_file(base / "depth_u16" / f"{name}.png",
-                                                   read_kitti_calib(base / "calib" / f"{name}.txt"))
+        rig = rig_from_kitti(read_kitti_calib(base / "calib" / f"{name}.txt"))
+        disparity = depth_to_disparity(read_depth(base / "depth_u16" / f"{name}.png"), rig.fx, rig.baseline)
         road = np.zeros(disparity.shape, np.uint8)
         cv2.fillPoly(road, [np.array(polygon, np.int32)], 1)
         yield "KITTI road (polygons)", "LiDAR depth", disparity, RoadLabel(road > 0, road > 0), rig.baseline

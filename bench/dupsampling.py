@@ -22,7 +22,7 @@ from _common import machine, write_section  # noqa: E402
 
 from freespace.data.synthetic import render_sample  # noqa: E402
 from freespace.data.synthetic.scene import SynthConfig  # noqa: E402
-from freespace.metrics import confusion_counts  # noqa: E402
+from freespace.evaluation.metrics import confusion_counts  # noqa: E402
 from freespace.models import create_model, main_logits  # noqa: E402
 
 

@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, timeit, write_section  # noqa: E402
 
 from freespace.geometry import fit_road_model, generate_view  # noqa: E402
-from freespace.io import read_disparity, read_image, write_image  # noqa: E402
+from freespace.io.codecs import read_disparity, read_image, write_image  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data" / "kitti_stereo_2015"
 POLYGON = [(400, 374), (400, 240), (570, 190), (615, 190), (700, 225), (880, 300), (880, 374)]

@@ -27,7 +27,7 @@ from freespace.data.synthetic import SynthConfig, write_dataset  # noqa: E402
 from freespace.data.torch_dataset import RoadSegmentationDataset  # noqa: E402
 from freespace.engine.config import TrainConfig, parse_size  # noqa: E402
 from freespace.engine.train import run_training  # noqa: E402
-from freespace.io import IGNORE_INDEX  # noqa: E402
+from freespace.labels import IGNORE_INDEX  # noqa: E402
 from freespace.models import create_model  # noqa: E402
 
 

@@ -25,11 +25,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from freespace.autolabel import autolabel
 from freespace.data.synthetic import SynthConfig, render_sample
+from freespace.datagen.autolabel import autolabel
+from freespace.evaluation.viz import caption, grid
 from freespace.geometry import compute_disparity
-from freespace.io import RoadLabel, atomic_write_bytes, read_disparity, read_image, read_road_label
-from freespace.viz import caption, grid
+from freespace.io.codecs import read_disparity, read_image, read_road_label
+from freespace.io.files import atomic_write_bytes
+from freespace.labels import RoadLabel
 
 ROOT = Path(__file__).resolve().parent.parent
 KITTI_BASELINE = 0.54  # metres, KITTI 2015's rig (no calibration comes with the shared frames)

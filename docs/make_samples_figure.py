@@ -8,9 +8,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from freespace.data.synthetic import render_sample
+from freespace.evaluation.viz import caption, colorize_disparity, grid, overlay_road
 from freespace.geometry import fit_road_model, generate_view
-from freespace.io import write_image
-from freespace.viz import caption, colorize_disparity, grid, overlay_road
+from freespace.io.codecs import write_image
 
 
 def main() -> None:

@@ -118,11 +118,11 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_generate(args: argparse.Namespace) -> int:
     """``freespace generate``: one pair or a whole dataset (or, with --virtual, one view from another pose)."""
-    from freespace.generate import FitOptions
+    from freespace.datagen.generate import FitOptions
 
     options = FitOptions(robust=args.robust, inlier_threshold=args.inlier_threshold, max_disparity=args.max_disparity)
     if args.virtual:
-        from freespace.generate import generate_virtual_pair
+        from freespace.datagen.generate import generate_virtual_pair
 
         print(generate_virtual_pair(args.reference, args.road_mask, args.calib, args.disparity, shift=args.shift,
                                     rotate=args.rotate, out=args.out, label_out=args.label_out,
@@ -140,7 +140,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
                                      "--root (a dataset)")
         if args.shard is not None or args.lidar_densify is not None:
             raise InvalidOptionError("--shard and --lidar-densify are for --dataset (a whole dataset)")
-        from freespace.generate import generate_pair
+        from freespace.datagen.generate import generate_pair
 
         result = generate_pair(args.reference, args.target, args.road_mask, args.disparity, out=args.out,
                                model_json=args.model_json, options=options)
@@ -155,7 +155,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
         raise InvalidOptionError("--dataset needs --root DIR, the dataset's folder")
     if args.lidar_densify is not None and args.disparity_mode != "lidar":
         raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
-    from freespace.generate import generate_dataset
+    from freespace.datagen.generate import generate_dataset
     from freespace.shard import parse_shard
 
     shard = parse_shard(args.shard) if args.shard is not None else None
@@ -174,8 +174,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 
 def _autolabel_parser(p: argparse.ArgumentParser) -> None:
-    from freespace.autolabel import AutolabelOptions
     from freespace.data.disparity import DISPARITY_MODES
+    from freespace.datagen.autolabel import AutolabelOptions
     from freespace.geometry import SGBM_MAX_DISPARITY
 
     one = p.add_argument_group("one image")
@@ -214,7 +214,7 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_autolabel(args: argparse.Namespace) -> int:
     """``freespace autolabel``: a road label from disparity, for one left image or a whole dataset."""
-    from freespace.autolabel import AutolabelOptions, autolabel_dataset, autolabel_pair
+    from freespace.datagen.autolabel import AutolabelOptions, autolabel_dataset, autolabel_pair
 
     options = AutolabelOptions(curb_height=args.curb_height, camera_height=args.camera_height, noise=args.noise,
                                max_disparity=args.max_disparity)
@@ -346,8 +346,8 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     """``freespace datasets split``: the paper's train/val/test split by scenario, as list files."""
     from freespace.data.registry import get_dataset
     from freespace.data.splits import make_splits, write_splits
-    from freespace.io import check_outputs, check_writable
-    from freespace.outdir import claim_folder
+    from freespace.io.files import check_outputs, check_writable
+    from freespace.io.outdir import claim_folder
 
     check_writable(args.out, folder=True)
     check_outputs({"--out": args.out}, {"--root": args.root})
@@ -419,7 +419,7 @@ def _evaluate_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """``freespace evaluate``: a checkpoint on a subset (train/val/test/all) of a dataset's on-disk split."""
-    from freespace.engine.evaluate import evaluate_checkpoint
+    from freespace.inference.evaluate import evaluate_checkpoint
 
     m = evaluate_checkpoint(args.checkpoint, args.dataset, args.root, args.out, subset=args.subset,
                             splits_dir=args.splits_dir, split=args.split, progress=not args.no_progress)
@@ -439,8 +439,8 @@ def _evaluate_kitti_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
-    from freespace.io import check_outputs, check_writable, write_json
-    from freespace.kitti_eval import evaluate_kitti_dirs
+    from freespace.evaluation.kitti import evaluate_kitti_dirs
+    from freespace.io.files import check_outputs, check_writable, write_json
 
     if args.bev and not args.calib:
         raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
@@ -476,10 +476,10 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_predict(args: argparse.Namespace) -> int:
     """``freespace predict``: road confidence PNGs (KITTI format) and overlays, or the overlaid video."""
-    from freespace.infer import Predictor, predict_folder, predict_video
-    from freespace.io import check_outputs, check_writable
+    from freespace.inference.predict import Predictor, predict_folder, predict_video
+    from freespace.io.files import check_outputs, check_writable
+    from freespace.io.video import is_video_path
     from freespace.shard import parse_shard
-    from freespace.video import is_video_path
 
     check_writable(args.out, folder=not is_video_path(args.out))  # before the model is loaded
     check_outputs({"--out": args.out}, {"--input": args.input, "--checkpoint": args.checkpoint, "--onnx": args.onnx})
@@ -514,7 +514,7 @@ def _export_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """``freespace export``: ONNX or TorchScript, validated against PyTorch."""
-    from freespace.infer import export_model
+    from freespace.inference.predict import export_model
 
     r = export_model(args.checkpoint, args.format, args.out)
     print(f"{r['format']} → {r['path']}  max abs difference to PyTorch {r['max_abs_diff']:.2e} "
@@ -532,7 +532,7 @@ def _kitti_submit_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_kitti_submit(args: argparse.Namespace) -> int:
     """``freespace kitti-submit``: the testing split in the benchmark's BEV format, zipped."""
-    from freespace.infer import kitti_submit
+    from freespace.inference.predict import kitti_submit
 
     r = kitti_submit(args.checkpoint, args.root, args.out, progress=not args.no_progress)
     print(f"{r['frames']} bird's-eye-view maps → {args.out}; upload {r['zip']}")

@@ -16,18 +16,19 @@ import numpy as np
 from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.data.synthetic.dataset import MAX_FRAMES
+from freespace.datagen.generate import generate_dataset
 from freespace.errors import FreespaceError, InvalidOptionError, check_seed
-from freespace.generate import generate_dataset
+from freespace.evaluation.viz import caption, colorize_disparity, grid, overlay_road
 from freespace.geometry import compute_disparity, fit_road_model
-from freespace.io import PathLike, check_writable, read_disparity, read_image, read_road_label, write_image, write_json
-from freespace.outdir import claim_folder
-from freespace.viz import caption, colorize_disparity, grid, overlay_road
+from freespace.io.codecs import read_disparity, read_image, read_road_label, write_image
+from freespace.io.files import PathLike, check_writable, write_json
+from freespace.io.outdir import claim_folder
 
 log = logging.getLogger(__name__)
 
 __all__ = ["run_demo"]
 
-#: what the demo writes into OUT (:mod:`freespace.outdir` entries)
+#: what the demo writes into OUT (:mod:`freespace.io.outdir` entries)
 OUT_ENTRIES = ("dataset/", "generated/", "figures/", "experiment/", "demo_summary.json")
 
 

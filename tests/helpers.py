@@ -9,6 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from freespace.geometry import StereoCalibration
+from freespace.geometry.depth import depth_to_disparity, rig_from_kitti
+from freespace.io.codecs import read_depth
+from freespace.io.kitti import read_kitti_calib
+
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
@@ -66,7 +71,7 @@ def synthetic_pair(shape: tuple[int, int] = (160, 320), roll_deg: float = 1.0, s
     exactly; the road is a trapezoid in the lower half (don't-care above row 40).
     """
     from freespace.geometry import RoadModel, generate_view
-    from freespace.io import RoadLabel
+    from freespace.labels import RoadLabel
 
     h, w = shape
     model = RoadModel.from_roll(math.radians(roll_deg), 0.3, -0.25 * h)
@@ -76,3 +81,18 @@ def synthetic_pair(shape: tuple[int, int] = (160, 320), roll_deg: float = 1.0, s
     valid = np.ones(shape, bool)
     valid[:40] = False
     return left, right, RoadLabel(road=road, valid=valid), model.disparity(shape)
+
+
+def disparity_from_depth_file(depth_path: Path, calib: dict[str, np.ndarray] | Path, *, shape: tuple[int, int] | None = None
+                              ) -> tuple[np.ndarray, StereoCalibration]:
+    """``(float32 H×W disparity, rig)`` of a depth file and a parsed KITTI calibration (a virtual right camera
+    when it has no P3), as the data sources compose them; ``calib`` may be the calibration file."""
+    rig = rig_from_kitti(calib if isinstance(calib, dict) else read_kitti_calib(calib))
+    return depth_to_disparity(read_depth(depth_path, shape=shape), rig.fx, rig.baseline), rig
+
+
+def write_velodyne(path: Path, points: np.ndarray) -> Path:
+    """Write ``N×4`` (x, y, z, reflectance) points as a KITTI ``.bin`` scan (little-endian float32)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(np.asarray(points).astype("<f4").tobytes())
+    return path

@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from freespace.autolabel import AutolabelOptions, autolabel
 from freespace.cli import main
 from freespace.data.registry import get_dataset
 from freespace.data.synthetic import SynthConfig, render_sample, write_dataset
+from freespace.datagen.autolabel import AutolabelOptions, autolabel
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, RoadFitError
-from freespace.io import read_disparity, read_image, read_road_label, write_disparity, write_image
+from freespace.io.codecs import read_disparity, read_image, read_road_label, write_disparity
 
 from helpers import plane_disparity, shared_path
 
@@ -247,7 +247,7 @@ def test_train_labels_view_reads_the_tree_for_the_named_frames(rendered: Path, t
 
 
 def test_autolabel_never_imports_torch() -> None:
-    code = ("import sys, freespace.autolabel, freespace.cli; freespace.cli.build_parser({'autolabel'}); "
+    code = ("import sys, freespace.datagen.autolabel, freespace.cli; freespace.cli.build_parser({'autolabel'}); "
             "print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"

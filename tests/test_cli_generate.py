@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from freespace.cli import main
-from freespace.io import read_image, road_label_to_kitti, write_disparity, write_image
+from freespace.io.codecs import read_image, road_label_to_kitti, write_disparity, write_image
 
 from helpers import synthetic_pair
 
@@ -109,7 +109,7 @@ def test_process_reports_one_line_and_never_imports_torch(pair_files: dict[str, 
     res = _run(_pair_args(pair_files, tmp_path / "G.png", "--disparity", str(tmp_path / "nope.png")))
     assert res.returncode == 2
     assert res.stderr.strip().count("\n") == 0 and "disparity not found" in res.stderr
-    code = ("import sys, freespace.cli, freespace.generate, freespace.geometry, freespace.data.kitti_road;"
+    code = ("import sys, freespace.cli, freespace.datagen.generate, freespace.geometry, freespace.data.kitti_road;"
             "freespace.cli.main(sys.argv[1:]); print('torch' in sys.modules)")
     res = subprocess.run([sys.executable, "-c", code, *_pair_args(pair_files, tmp_path / "G.png")],
                          capture_output=True, text=True)
@@ -239,8 +239,8 @@ def test_unwritable_model_json_leaves_no_image(pair_files: dict[str, Path], tmp_
 
 
 def test_unusable_inputs_raise_typed_errors() -> None:
+    from freespace.datagen.generate import generate_arrays
     from freespace.errors import RoadFitError
-    from freespace.generate import generate_arrays
 
     image = np.zeros((40, 60, 3), np.uint8)
     road = np.zeros((40, 60), bool)

@@ -18,7 +18,7 @@ from freespace.data.kitti_road import KittiRoad
 from freespace.data.splits import make_splits, read_splits, split_sizes, write_splits
 from freespace.data.synthetic import format_kitti_calib
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
-from freespace.io import road_label_to_kitti, write_disparity, write_image
+from freespace.io.codecs import road_label_to_kitti, write_disparity, write_image
 
 from helpers import synthetic_pair
 
@@ -103,7 +103,7 @@ def test_missing_root_is_the_same_error_everywhere(tmp_path: Path) -> None:
 def test_kitti_without_right_images_and_user_disparity(tmp_path: Path) -> None:
     names = kitti_tree(tmp_path, 3, right=False)
     ds = KittiRoad(tmp_path)
-    assert not ds.has_right
+    assert all(f.right is None for f in ds.frames)
     s = ds.load(0)
     assert s.right is None and s.disparity is None and s.disparity_source == "none"
     disp_dir = tmp_path / "learned"
@@ -347,7 +347,7 @@ def test_generate_on_every_layout(layout: str, tmp_path: Path, capsys: pytest.Ca
 def test_torch_dataset(tmp_path: Path) -> None:
     torch = pytest.importorskip("torch")
     from freespace.data.torch_dataset import RoadSegmentationDataset
-    from freespace.io import IGNORE_INDEX
+    from freespace.labels import IGNORE_INDEX
 
     kitti_tree(tmp_path, 3)
     ds = RoadSegmentationDataset(KittiRoad(tmp_path, disparity_mode="none"))
@@ -368,7 +368,7 @@ def test_torch_dataset_training_options(tmp_path: Path) -> None:
     (seed, epoch, i) only."""
     torch = pytest.importorskip("torch")
     from freespace.data.torch_dataset import Item, RoadSegmentationDataset
-    from freespace.io import IGNORE_INDEX
+    from freespace.labels import IGNORE_INDEX
 
     names = kitti_tree(tmp_path, 3)
     kitti = KittiRoad(tmp_path, disparity_mode="none")

@@ -12,8 +12,8 @@ import pytest
 from freespace.cli import main
 from freespace.data.synthetic import SynthConfig
 from freespace.demo import run_demo
-from freespace.io import read_image
-from freespace.viz import caption, colorize_disparity, grid, overlay_road
+from freespace.evaluation.viz import caption, colorize_disparity, grid, overlay_road
+from freespace.io.codecs import read_image
 
 
 def test_demo_end_to_end(tmp_path: Path) -> None:

@@ -20,11 +20,11 @@ from freespace.cli import main
 from freespace.data import get_dataset
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.errors import DatasetError
-from freespace.geometry.depth import disparity_from_depth_file
-from freespace.geometry.lidar import disparity_from_velodyne_file, write_velodyne
-from freespace.io import read_disparity, read_kitti_calib
+from freespace.geometry.lidar import velodyne_to_disparity
+from freespace.io.codecs import read_disparity
+from freespace.io.kitti import read_kitti_calib, read_velodyne
 
-from helpers import shared_path
+from helpers import disparity_from_depth_file, shared_path, write_velodyne
 
 # --- depth_u16 beside image_2 (real KITTI frames) ------------------------------------------------------
 
@@ -132,7 +132,7 @@ def test_lidar_mode_loads_the_projected_scan(lidar_root) -> None:
     for i, frame in enumerate(ds.frames):
         sample = ds.load(i)
         assert sample.disparity_source == "lidar"
-        projected = disparity_from_velodyne_file(frame.velodyne, frame.calib, sample.left.shape[:2])
+        projected = velodyne_to_disparity(read_velodyne(frame.velodyne), read_kitti_calib(frame.calib), sample.left.shape[:2])
         np.testing.assert_array_equal(sample.disparity, projected)
         have = np.isfinite(sample.disparity)
         np.testing.assert_array_equal(have, masks[frame.name])          # one point per sampled pixel, no other

@@ -19,7 +19,7 @@ from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.engine.config import TrainConfig
 from freespace.errors import FreespaceError, InputFileError
-from freespace.io import IGNORE_INDEX
+from freespace.labels import IGNORE_INDEX
 
 
 @pytest.fixture(scope="module")
@@ -109,9 +109,9 @@ def test_nan_loss_stops_the_run(tiny: Path, tmp_path: Path, monkeypatch: pytest.
 
 
 def test_checkpoints_are_written_atomically(tmp_path: Path) -> None:
-    from freespace.engine.train import _checkpoint_io
+    from freespace.engine.train import RunCheckpointIO
 
-    io = _checkpoint_io(tmp_path)
+    io = RunCheckpointIO(tmp_path)
     path = tmp_path / "last.ckpt"
     io.save_checkpoint({"epoch": 1}, path)
 
@@ -127,9 +127,9 @@ def test_checkpoints_are_written_atomically(tmp_path: Path) -> None:
 
 def test_resumed_checkpoint_paths_stay_in_the_run_folder(tmp_path: Path) -> None:
     """A checkpoint callback state that names files elsewhere (a moved run, a crafted file) is confined."""
-    from freespace.engine.train import _checkpoint_io
+    from freespace.engine.train import RunCheckpointIO
 
-    io = _checkpoint_io(tmp_path / "run")
+    io = RunCheckpointIO(tmp_path / "run")
     elsewhere = "/elsewhere/checkpoints/"
     state = {"dirpath": elsewhere, "best_model_path": elsewhere + "best.ckpt", "last_model_path": "/etc/passwd",
              "kth_best_model_path": elsewhere + "best.ckpt", "best_k_models": {elsewhere + "best.ckpt": 0.5}}
@@ -214,7 +214,7 @@ def test_ddp_two_cpu_processes(tiny: Path, tmp_path: Path) -> None:
     assert len(list(csv.DictReader((run / "metrics.csv").open()))) == 2
     # the test metrics were counted on two processes (disjoint halves of the test split) and summed: they
     # equal a single-process evaluation of the same checkpoint on the same frames
-    from freespace.engine.evaluate import evaluate_checkpoint
+    from freespace.inference.evaluate import evaluate_checkpoint
 
     m = json.loads((run / "metrics.json").read_text())
     test_names = (run / "splits" / "test.txt").read_text().split()
@@ -269,7 +269,7 @@ def test_dropout_draws_depend_on_the_run_seed_and_the_epoch() -> None:
 def test_the_monitored_validation_score(tmp_path: Path) -> None:
     """With --val-window N the best epoch is the one whose N-epoch mean F-score is highest."""
     from freespace.engine.train import CSV_FIELDS, _best_epoch, monitored
-    from freespace.io import write_csv
+    from freespace.io.files import write_csv
 
     rows = [{"epoch": e, "val_f_score": f, "val_f_window": w}
             for e, (f, w) in enumerate([(0.70, 0.70), (0.90, 0.80), (0.72, 0.773), (0.85, 0.823), (0.86, 0.81)])]

@@ -9,7 +9,7 @@ import pytest
 
 from freespace.errors import InvalidOptionError
 from freespace.geometry import RoadModel, StereoCalibration, homography_from_pose
-from freespace.io import read_kitti_calib
+from freespace.io.kitti import read_kitti_calib
 
 from helpers import shared_path
 

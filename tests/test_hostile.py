@@ -22,7 +22,7 @@ import pytest
 
 from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
-from freespace.io import write_disparity, write_image
+from freespace.io.codecs import write_disparity, write_image
 
 from helpers import synthetic_pair
 
@@ -473,7 +473,7 @@ def test_training_off_a_terminal_prints_lines_not_bar_frames(trained: dict[str, 
     assert sum("epoch" in line.lower() for line in text.splitlines()) >= 2, text
 
 
-# ------------------------------------------ issue 20: output folders (freespace.outdir, one rule for all)
+# ------------------------------------------ issue 20: output folders (freespace.io.outdir, one rule for all)
 def _users_folder(folder: Path) -> dict[str, bytes]:
     """A folder of a user's own files (names with spaces and non-ASCII characters among them)."""
     (folder / "photos").mkdir(parents=True, exist_ok=True)
@@ -599,7 +599,7 @@ def test_train_never_deletes_a_folder_it_did_not_write(trained: dict[str, Path],
 def test_two_runs_never_share_a_folder(trained: dict[str, Path], tmp_path: Path,
                                        capsys: pytest.CaptureFixture) -> None:
     """While a run holds its folder, a second run into it is refused (train, predict, generate)."""
-    from freespace.outdir import claim_folder
+    from freespace.io.outdir import claim_folder
 
     run = tmp_path / "run"
     with claim_folder(run, "train", entries=["config.yaml"]):
@@ -707,7 +707,7 @@ def test_reproduce_refuses_a_cell_with_other_settings(trained: dict[str, Path], 
     """A finished (or started) cell keeps its settings: --epochs, --image-size or --root changed is refused."""
     from freespace.engine.config import TrainConfig
     from freespace.experiments.reproduce import OUT_ENTRIES
-    from freespace.outdir import claim_folder
+    from freespace.io.outdir import claim_folder
 
     out = tmp_path / "exp"
     run = out / "runs" / "segnet-orig-s0"
@@ -735,7 +735,7 @@ def test_reproduce_refuses_a_cell_with_other_settings(trained: dict[str, Path], 
 # one convention for the pitch, and messages that name the right thing. Each case: exit code, one line,
 # no traceback, no output.
 # ======================================================================================================
-from freespace.io import read_road_label  # noqa: E402
+from freespace.io.codecs import read_road_label  # noqa: E402
 
 from helpers import shared_path  # noqa: E402
 
@@ -756,7 +756,7 @@ def _pair_args(pair: dict[str, Path], out: Path, **extra: Path) -> list[str]:
 
 def test_issue20_flipped_pfm_is_an_implausible_fit(pair: dict[str, Path], tmp_path: Path,
                                                    capsys: pytest.CaptureFixture) -> None:
-    from freespace.io import read_disparity
+    from freespace.io.codecs import read_disparity
 
     flipped = tmp_path / "flipped.pfm"
     _pfm_top_down(flipped, read_disparity(pair["D"]))
@@ -768,7 +768,7 @@ def test_issue20_flipped_pfm_is_an_implausible_fit(pair: dict[str, Path], tmp_pa
 
 def test_issue20_camera_height_bound_with_a_calibration(trained: dict[str, Path], tmp_path: Path,
                                                         capsys: pytest.CaptureFixture) -> None:
-    from freespace.io import read_disparity
+    from freespace.io.codecs import read_disparity
 
     training = trained["data"] / "data_road" / "training"
     frame = sorted((training / "image_2").iterdir())[0].stem
@@ -789,7 +789,7 @@ def test_issue20_camera_height_bound_with_a_calibration(trained: dict[str, Path]
 
 def test_issue20_few_inliers_is_an_implausible_fit(pair: dict[str, Path], tmp_path: Path,
                                                    capsys: pytest.CaptureFixture) -> None:
-    from freespace.io import read_disparity
+    from freespace.io.codecs import read_disparity
 
     disparity = read_disparity(pair["D"])
     rng = np.random.default_rng(0)
@@ -803,7 +803,7 @@ def test_issue20_few_inliers_is_an_implausible_fit(pair: dict[str, Path], tmp_pa
 
 def test_issue20_implausible_frame_fails_alone_in_a_dataset_run(trained: dict[str, Path], tmp_path: Path,
                                                                 capsys: pytest.CaptureFixture) -> None:
-    from freespace.io import read_disparity
+    from freespace.io.codecs import read_disparity
 
     root = _kitti_root(trained, tmp_path)
     disp_dir = root / "data_road" / "training" / "disparity"
@@ -824,7 +824,8 @@ def test_issue20_bounds_pass_real_kitti_and_every_rig_the_renderer_may_draw(tmp_
     from freespace.data.synthetic import scene
     from freespace.geometry import RoadPlane, StereoCalibration, compute_disparity, fit_road_model
     from freespace.geometry.road_model import CAMERA_HEIGHT_RANGE_M, MAX_ROLL_DEG
-    from freespace.io import read_disparity, read_image, read_kitti_calib
+    from freespace.io.codecs import read_disparity, read_image
+    from freespace.io.kitti import read_kitti_calib
 
     # the renderer's limits lie inside the bounds, with a margin
     assert scene.MAX_ROLL_DEG < MAX_ROLL_DEG
@@ -850,7 +851,7 @@ def test_issue20_bounds_pass_real_kitti_and_every_rig_the_renderer_may_draw(tmp_
         rig = StereoCalibration.from_kitti(read_kitti_calib(path))
         rig.road_model().check_plausible(rig.road_distance)
     # a real road frame's depth (measured heights 1.62–1.67 m)
-    from freespace.geometry.depth import disparity_from_depth_file
+    from helpers import disparity_from_depth_file
 
     depth_root = shared_path("kitti_road_depth", "testing")
     road = np.zeros((375, 1242), np.uint8)
@@ -863,7 +864,7 @@ def test_issue20_bounds_pass_real_kitti_and_every_rig_the_renderer_may_draw(tmp_
 
 
 def test_issue20_real_flipped_pfms_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    from freespace.io import read_disparity
+    from freespace.io.codecs import read_disparity
 
     stereo = shared_path("kitti_stereo_2015")
     for name in ("000000_10", "000001_10"):
@@ -961,7 +962,7 @@ def test_issue20_one_pitch_convention(tmp_path: Path) -> None:
 
     from freespace.data.registry import get_dataset
     from freespace.geometry import RoadPlane, StereoCalibration
-    from freespace.io import read_kitti_calib
+    from freespace.io.kitti import read_kitti_calib
 
     data = tmp_path / "syn"
     assert main(["synth", "--out", str(data), "--num", "3", "--width", "160", "--height", "128", "--seed", "4",
@@ -1006,7 +1007,7 @@ def test_issue20_synth_folder_of_the_old_pitch_sign_is_refused(tmp_path: Path, c
 
 def test_issue20_depth_and_lidar_failures_name_their_source(trained: dict[str, Path], tmp_path: Path,
                                                             capsys: pytest.CaptureFixture) -> None:
-    from freespace.geometry.lidar import write_velodyne
+    from helpers import write_velodyne
 
     root = _kitti_root(trained, tmp_path)
     training = root / "data_road" / "training"
@@ -1259,7 +1260,7 @@ def _two_class_scores(path: Path, shape: list) -> Path:
 def test_onnx_with_a_fixed_input_size_or_batch(shape: list, trained: dict[str, Path], tmp_path: Path,
                                                capsys: pytest.CaptureFixture) -> None:
     """A fixed input size: frames are resized to it (and the maps back); a fixed batch: batches of it."""
-    from freespace.io import read_image
+    from freespace.io.codecs import read_image
 
     model = _two_class_scores(tmp_path / "fixed.onnx", shape)
     images = trained["data"] / "data_road" / "training" / "image_2"
@@ -1298,7 +1299,7 @@ def test_onnx_failing_at_run_time(trained: dict[str, Path], tmp_path: Path, caps
 def _reproduce_folder(out: Path):
     """``out`` claimed as reproduce's output folder (its manifest), for run folders made by hand inside."""
     from freespace.experiments.reproduce import OUT_ENTRIES
-    from freespace.outdir import claim_folder
+    from freespace.io.outdir import claim_folder
 
     return claim_folder(out, "reproduce", entries=OUT_ENTRIES)
 

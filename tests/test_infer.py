@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from freespace.bev import BEV_SHAPE, bev_matrix, to_bev
 from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
-from freespace.io import read_image, read_kitti_calib, read_road_label, write_image
+from freespace.evaluation.bev import BEV_SHAPE, bev_matrix, to_bev
+from freespace.io.codecs import read_image, read_road_label, write_image
+from freespace.io.kitti import read_kitti_calib
 
 from helpers import shared_path
 

@@ -8,17 +8,11 @@ import numpy as np
 import pytest
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError
-from freespace.io import (
-    RoadLabel,
-    atomic_write_text,
-    read_disparity,
-    read_image,
-    read_kitti_calib,
-    read_road_label,
-    road_label_to_kitti,
-    write_disparity,
-    write_image,
-)
+from freespace.io.codecs import (read_disparity, read_image, read_road_label, road_label_to_kitti, write_disparity,
+    write_image)
+from freespace.io.files import atomic_write_text
+from freespace.io.kitti import read_kitti_calib
+from freespace.labels import RoadLabel
 
 from helpers import shared_path
 

@@ -18,15 +18,13 @@ import pytest
 from freespace.data.synthetic import SynthConfig, format_kitti_calib, render_sample
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
 from freespace.geometry import fit_road_model
-from freespace.geometry.depth import disparity_from_depth_file
 from freespace.geometry.lidar import (
     densify_nearest,
-    disparity_from_velodyne_file,
     project_velodyne,
-    read_velodyne,
     velodyne_to_disparity,
-    write_velodyne,
 )
+from freespace.io.kitti import read_kitti_calib, read_velodyne
+from helpers import disparity_from_depth_file, write_velodyne
 
 # a real KITTI R0_rect (rotation of about 0.7°) and camera-2 offset (P2 = K [I | t2])
 R0_RECT = np.array([[0.9999239, 0.00983776, -0.007445048], [-0.009869795, 0.9999421, -0.004278459],
@@ -115,7 +113,7 @@ def test_projected_disparity_equals_the_exact_one(scene, scan) -> None:
     # the same through the files: a KITTI calibration text file and the .bin scan
     calib_file = path.parent / "calib.txt"
     calib_file.write_text(format_kitti_calib(calib))
-    from_files = disparity_from_velodyne_file(path, calib_file, sample.disparity.shape)
+    from_files = velodyne_to_disparity(read_velodyne(path), read_kitti_calib(calib_file), sample.disparity.shape)
     np.testing.assert_allclose(from_files, disparity, rtol=1e-6, equal_nan=True)
 
 

@@ -12,9 +12,10 @@ import pytest
 
 from freespace.cli import main
 from freespace.errors import ShapeMismatchError
-from freespace.io import RoadLabel, road_label_to_kitti, write_image
-from freespace.metrics import (Counts, KittiCounts, RoadEvaluator, confusion_counts, kitti_counts, kitti_scores,
+from freespace.evaluation.metrics import (Counts, KittiCounts, RoadEvaluator, confusion_counts, kitti_counts, kitti_scores,
                                to_confidence)
+from freespace.io.codecs import road_label_to_kitti, write_image
+from freespace.labels import RoadLabel
 
 
 def devkit_reference(images: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> dict[str, float]:

@@ -1,4 +1,4 @@
-"""freespace.outdir: the one rule for output folders (manifest, lock, stages) and all-or-nothing files."""
+"""freespace.io.outdir: the one rule for output folders (manifest, lock, stages) and all-or-nothing files."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError
-from freespace.io import write_files_together
-from freespace.outdir import META, claim_folder
+from freespace.io.files import write_files_together
+from freespace.io.outdir import META, claim_folder
 
 
 def _manifest(folder: Path) -> dict:

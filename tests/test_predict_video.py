@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from freespace.cli import main
-from freespace.infer import predict_video
-from freespace.io import read_image, write_image
-from freespace.metrics import to_confidence
-from freespace.video import VideoWriter, open_frames
-from freespace.viz import overlay_road
+from freespace.evaluation.metrics import to_confidence
+from freespace.evaluation.viz import overlay_road
+from freespace.inference.predict import predict_video
+from freespace.io.codecs import read_image, write_image
+from freespace.io.video import VideoWriter, open_frames
 
 from helpers import textured_image
 
@@ -84,7 +84,7 @@ def test_video_round_trip(files: dict[str, Path], tmp_path: Path, capsys: pytest
     # every output frame is the overlay of the prediction of its input frame. MPEG-4 blurs the fine mask of
     # an untrained network, so frames are compared in 8×8-pixel block means: measured 2.2 grey levels from
     # the expected overlay, 15–17 from the inverted mask's, 25–31 from no overlay, 13–14 from the next frame's
-    from freespace.predictor import Predictor
+    from freespace.inference.predictor import Predictor
 
     def blocks(image: np.ndarray) -> np.ndarray:
         return cv2.resize(image.astype(np.float32), (SHAPE[1] // 8, SHAPE[0] // 8), interpolation=cv2.INTER_AREA)

@@ -207,7 +207,7 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_train_from_a_weights_file_then_predict_and_export_without_it(tiny: Path, tmp_path: Path) -> None:
-    from freespace.predictor import load_checkpoint
+    from freespace.inference.predictor import load_checkpoint
 
     torch.manual_seed(2)
     weights = tmp_path / "weights" / "lite0.pth"

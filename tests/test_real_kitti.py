@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from freespace.geometry import compute_disparity, fit_road_model, generate_view
-from freespace.io import read_disparity, read_image
+from freespace.io.codecs import read_disparity, read_image
 
 from helpers import shared_path
 

@@ -16,7 +16,7 @@ import torch
 from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.experiments.stats import paired_gain
-from freespace.io import read_image
+from freespace.io.codecs import read_image
 
 METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
 

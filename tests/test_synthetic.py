@@ -14,7 +14,8 @@ from freespace.cli import main
 from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, render_sample, sample_frame, write_dataset
 from freespace.geometry import StereoCalibration, fit_road_model
-from freespace.io import read_disparity, read_kitti_calib, read_road_label
+from freespace.io.codecs import read_disparity, read_road_label
+from freespace.io.kitti import read_kitti_calib
 
 SMALL = SynthConfig(width=320, height=240)
 

@@ -24,7 +24,8 @@ from freespace.geometry import (
     virtual_homography,
     virtual_view,
 )
-from freespace.io import RoadLabel, read_image, read_road_label, road_label_to_kitti, write_disparity, write_image
+from freespace.io.codecs import read_image, read_road_label, road_label_to_kitti, write_disparity, write_image
+from freespace.labels import RoadLabel
 
 from helpers import textured_image
 
@@ -119,7 +120,10 @@ def test_plane_sources_agree(frames) -> None:
     assert lhs == pytest.approx(calib.baseline, rel=1e-5)
     # a camera height and pitch: the level plane seen from the camera pitched, then rolled about its optical axis
     h, pitch, roll = 1.65, 2.5, -1.0
-    expected = RoadPlane((0, 1, 0), h).in_view(VirtualPose(pitch=pitch)).in_view(VirtualPose(roll=roll))
+    def in_view(plane: RoadPlane, pose: VirtualPose) -> RoadPlane:  # n' = R·n, h' = h − n·C in the camera's frame
+        return RoadPlane(tuple(pose.R @ plane.n), plane.height - float(plane.n @ pose.C))
+
+    expected = in_view(in_view(RoadPlane((0, 1, 0), h), VirtualPose(pitch=pitch)), VirtualPose(roll=roll))
     got = RoadPlane.from_camera(h, pitch, roll)
     np.testing.assert_allclose(got.normal, expected.normal, atol=1e-12)
     assert got.height == h and got.n[2] > 0  # looking down: the road lies ahead (n·(0, 0, Z) = h for Z > 0)

@@ -20,7 +20,9 @@ import numpy as np
 from freespace.data.disparity import DisparityCache, check_disparity_mode, resolve_disparity
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
 from freespace.geometry import SGBM_MAX_DISPARITY, StereoCalibration
-from freespace.io import PathLike, RoadLabel, read_image, read_road_label
+from freespace.io.codecs import read_image, read_road_label
+from freespace.io.files import PathLike
+from freespace.labels import RoadLabel
 
 __all__ = ["FrameRef", "Sample", "Problem", "StereoRoadDataset", "check_dataset_root"]
 
@@ -170,11 +172,6 @@ class StereoRoadDataset(ABC):
             if f.name == name:
                 return i
         raise DatasetError(f"frame {name!r} is not in {self.name} {self.split}")
-
-    @property
-    def has_right(self) -> bool:
-        """Whether any frame has a right image (needed for the augmentation)."""
-        return any(f.right is not None for f in self.frames)
 
     def subset(self, names: Iterable[str]) -> StereoRoadDataset:
         """This dataset (layout, split, disparity options) restricted to the frames called ``names``, in

@@ -26,7 +26,8 @@ import numpy as np
 from freespace.errors import DatasetError, InvalidOptionError
 from freespace.geometry import StereoCalibration, compute_disparity
 from freespace.geometry.depth import depth_to_disparity as _depth_to_disparity
-from freespace.io import PathLike, atomic_write_bytes, read_disparity
+from freespace.io.codecs import read_disparity
+from freespace.io.files import PathLike, atomic_write_bytes
 
 log = logging.getLogger(__name__)
 

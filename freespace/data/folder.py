@@ -36,15 +36,9 @@ from freespace.data.base import FrameRef, Problem, StereoRoadDataset
 from freespace.data.registry import register_dataset
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
 from freespace.geometry import RoadPlane, StereoCalibration
-from freespace.io import (
-    DISPARITY_SUFFIXES,
-    IMAGE_SUFFIXES,
-    PathLike,
-    RoadLabel,
-    read_disparity,
-    read_raw,
-    read_road_label,
-)
+from freespace.io.codecs import DISPARITY_SUFFIXES, IMAGE_SUFFIXES, read_disparity, read_raw, read_road_label
+from freespace.io.files import PathLike
+from freespace.labels import RoadLabel
 
 __all__ = ["FolderSpec", "GenericStereo", "SynthiaStereo", "CarlaStereo", "CONFIG_NAME"]
 

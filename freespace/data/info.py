@@ -11,8 +11,9 @@ from freespace.data.base import Problem, StereoRoadDataset, check_dataset_root
 from freespace.data.registry import get_dataset, get_dataset_class
 from freespace.data.splits import make_splits
 from freespace.errors import DatasetError, FreespaceError, InputFileError
-from freespace.geometry.lidar import read_velodyne
-from freespace.io import PathLike, read_disparity, read_raw
+from freespace.io.codecs import read_disparity, read_raw
+from freespace.io.files import PathLike
+from freespace.io.kitti import read_velodyne
 
 __all__ = ["dataset_info", "format_info", "check_dataset", "scan_dataset", "image_size"]
 

@@ -37,17 +37,11 @@ from freespace.data.registry import register_dataset
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError
 from freespace.geometry import StereoCalibration
 from freespace.geometry.depth import rig_from_kitti
-from freespace.geometry.lidar import disparity_from_velodyne_file
-from freespace.io import (
-    DEPTH_SUFFIXES,
-    DISPARITY_SUFFIXES,
-    PathLike,
-    RoadLabel,
-    missing_input,
-    read_depth,
-    read_kitti_calib,
-    read_road_label,
-)
+from freespace.geometry.lidar import velodyne_to_disparity
+from freespace.io.codecs import DEPTH_SUFFIXES, DISPARITY_SUFFIXES, read_depth, read_road_label
+from freespace.io.files import PathLike, missing_input
+from freespace.io.kitti import read_kitti_calib, read_velodyne
+from freespace.labels import RoadLabel
 
 __all__ = ["KittiRoad", "CATEGORIES"]
 
@@ -150,7 +144,7 @@ class KittiRoad(StereoRoadDataset):
 
     def read_depth(self, frame: FrameRef) -> np.ndarray:
         """``depth_u16/<frame>.png`` (uint16 millimetres, 0 and 65535 = none) or ``.npy``/``.pfm`` (metres)
-        as ``float32 H×W`` metres, NaN = none (:func:`freespace.io.read_depth`)."""
+        as ``float32 H×W`` metres, NaN = none (:func:`freespace.io.codecs.read_depth`)."""
         if frame.depth is None:
             raise DatasetError(f"{frame.name} has no depth map (data_road/{self.split}/depth_u16/{frame.name}.png)")
         return read_depth(frame.depth)
@@ -164,8 +158,8 @@ class KittiRoad(StereoRoadDataset):
         if frame.calib is None:
             raise DatasetError(f"{frame.name} has no calibration file; projecting its Velodyne scan needs "
                                f"Tr_velo_to_cam, R0_rect and P2 from data_road/{self.split}/calib/{frame.name}.txt")
-        return disparity_from_velodyne_file(frame.velodyne, read_kitti_calib(frame.calib), shape,
-                                            densify_gap=self.lidar_densify)
+        return velodyne_to_disparity(read_velodyne(frame.velodyne), read_kitti_calib(frame.calib), shape,
+                                     densify_gap=self.lidar_densify)
 
     def orphans(self) -> list[Problem]:
         names = {f.name for f in self.frames}

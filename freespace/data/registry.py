@@ -11,7 +11,7 @@ from typing import Any
 
 from freespace.data.base import StereoRoadDataset
 from freespace.errors import InvalidOptionError
-from freespace.io import PathLike
+from freespace.io.files import PathLike
 
 __all__ = ["register_dataset", "list_datasets", "get_dataset_class", "get_dataset"]
 

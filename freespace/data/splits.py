@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, check_seed
-from freespace.io import PathLike, atomic_write_text
+from freespace.io.files import PathLike, atomic_write_text
 
 __all__ = ["SPLIT_NAMES", "split_sizes", "make_splits", "write_splits", "read_splits"]
 

@@ -2,7 +2,7 @@
 :class:`~freespace.data.base.StereoRoadDataset` as segmentation samples.
 
 Samples are dicts: ``image`` float32 ``3×H×W`` in [0, 1] (normalisation belongs to the model),
-``label`` int64 ``H×W`` (0 = non-road, 1 = road, :data:`~freespace.io.IGNORE_INDEX` 255 = don't care),
+``label`` int64 ``H×W`` (0 = non-road, 1 = road, :data:`~freespace.labels.IGNORE_INDEX` 255 = don't care),
 ``name`` str and ``index`` (the sample's position in this dataset). Options, all off by default:
 
 * ``size=(H, W)``: images are resized with area interpolation, labels with nearest (never bilinear);
@@ -30,7 +30,8 @@ import torch
 
 from freespace.data.base import StereoRoadDataset
 from freespace.errors import DatasetError
-from freespace.io import IGNORE_INDEX, read_image
+from freespace.io.codecs import read_image
+from freespace.labels import IGNORE_INDEX
 
 __all__ = ["RoadSegmentationDataset", "Item", "VirtualAugment", "IGNORE_INDEX", "label_to_index", "resized_intrinsics"]
 

@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any, Union, get_args, get_origin, get_type_hints
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, check_seed
-from freespace.io import MAX_IMAGE_SIDE, PathLike, atomic_write_text, check_outputs, check_writable
+from freespace.io.codecs import MAX_IMAGE_SIDE
+from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable
 
 __all__ = ["TrainConfig", "parse_size", "parse_augment", "parse_ranges", "AUGMENTS", "PRESETS", "STRATEGIES",
            "add_config_arguments", "config_from_args", "read_config_yaml"]

@@ -197,7 +197,7 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int],
 def _generated_views(ds: StereoRoadDataset, indices: list[int], folder: Path) -> list[Item]:
     """DS-Generator views of the given frames (which have right images; made once, resumable), as items with
     the frames' labels."""
-    from freespace.generate import generate_dataset
+    from freespace.datagen.generate import generate_dataset
 
     sub = ds.subset(ds.frames[i].name for i in indices)
     if is_rank_zero():

@@ -10,8 +10,8 @@ import numpy as np
 import torch
 
 from freespace.errors import TrainingError
-from freespace.io import IGNORE_INDEX
-from freespace.metrics import RoadEvaluator
+from freespace.evaluation.metrics import RoadEvaluator
+from freespace.labels import IGNORE_INDEX
 from freespace.models import create_model, main_logits
 
 __all__ = ["RoadModule", "TrainingError", "epoch_seed"]

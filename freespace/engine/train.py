@@ -18,17 +18,20 @@ import time
 from pathlib import Path
 from typing import Any
 
+import lightning.pytorch as pl
 import torch
+from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
+from lightning.pytorch.plugins.io import TorchCheckpointIO
 
-from freespace.engine.config import TrainConfig
 from freespace.data.torch_dataset import RoadSegmentationDataset
+from freespace.engine.config import TrainConfig
 from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError
-from freespace.io import atomic_write_bytes, write_csv, write_json
+from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
+from freespace.io.files import atomic_write_bytes, write_csv, write_json
+from freespace.io.outdir import claim_folder
 from freespace.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
-from freespace.outdir import claim_folder
-from freespace.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 
 log = logging.getLogger(__name__)
 
@@ -44,76 +47,75 @@ def monitored(val_window: int) -> str:
     return "val_f_score" if val_window == 1 else "val_f_window"
 
 
-def _callbacks(run_dir: Path, patience: int, monitor: str):
-    import lightning.pytorch as pl
-    from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
+class EpochCSV(pl.Callback):
+    """``metrics.csv`` of the run folder ``run_dir``: one row per finished epoch, rewritten atomically (kept
+    across resumes)."""
 
-    class EpochCSV(pl.Callback):
-        """``metrics.csv``: one row per finished epoch, rewritten atomically (kept across resumes)."""
+    def __init__(self, run_dir: Path) -> None:
+        self.path = run_dir / "metrics.csv"
+        self.t0 = time.perf_counter()
 
-        def __init__(self) -> None:
-            self.path = run_dir / "metrics.csv"
-            self.t0 = time.perf_counter()
+    def on_train_epoch_start(self, trainer, module) -> None:
+        self.t0 = time.perf_counter()
 
-        def on_train_epoch_start(self, trainer, module) -> None:
-            self.t0 = time.perf_counter()
+    def on_train_epoch_end(self, trainer, module) -> None:
+        if not trainer.is_global_zero:
+            return
+        m = trainer.callback_metrics
+        rows = []
+        if self.path.is_file():
+            rows = [r for r in csv.DictReader(self.path.open()) if int(r["epoch"]) < trainer.current_epoch]
+        row = {"epoch": trainer.current_epoch, "lr": trainer.optimizers[0].param_groups[0]["lr"],
+               "seconds": round(time.perf_counter() - self.t0, 3)}
+        row.update({k: f"{float(m[k]):.6f}" for k in CSV_FIELDS if k in m})
+        write_csv(self.path, CSV_FIELDS, rows + [row])
+        if not on_terminal() or not trainer.progress_bar_callback:  # a log gets one line per epoch
+            log.info("epoch %d/%d  loss %s  val F %s  IoU %s  (%.1f s)", trainer.current_epoch + 1,
+                     trainer.max_epochs, row.get("train_loss", "—"), row.get("val_f_score", "—"),
+                     row.get("val_iou", "—"), row["seconds"])
 
-        def on_train_epoch_end(self, trainer, module) -> None:
-            if not trainer.is_global_zero:
-                return
-            m = trainer.callback_metrics
-            rows = []
-            if self.path.is_file():
-                rows = [r for r in csv.DictReader(self.path.open()) if int(r["epoch"]) < trainer.current_epoch]
-            row = {"epoch": trainer.current_epoch, "lr": trainer.optimizers[0].param_groups[0]["lr"],
-                   "seconds": round(time.perf_counter() - self.t0, 3)}
-            row.update({k: f"{float(m[k]):.6f}" for k in CSV_FIELDS if k in m})
-            write_csv(self.path, CSV_FIELDS, rows + [row])
-            if not on_terminal() or not trainer.progress_bar_callback:  # a log gets one line per epoch
-                log.info("epoch %d/%d  loss %s  val F %s  IoU %s  (%.1f s)", trainer.current_epoch + 1,
-                         trainer.max_epochs, row.get("train_loss", "—"), row.get("val_f_score", "—"),
-                         row.get("val_iou", "—"), row["seconds"])
 
+def _callbacks(run_dir: Path, patience: int, monitor: str) -> tuple[list[pl.Callback], ModelCheckpoint]:
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor=monitor, mode="max",
                            save_top_k=1, save_last=True, enable_version_counter=False)
     stop = EarlyStopping(monitor=monitor, mode="max", patience=patience, check_finite=True)
-    return [ckpt, stop, EpochCSV()], ckpt
+    return [ckpt, stop, EpochCSV(run_dir)], ckpt
 
 
-#: what a run writes into its folder, as :mod:`freespace.outdir` entries (removed when a plain rerun takes
+#: what a run writes into its folder, as :mod:`freespace.io.outdir` entries (removed when a plain rerun takes
 #: over a start that never checkpointed)
 RUN_ENTRIES = ("config.yaml", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/", "tensorboard/")
 
 
-def _checkpoint_io(run_dir: Path, module: torch.nn.Module | None = None):
-    from lightning.pytorch.plugins.io import TorchCheckpointIO
+class RunCheckpointIO(TorchCheckpointIO):
+    """Checkpoints of the run folder ``run_dir``.
 
-    class RunCheckpointIO(TorchCheckpointIO):
-        """Checkpoints of one run folder.
+    Saving goes to a temporary file that is renamed, so a killed run keeps a valid ``last.ckpt``.
+    Loading uses ``torch.load(weights_only=True)`` (a checkpoint runs no code), refuses a corrupt or
+    crafted file with one line, and points every path that the checkpoint callback stored back into
+    this run folder: a copied or moved run, or a crafted file, never reads or deletes files elsewhere.
+    With ``module``, weights and optimizer state that do not fit it are refused too.
+    """
 
-        Saving goes to a temporary file that is renamed, so a killed run keeps a valid ``last.ckpt``.
-        Loading uses ``torch.load(weights_only=True)`` (a checkpoint runs no code), refuses a corrupt or
-        crafted file with one line, and points every path that the checkpoint callback stored back into
-        this run folder: a copied or moved run, or a crafted file, never reads or deletes files elsewhere.
-        With ``module``, weights and optimizer state that do not fit it are refused too.
-        """
+    def __init__(self, run_dir: Path, module: torch.nn.Module | None = None) -> None:
+        super().__init__()
+        self.run_dir = run_dir
+        self.module = module
 
-        def save_checkpoint(self, checkpoint: dict[str, Any], path, storage_options=None) -> None:
-            buf = _io.BytesIO()
-            torch.save(checkpoint, buf)
-            atomic_write_bytes(path, buf.getvalue())
+    def save_checkpoint(self, checkpoint: dict[str, Any], path, storage_options=None) -> None:
+        buf = _io.BytesIO()
+        torch.save(checkpoint, buf)
+        atomic_write_bytes(path, buf.getvalue())
 
-        def load_checkpoint(self, path, map_location=None, weights_only=None) -> dict[str, Any]:
-            checkpoint = read_checkpoint_file(path)
-            _check_training_state(checkpoint, path)
-            if module is not None:
-                _check_fits(checkpoint, module, path)
-            for state in (checkpoint.get("callbacks") or {}).values():
-                if isinstance(state, dict) and "dirpath" in state:
-                    _confine_paths(state, Path(os.path.realpath(run_dir / "checkpoints")))  # as Lightning keeps it
-            return checkpoint
-
-    return RunCheckpointIO()
+    def load_checkpoint(self, path, map_location=None, weights_only=None) -> dict[str, Any]:
+        checkpoint = read_checkpoint_file(path)
+        _check_training_state(checkpoint, path)
+        if self.module is not None:
+            _check_fits(checkpoint, self.module, path)
+        for state in (checkpoint.get("callbacks") or {}).values():
+            if isinstance(state, dict) and "dirpath" in state:
+                _confine_paths(state, Path(os.path.realpath(self.run_dir / "checkpoints")))  # as Lightning keeps it
+        return checkpoint
 
 
 #: the parts of a checkpoint that Lightning restores on resume, and their types
@@ -212,7 +214,7 @@ def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> None:
         raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
                                  f"{run_dir} has none")
     saved = TrainConfig.load(run_dir / "config.yaml")
-    resumed = _checkpoint_io(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
+    resumed = RunCheckpointIO(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
     if config.image_size is None:
         config.image_size = saved.image_size  # "auto" was resolved when the run started
     changed = [k for k, v in saved.to_dict().items()
@@ -227,8 +229,6 @@ def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> None:
 
 
 def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
-    import lightning.pytorch as pl
-
     quiet_lightning()
 
     from freespace.engine.module import RoadModule
@@ -264,7 +264,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
         devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",
-        max_epochs=config.epochs, callbacks=callbacks, plugins=[_checkpoint_io(run_dir, module)],
+        max_epochs=config.epochs, callbacks=callbacks, plugins=[RunCheckpointIO(run_dir, module)],
         logger=_logger(config, run_dir),
         default_root_dir=str(run_dir), num_sanity_val_steps=0, deterministic=True,
         enable_progress_bar=progress and on_terminal(), enable_model_summary=False, use_distributed_sampler=False,

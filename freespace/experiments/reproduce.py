@@ -42,9 +42,9 @@ import numpy as np
 from freespace.engine.config import TrainConfig, read_config_yaml
 from freespace.errors import CorruptFileError, DatasetError, FreespaceError, InvalidOptionError
 from freespace.experiments.stats import paired_gain
-from freespace.io import (PathLike, atomic_write_bytes, atomic_write_text, check_writable, write_csv, write_image,
-                          write_json)
-from freespace.outdir import claim_folder
+from freespace.io.codecs import write_image
+from freespace.io.files import PathLike, atomic_write_bytes, atomic_write_text, check_writable, write_csv, write_json
+from freespace.io.outdir import claim_folder
 
 log = logging.getLogger(__name__)
 
@@ -108,7 +108,7 @@ _RUN_NAME = re.compile(r"(?P<model>.+)-(?P<tag>[a-z]+)-s(?P<seed>\d+)")
 TestRoots = PathLike | list[PathLike] | tuple[PathLike, ...] | dict[str, PathLike] | None
 
 
-#: what ``reproduce`` writes into OUT (:mod:`freespace.outdir` entries)
+#: what ``reproduce`` writes into OUT (:mod:`freespace.io.outdir` entries)
 OUT_ENTRIES = ("runs/", "index.json", "results.csv", "gains.csv", "results.md", "figures/")
 
 
@@ -294,8 +294,8 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     ``RUN/<name>/metrics.json`` (accuracy, precision, recall, f_score, iou at p ≥ 0.5, max_f, ap as
     fractions; frames; the resolved root). Skipped when that file exists for the same root."""
     from freespace.data.registry import get_dataset
-    from freespace.engine.evaluate import evaluate_frames
-    from freespace.predictor import Predictor
+    from freespace.inference.evaluate import evaluate_frames
+    from freespace.inference.predictor import Predictor
 
     run_dir = Path(run_dir)
     path = run_dir / name / "metrics.json"
@@ -713,8 +713,8 @@ def _figure(out: Path, model: str, entries: list[dict[str, Any]], frames: int) -
     (TP/FN/FP), X first."""
     from freespace.data.registry import get_dataset
     from freespace.data.splits import read_splits
-    from freespace.predictor import Predictor
-    from freespace.viz import caption, grid, overlay_errors
+    from freespace.evaluation.viz import caption, grid, overlay_errors
+    from freespace.inference.predictor import Predictor
 
     runs = {e["variant"]: out / e["run"] for e in entries
             if e["model"] == model and e["seed"] == 0 and (out / e["run"] / "checkpoints" / "best.ckpt").is_file()

@@ -20,7 +20,7 @@ A depth camera (or LiDAR) without a second camera has no baseline: choose one, a
   target image, so with RGB-D data the fitted model serves the road geometry, virtual views of a
   chosen pose, and disparity-based training inputs, not the warp of a right image that does not exist.
 
-Only NumPy (and :mod:`freespace.io` for the file helpers) is imported here; never torch.
+Only NumPy is imported here; never torch. Depth files are read by :func:`freespace.io.codecs.read_depth`.
 """
 
 from __future__ import annotations
@@ -33,14 +33,11 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, InvalidOptionError
 from freespace.geometry.homography import StereoCalibration
-from freespace.io import PathLike, read_depth, read_kitti_calib
 
 __all__ = [
     "DEFAULT_VIRTUAL_BASELINE_M",
     "depth_to_disparity",
-    "disparity_to_depth",
     "rig_from_kitti",
-    "disparity_from_depth_file",
 ]
 
 log = logging.getLogger(__name__)
@@ -82,15 +79,9 @@ def depth_to_disparity(depth_m: np.ndarray, focal_px: float, baseline_m: float) 
     return out
 
 
-def disparity_to_depth(disparity: np.ndarray, focal_px: float, baseline_m: float) -> np.ndarray:
-    """Depth ``Z = f·B / d`` in metres (``float32``, NaN where ``d`` is ≤ 0, NaN or inf); the inverse of
-    :func:`depth_to_disparity`."""
-    return depth_to_disparity(disparity, focal_px, baseline_m)  # the same reciprocal map
-
-
 def rig_from_kitti(calib: dict[str, np.ndarray], *, baseline: float | None = None, left: str = "P2",
                    right: str = "P3") -> StereoCalibration:
-    """The stereo rig of a parsed KITTI calibration (:func:`freespace.io.read_kitti_calib`), with a
+    """The stereo rig of a parsed KITTI calibration (:func:`freespace.io.kitti.read_kitti_calib`), with a
     virtual right camera when needed.
 
     * ``baseline`` None and ``right`` (P3) present: the real rig, as
@@ -119,32 +110,3 @@ def rig_from_kitti(calib: dict[str, np.ndarray], *, baseline: float | None = Non
         rig = StereoCalibration.from_kitti({**calib, right: virtual}, left=left, right=right)
         return replace(rig, baseline=float(baseline))  # exactly the chosen value, not a round trip through P
     return StereoCalibration.from_kitti(calib, left=left, right=right)
-
-
-def disparity_from_depth_file(depth_path: PathLike, calibration: StereoCalibration | dict[str, np.ndarray] | PathLike,
-                              *, baseline: float | None = None, png_scale: float = 0.001,
-                              shape: tuple[int, int] | None = None) -> tuple[np.ndarray, StereoCalibration]:
-    """Read a depth file and turn it into disparity in one call.
-
-    Args:
-        depth_path: ``depth_u16`` PNG (millimetres, 0/65535 = none) or float ``.npy``/``.pfm`` in metres
-            (:func:`freespace.io.read_depth`).
-        calibration: a :class:`StereoCalibration`, a parsed KITTI calibration dict, or the path of a
-            KITTI calibration file.
-        baseline: a virtual baseline in metres that replaces the calibration's (see
-            :func:`rig_from_kitti`); None keeps a real one (or uses the default virtual one without P3).
-        png_scale: metres per unit of a depth PNG. shape: ``(H, W)`` the map must have, or None.
-
-    Returns:
-        ``(disparity, rig)``: ``float32 H×W`` disparity in pixels (NaN = none) and the rig it used.
-    """
-    if isinstance(calibration, StereoCalibration):
-        rig = calibration
-        if baseline is not None:
-            _check_rig(rig.fx, baseline)
-            rig = replace(rig, baseline=float(baseline))
-    else:
-        calib = calibration if isinstance(calibration, dict) else read_kitti_calib(calibration)
-        rig = rig_from_kitti(calib, baseline=baseline)
-    depth = read_depth(depth_path, png_scale=png_scale, shape=shape)
-    return depth_to_disparity(depth, rig.fx, rig.baseline), rig

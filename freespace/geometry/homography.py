@@ -86,7 +86,7 @@ class StereoCalibration:
 
     @classmethod
     def from_kitti(cls, calib: dict[str, np.ndarray], left: str = "P2", right: str = "P3") -> StereoCalibration:
-        """Build from a parsed KITTI calibration (:func:`freespace.io.read_kitti_calib`).
+        """Build from a parsed KITTI calibration (:func:`freespace.io.kitti.read_kitti_calib`).
 
         Focal length and principal point come from ``P2``; the baseline from the difference of the
         4th columns of ``P2`` and ``P3``. When ``Tr_cam_to_road`` (camera 0 → road frame, applied before ``R0_rect`` as in the devkit,

@@ -1,4 +1,5 @@
-"""Disparity from KITTI Velodyne scans: read ``velodyne/<frame>.bin``, project into the left image.
+"""Disparity from KITTI Velodyne scans: project the points into the left image (the scans are read by
+:func:`freespace.io.kitti.read_velodyne`).
 
 Conventions
 -----------
@@ -21,68 +22,22 @@ Only NumPy and OpenCV are imported here; never torch.
 from __future__ import annotations
 
 import math
-from pathlib import Path
-
 import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError
+from freespace.errors import CorruptFileError, InvalidOptionError
 from freespace.geometry.depth import depth_to_disparity, rig_from_kitti
-from freespace.io import PathLike, atomic_write_bytes, read_kitti_calib
 
 __all__ = [
-    "read_velodyne",
-    "write_velodyne",
     "velodyne_to_camera",
     "project_velodyne",
     "velodyne_to_disparity",
-    "disparity_from_velodyne_file",
     "densify_nearest",
     "DEFAULT_MIN_DEPTH_M",
 ]
 
 DEFAULT_MIN_DEPTH_M = 0.1
 """Points closer than this along the optical axis (metres) — and every point behind the camera — are dropped."""
-
-
-def read_velodyne(path: PathLike) -> np.ndarray:
-    """Read a KITTI Velodyne scan.
-
-    Returns:
-        ``float32 N×4``: x, y, z (metres, Velodyne frame) and reflectance, N ≥ 1.
-
-    Raises:
-        InputFileError: missing or unreadable file. CorruptFileError: empty, a size that is not a
-        multiple of 16 bytes (4 float32 per point), or NaN/inf values.
-    """
-    path = Path(path)
-    if not path.is_file():
-        hint = "it is a folder, name a file" if path.is_dir() else "check the path"
-        raise InputFileError(f"Velodyne scan not found: {path} ({hint})")
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputFileError(f"cannot read Velodyne scan {path}: {exc.strerror}") from None
-    if not data or len(data) % 16:
-        raise CorruptFileError(f"Velodyne scan {path} has {len(data)} bytes; expected a non-empty multiple of 16 "
-                               f"(float32 x, y, z, reflectance per point)")
-    points = np.frombuffer(data, dtype="<f4").reshape(-1, 4).astype(np.float32)
-    bad = ~np.isfinite(points).all(axis=1)
-    if bad.any():
-        raise CorruptFileError(f"Velodyne scan {path} has {int(bad.sum())} points with NaN or inf values; "
-                               f"expected a KITTI .bin scan (float32 x, y, z, reflectance)")
-    return points
-
-
-def write_velodyne(path: PathLike, points: np.ndarray) -> Path:
-    """Write ``N×4`` (x, y, z, reflectance) or ``N×3`` (reflectance 0) points as a KITTI ``.bin`` scan,
-    atomically. Returns the path written."""
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] not in (3, 4) or not np.isfinite(pts).all():
-        raise InvalidOptionError(f"points must be a finite N×3 or N×4 array, got shape {pts.shape}")
-    if pts.shape[1] == 3:
-        pts = np.hstack([pts, np.zeros((len(pts), 1))])
-    return atomic_write_bytes(path, pts.astype("<f4").tobytes())
 
 
 def _matrix(calib: dict[str, np.ndarray], keys: tuple[str, ...], shape: tuple[int, int],
@@ -105,7 +60,7 @@ def velodyne_to_camera(points: np.ndarray, calib: dict[str, np.ndarray], camera:
 
     Args:
         points: ``N×3`` or ``N×4`` points in the Velodyne frame (metres; a 4th column is ignored).
-        calib: a parsed KITTI calibration (:func:`freespace.io.read_kitti_calib`) with
+        calib: a parsed KITTI calibration (:func:`freespace.io.kitti.read_kitti_calib`) with
             ``Tr_velo_to_cam`` (3×4), ``P2`` (3×4) and ``R0_rect`` (3×3; identity when absent).
         camera: the projection matrix to use.
 
@@ -177,16 +132,6 @@ def velodyne_to_disparity(points: np.ndarray, calib: dict[str, np.ndarray], shap
     rig = rig_from_kitti(calib, baseline=baseline)
     disparity = depth_to_disparity(project_velodyne(points, calib, shape, min_depth=min_depth), rig.fx, rig.baseline)
     return densify_nearest(disparity, densify_gap) if densify_gap else disparity
-
-
-def disparity_from_velodyne_file(scan_path: PathLike, calibration: dict[str, np.ndarray] | PathLike,
-                                 shape: tuple[int, int], *, baseline: float | None = None,
-                                 min_depth: float = DEFAULT_MIN_DEPTH_M, densify_gap: int = 0) -> np.ndarray:
-    """Read a ``velodyne/<frame>.bin`` scan and its KITTI calibration (dict or file path) and return the
-    ``float32 H×W`` disparity of the P2 image (NaN = none); options as :func:`velodyne_to_disparity`."""
-    calib = calibration if isinstance(calibration, dict) else read_kitti_calib(calibration)
-    return velodyne_to_disparity(read_velodyne(scan_path), calib, shape, baseline=baseline, min_depth=min_depth,
-                                 densify_gap=densify_gap)
 
 
 def densify_nearest(disparity: np.ndarray, max_gap_px: float) -> np.ndarray:

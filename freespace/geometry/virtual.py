@@ -42,7 +42,7 @@ import numpy as np
 from freespace.errors import InvalidOptionError, ShapeMismatchError
 from freespace.geometry.homography import StereoCalibration
 from freespace.geometry.road_model import RoadModel
-from freespace.io import RoadLabel
+from freespace.labels import RoadLabel
 
 __all__ = ["RoadPlane", "VirtualPose", "virtual_homography", "virtual_view", "rotation_from_angles"]
 
@@ -205,11 +205,6 @@ class RoadPlane:
         """
         return self.height - float(np.abs(self.n) @ np.abs(np.asarray(shift, dtype=np.float64)))
 
-    def in_view(self, pose: VirtualPose) -> RoadPlane:
-        """The same plane in the frame of the camera at ``pose``: ``n' = R·n``, ``h' = h − n·C``."""
-        normal = tuple(float(x) for x in pose.R @ self.n)
-        return RoadPlane(normal, self.height - float(self.n @ pose.C))  # type: ignore[arg-type]
-
 
 def _check_K(K: np.ndarray) -> np.ndarray:
     K = np.asarray(K, dtype=np.float64)
@@ -268,7 +263,7 @@ def virtual_view(image: np.ndarray, label: RoadLabel | np.ndarray | None, K: np.
 
     Args:
         image: ``H×W×C`` or ``H×W`` reference image, uint8 or float32.
-        label: a :class:`~freespace.io.RoadLabel` (road + valid), an ``H×W`` integer class map, or None.
+        label: a :class:`~freespace.labels.RoadLabel` (road + valid), an ``H×W`` integer class map, or None.
         K: 3×3 intrinsics of the reference camera (pixels of ``image``). plane: the road plane in the
             reference frame. pose: the virtual camera (module conventions: ``X ↦ R·(X − C)``).
         ignore: the value written into a class-map label at invalid pixels (default 255).

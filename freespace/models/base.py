@@ -19,7 +19,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from freespace.errors import FreespaceError, InvalidOptionError, PretrainedWeightsError
-from freespace.io import IGNORE_INDEX
+from freespace.labels import IGNORE_INDEX
 
 __all__ = ["SegmentationModel", "main_logits", "IGNORE_INDEX", "load_smp_encoder", "network_error"]
 

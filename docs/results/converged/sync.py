@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from freespace.experiments.reproduce import OUT_ENTRIES
-from freespace.outdir import claim_folder
+from freespace.io.outdir import claim_folder
 
 SKIP = {"checkpoints", "generated", "tensorboard"}
 

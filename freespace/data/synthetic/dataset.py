@@ -29,9 +29,9 @@ import numpy as np
 from freespace.data.synthetic.render import StereoSample, render_sample
 from freespace.data.synthetic.scene import SynthConfig
 from freespace.errors import InvalidOptionError, check_seed
-from freespace.io import (PathLike, atomic_write_text, check_writable, road_label_to_kitti, write_csv,
-                          write_disparity, write_image, write_json)
-from freespace.outdir import claim_folder
+from freespace.io.codecs import road_label_to_kitti, write_disparity, write_image
+from freespace.io.files import PathLike, atomic_write_text, check_writable, write_csv, write_json
+from freespace.io.outdir import claim_folder
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
 
@@ -91,7 +91,7 @@ def _init_worker(parent: int) -> None:
 MAX_FRAMES = 1_000_000
 
 
-#: what ``synth`` writes into OUT (:mod:`freespace.outdir` entries)
+#: what ``synth`` writes into OUT (:mod:`freespace.io.outdir` entries)
 OUT_ENTRIES = ("data_road/", "data_road_right/", "index.csv", "synth.json")
 
 

@@ -23,7 +23,7 @@ from freespace.data.synthetic.scene import (
 )
 from freespace.geometry.homography import StereoCalibration
 from freespace.geometry.virtual import VirtualPose
-from freespace.io import RoadLabel
+from freespace.labels import RoadLabel
 
 __all__ = ["StereoSample", "ViewRender", "render_frame", "render_sample", "render_view", "kitti_calibration"]
 

@@ -16,11 +16,12 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError
-from freespace.io import PathLike, check_outputs, check_writable, write_image, write_json
-from freespace.metrics import RoadEvaluator
-from freespace.outdir import claim_folder
-from freespace.predictor import Predictor
-from freespace.viz import overlay_errors, write_pr_curve
+from freespace.evaluation.metrics import RoadEvaluator
+from freespace.evaluation.viz import overlay_errors, write_pr_curve
+from freespace.inference.predictor import Predictor
+from freespace.io.codecs import write_image
+from freespace.io.files import PathLike, check_outputs, check_writable, write_json
+from freespace.io.outdir import claim_folder
 
 __all__ = ["evaluate_checkpoint", "evaluate_frames"]
 

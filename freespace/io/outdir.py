@@ -30,7 +30,7 @@ The folder itself is never renamed or replaced, so an ``--out`` that is a symbol
 ``--out .`` works. Files are listed in the manifest **before** they are written (in place or by a
 stage), so a run killed half-way leaves only files that its next run knows.
 
-Also here: :func:`freespace.io.write_files_together` (several output files written all or nothing, earlier files kept
+Also here: :func:`freespace.io.files.write_files_together` (several output files written all or nothing, earlier files kept
 when it fails). Only the standard library is imported.
 """
 
@@ -48,7 +48,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError
-from freespace.io import write_files_together
+from freespace.io.files import write_files_together
 
 PathLike = str | os.PathLike[str]
 
@@ -57,7 +57,7 @@ META = ".freespace"
 MANIFEST = "manifest.json"
 _LOCK = "lock"
 _STAGE = "stage-"
-#: what a killed atomic write (:func:`freespace.io.write_files_together`: a :func:`tempfile.mkstemp` file)
+#: what a killed atomic write (:func:`freespace.io.files.write_files_together`: a :func:`tempfile.mkstemp` file)
 #: leaves beside its target NAME
 _TEMP = re.compile(r"\.(.+)\.[a-z0-9_]{8}\.tmp")
 #: folders (resolved) that this process holds now: a folder claimed inside one of them is its own nesting

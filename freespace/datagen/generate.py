@@ -41,27 +41,14 @@ from freespace.geometry import (
     virtual_homography,
     virtual_view,
 )
-from freespace.io import (
-    IMAGE_SUFFIXES,
-    PathLike,
-    check_outputs,
-    check_writable,
-    check_writable_files,
-    encode_image,
-    encode_json,
-    atomic_write_bytes,
-    RoadLabel,
-    read_disparity,
-    read_image,
-    read_kitti_calib,
-    read_road_label,
-    road_label_to_kitti,
-    write_csv,
-    write_json,
-    write_files_together,
-)
 from freespace.geometry.stereo import check_search_range
-from freespace.outdir import claim_folder
+from freespace.io.codecs import (IMAGE_SUFFIXES, encode_image, read_disparity, read_image, read_road_label,
+    road_label_to_kitti)
+from freespace.io.files import (PathLike, check_outputs, check_writable, check_writable_files, encode_json,
+    atomic_write_bytes, write_csv, write_json, write_files_together)
+from freespace.io.kitti import read_kitti_calib
+from freespace.io.outdir import claim_folder
+from freespace.labels import RoadLabel
 from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)
@@ -493,7 +480,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
 def frames_folder(out_dir: Path, command: str, settings: dict[str, Any], overwrite: bool, names: list[str],
                   shard: tuple[int, int] | None, extra: tuple[str, ...] = ()) -> Iterator[None]:
     """Hold ``out_dir`` for a per-frame dataset output of ``command`` (``generate``, ``autolabel``): the
-    folder rule of :mod:`freespace.outdir` (shards share it), the recorded ``settings`` (a folder made with
+    folder rule of :mod:`freespace.io.outdir` (shards share it), the recorded ``settings`` (a folder made with
     other ones is refused unless ``overwrite``, which first removes what this run or shard would write),
     and every file of the frames ``names`` listed in the manifest before it is written: ``<frame>.png``,
     ``reports/<frame>.json``, ``<extra>/<frame>.png``, the totals and ``settings.json``."""

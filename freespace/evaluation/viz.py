@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from freespace.io import PathLike, atomic_write_bytes
+from freespace.io.files import PathLike, atomic_write_bytes
 
 __all__ = ["colorize_disparity", "overlay_road", "overlay_errors", "caption", "grid", "write_pr_curve"]
 
@@ -71,7 +71,7 @@ def grid(rows: Sequence[Sequence[np.ndarray]], width: int | None = None) -> np.n
 
 def write_pr_curve(path: PathLike, recall: np.ndarray, precision: np.ndarray) -> None:
     """Draw a road precision-recall curve (fractions, one point per threshold, e.g. from
-    :meth:`freespace.metrics.KittiCounts.pr_curve`) into a PNG file, written atomically."""
+    :meth:`freespace.evaluation.metrics.KittiCounts.pr_curve`) into a PNG file, written atomically."""
     import io as _io
 
     import matplotlib

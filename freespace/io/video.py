@@ -9,7 +9,7 @@ Only NumPy and OpenCV (whose wheels include FFmpeg) are imported here; never tor
 
 Example::
 
-    from freespace.video import open_frames, VideoWriter
+    from freespace.io.video import open_frames, VideoWriter
 
     source = open_frames("drive.mp4")                  # or "frames/" or "frames/*.png"
     with VideoWriter("out.mp4", fps=source.fps) as out:
@@ -33,9 +33,10 @@ import cv2
 import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
-from freespace.io import IMAGE_SUFFIXES, PathLike, read_image
+from freespace.io.codecs import IMAGE_SUFFIXES, read_image
+from freespace.io.files import PathLike
 
-__all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "iter_frames", "is_video_path",
+__all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path",
            "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "DEFAULT_FPS"]
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".ts")
@@ -223,11 +224,6 @@ def open_frames(source: PathLike, *, fps: float | None = None, default_fps: floa
     if fps is not None:
         src = FrameSource(src.kind, src.spec, src.paths, float(fps), src.size, src.count)
     return src
-
-
-def iter_frames(source: PathLike, **options: float | None) -> Iterator[VideoFrame]:
-    """Shorthand for ``iter(open_frames(source, **options))``: a generator of :class:`VideoFrame`."""
-    return iter(open_frames(source, **options))  # type: ignore[arg-type]
 
 
 class VideoWriter:

@@ -16,9 +16,11 @@ from typing import Any
 import numpy as np
 
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, ShapeMismatchError
-from freespace.bev import to_bev
-from freespace.io import PathLike, missing_input, read_image, read_kitti_calib, road_label_from_image
-from freespace.metrics import KITTI_CATEGORIES, RoadEvaluator
+from freespace.evaluation.bev import to_bev
+from freespace.evaluation.metrics import KITTI_CATEGORIES, RoadEvaluator
+from freespace.io.codecs import read_image, road_label_from_image
+from freespace.io.files import PathLike, missing_input
+from freespace.io.kitti import read_kitti_calib
 
 __all__ = ["evaluate_kitti_dirs", "read_confidence"]
 
@@ -46,7 +48,7 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLik
     """Evaluate every ground-truth file of ``gt_dir`` against its prediction in ``pred_dir``.
 
     With ``calib_dir`` (``<cat>_<id>.txt`` KITTI calibration files), ground truth and predictions are
-    both transformed into the benchmark's bird's-eye view first (:mod:`freespace.bev`), as the server does.
+    both transformed into the benchmark's bird's-eye view first (:mod:`freespace.evaluation.bev`), as the server does.
 
     Returns:
         ``{category: {"max_f", "ap", "pre", "rec", "fpr", "fnr", "threshold", "images"}}`` for the

@@ -65,20 +65,11 @@ from freespace.errors import (
     ShapeMismatchError,
 )
 from freespace.geometry import SGBM_MAX_DISPARITY, RoadModel, compute_disparity, fit_road_model
-from freespace.io import (
-    PathLike,
-    RoadLabel,
-    check_outputs,
-    check_writable_files,
-    encode_image,
-    encode_json,
-    read_disparity,
-    read_image,
-    read_kitti_calib,
-    road_label_to_kitti,
-    write_json,
-    write_files_together,
-)
+from freespace.io.codecs import encode_image, read_disparity, read_image, road_label_to_kitti
+from freespace.io.files import (PathLike, check_outputs, check_writable_files, encode_json, write_json,
+    write_files_together)
+from freespace.io.kitti import read_kitti_calib
+from freespace.labels import RoadLabel
 
 log = logging.getLogger(__name__)
 
@@ -494,7 +485,7 @@ _CSV_FIELDS = ["frame", "status", "coverage", "road_fraction", "noise_px", "roug
 
 def _settings(dataset: Any, options: AutolabelOptions) -> dict[str, Any]:
     """What an autolabel tree depends on (``OUT/settings.json``; never the shard)."""
-    from freespace.generate import dataset_settings
+    from freespace.datagen.generate import dataset_settings
 
     return {**dataset_settings(dataset), **options.to_dict()}
 
@@ -534,12 +525,12 @@ def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     (``.shard-K-of-N`` names with ``shard``), and ``OUT/settings.json``. Disparities come from the
     dataset's disparity setting (file, depth, LiDAR or cached SGBM); the baseline from each frame's
     calibration. Resumable, sharded and refusing a folder made with other settings (unless
-    ``overwrite``) exactly as :func:`freespace.generate.generate_dataset`, whose machinery it shares.
+    ``overwrite``) exactly as :func:`freespace.datagen.generate.generate_dataset`, whose machinery it shares.
 
     Returns:
         The summary: counts, ``failed`` (frame → reason), mean coverage and road fraction.
     """
-    from freespace.generate import frames_folder
+    from freespace.datagen.generate import frames_folder
     from freespace.shard import select_shard
 
     options.check()
@@ -560,7 +551,7 @@ def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
 def _label_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options: AutolabelOptions, workers: int,
                   progress: bool, shard: tuple[int, int] | None) -> dict[str, Any]:
     """Label the frames of ``dataset`` not yet done into ``out_dir`` and write the totals."""
-    from freespace.generate import _plan, _run_jobs, _totals_names, _write_report_csv
+    from freespace.datagen.generate import _plan, _run_jobs, _totals_names, _write_report_csv
 
     summary_name, report_name = _totals_names(shard)
     frames = dataset.frames

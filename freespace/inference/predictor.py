@@ -1,8 +1,8 @@
 """Trained networks for prediction: :func:`load_checkpoint` and :class:`Predictor` (a checkpoint or an
 exported ONNX model → road probabilities at each image's own size).
 
-Used by ``freespace evaluate`` (:mod:`freespace.engine.evaluate`), ``predict``/``export``/``kitti-submit``
-(:mod:`freespace.infer`) and ``reproduce``'s figures (:mod:`freespace.experiments.reproduce`). PyTorch is
+Used by ``freespace evaluate`` (:mod:`freespace.inference.evaluate`), ``predict``/``export``/``kitti-submit``
+(:mod:`freespace.inference.predict`) and ``reproduce``'s figures (:mod:`freespace.experiments.reproduce`). PyTorch is
 imported only to read a checkpoint, onnxruntime only to read an ONNX file.
 """
 
@@ -16,7 +16,8 @@ import cv2
 import numpy as np
 
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError
-from freespace.io import MAX_IMAGE_SIDE, PathLike, missing_input
+from freespace.io.codecs import MAX_IMAGE_SIDE
+from freespace.io.files import PathLike, missing_input
 
 if TYPE_CHECKING:
     import torch

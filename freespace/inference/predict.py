@@ -1,5 +1,5 @@
 """Inference for deployment: `predict` (images, folders, globs, videos; sharded), `export`, `kitti-submit`
-(the predictor itself: :mod:`freespace.predictor`)."""
+(the predictor itself: :mod:`freespace.inference.predictor`)."""
 
 from __future__ import annotations
 
@@ -19,20 +19,14 @@ from typing import Any
 import numpy as np
 
 from freespace.errors import InputFileError, InvalidOptionError
-from freespace.io import (
-    PathLike,
-    atomic_write_bytes,
-    check_outputs,
-    check_writable,
-    read_kitti_calib,
-    write_image,
-    write_json,
-)
-from freespace.metrics import to_confidence
-from freespace.outdir import claim_folder
-from freespace.predictor import Predictor, load_checkpoint
+from freespace.evaluation.metrics import to_confidence
+from freespace.inference.predictor import Predictor, load_checkpoint
+from freespace.io.codecs import write_image
+from freespace.io.files import PathLike, atomic_write_bytes, check_outputs, check_writable, write_json
+from freespace.io.kitti import read_kitti_calib
+from freespace.io.outdir import claim_folder
+from freespace.io.video import FrameSource, VideoFrame, VideoWriter, open_frames
 from freespace.shard import select_shard
-from freespace.video import FrameSource, VideoFrame, VideoWriter, open_frames
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +34,7 @@ __all__ = ["predict_folder", "predict_video", "export_model", "kitti_submit"]
 
 
 def _input_paths(source: FrameSource) -> dict[str, Path]:
-    """The input files or folders of ``source`` for :func:`freespace.io.check_outputs`: the video, the
+    """The input files or folders of ``source`` for :func:`freespace.io.files.check_outputs`: the video, the
     folder, the image, or the folders a glob's images lie in (an output may not lie in any of them)."""
     if source.kind == "folder":
         folders = [Path(source.spec)]
@@ -80,8 +74,8 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
 
     Args:
         inputs: an image, a folder of images, a glob of images or a video (frames named
-            ``<video stem>_<index>``; :func:`freespace.video.open_frames`), decoded one batch at a time.
-        out: the output folder (:mod:`freespace.outdir`), written all or nothing: it replaces the files of
+            ``<video stem>_<index>``; :func:`freespace.io.video.open_frames`), decoded one batch at a time.
+        out: the output folder (:mod:`freespace.io.outdir`), written all or nothing: it replaces the files of
             an earlier ``predict`` output there. With ``shard`` only that shard's frames are written, beside
             the other shards' in the same folder, and its summary is ``summary.shard-K-of-N.json``.
         batch_size: frames per network call (≥ 1). shard: ``(K, N)``, 1-based (:mod:`freespace.shard`);
@@ -114,7 +108,7 @@ def _predict_into(predictor: Predictor, source: FrameSource, out: Path, batch_si
                   shard: tuple[int, int] | None) -> dict[str, Any]:
     from freespace.log import progress_bar
 
-    from freespace.viz import overlay_road
+    from freespace.evaluation.viz import overlay_road
 
     seconds, frames, t_start = 0.0, 0, time.perf_counter()
     bar = progress_bar(None, total=len(source), desc="predict", unit="frame", enabled=progress)
@@ -141,9 +135,9 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
     of ``inputs`` as one MP4 video ``out``.
 
     Args:
-        inputs: a video, a folder or a glob of images (one size; :func:`freespace.video.open_frames`),
+        inputs: a video, a folder or a glob of images (one size; :func:`freespace.io.video.open_frames`),
             decoded one batch of ``batch_size`` frames at a time: memory does not grow with the length.
-        out: the ``.mp4`` file, written atomically (:class:`freespace.video.VideoWriter`), at the input's
+        out: the ``.mp4`` file, written atomically (:class:`freespace.io.video.VideoWriter`), at the input's
             frame rate (10 frames per second for images); never one of the inputs.
 
     Returns:
@@ -152,7 +146,7 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
     """
     from freespace.log import progress_bar
 
-    from freespace.viz import overlay_road
+    from freespace.evaluation.viz import overlay_road
 
     if batch_size < 1:
         raise InvalidOptionError("--batch-size must be ≥ 1")
@@ -236,7 +230,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
     (``OUT/<cat>_road_<id>.png``, 800×400) and ``OUT/submission.zip`` holding them.
 
     Every calibration file is read before any prediction; the folder is written all or nothing and
-    replaces the files of an earlier submission there (:mod:`freespace.outdir`)."""
+    replaces the files of an earlier submission there (:mod:`freespace.io.outdir`)."""
     from freespace.data.kitti_road import KittiRoad
 
     check_writable(out, folder=True)
@@ -257,7 +251,7 @@ def _submit_into(predictor: Predictor, ds: Any, calibs: list[dict[str, np.ndarra
                  progress: bool) -> list[str]:
     from freespace.log import progress_bar
 
-    from freespace.bev import to_bev
+    from freespace.evaluation.bev import to_bev
 
     names = []
     for i, frame in enumerate(progress_bar(ds.frames, desc="kitti-submit", unit="frame", enabled=progress)):

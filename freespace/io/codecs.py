@@ -1,38 +1,33 @@
-"""Reading and writing images, disparity and depth maps, road labels and KITTI calibration; atomic writes.
+"""Codecs of the files the package reads and writes: images, disparity maps (png16/npy/pfm), depth maps
+and road labels.
 
 Conventions (the same in the whole package):
 
 * images are ``H×W×3 uint8`` RGB (colour files) or ``H×W uint8`` (grey files) in memory;
 * a disparity map is ``float32 H×W`` in pixels, NaN for "no value";
-* a road label is a pair of ``bool H×W`` arrays: ``road`` and ``valid`` (``valid`` False = don't care);
-  as a class map (training, losses) it is 1 road, 0 non-road, :data:`IGNORE_INDEX` (255) don't care;
-* every writer writes to a temporary file beside the target and renames it, so a crash or a user
-  mistake never leaves a partial output file.
+* a road label is a :class:`freespace.labels.RoadLabel` in memory;
+* writers are atomic (:mod:`freespace.io.files`).
 
 Only NumPy and OpenCV are imported here.
 """
 
 from __future__ import annotations
 
-import csv
 import io as _io
-import json
 import math
-import os
-import re
-import tempfile
 import zlib
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
 
 import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
+from freespace.errors import CorruptFileError, InvalidOptionError, ShapeMismatchError
+from freespace.io.files import PathLike, atomic_write_bytes, read_bytes
+from freespace.labels import RoadLabel
 
-PathLike = str | os.PathLike[str]
+__all__ = ["DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "read_raw",
+           "write_image", "encode_image", "read_disparity", "write_disparity", "read_depth", "read_road_label",
+           "road_label_from_image", "road_label_to_kitti"]
 
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
 DEPTH_SUFFIXES = (".png", ".npy", ".pfm")
@@ -40,210 +35,6 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")  # w
 
 #: the largest image side (pixels) a network is trained or run at: bounds sizes read from options and files
 MAX_IMAGE_SIDE = 8192
-
-#: the class id of don't-care pixels in label class maps (losses ignore it, metrics skip it)
-IGNORE_INDEX = 255
-
-__all__ = [
-    "IGNORE_INDEX",
-    "MAX_IMAGE_SIDE",
-    "DISPARITY_SUFFIXES",
-    "IMAGE_SUFFIXES",
-    "RoadLabel",
-    "atomic_write_bytes",
-    "write_files_together",
-    "atomic_write_text",
-    "encode_json",
-    "write_json",
-    "write_csv",
-    "read_image",
-    "read_raw",
-    "write_image",
-    "encode_image",
-    "read_disparity",
-    "write_disparity",
-    "read_depth",
-    "read_road_label",
-    "road_label_from_image",
-    "road_label_to_kitti",
-    "read_kitti_calib",
-    "check_outputs",
-    "missing_input",
-    "check_writable",
-    "check_writable_files",
-]
-
-
-# ---------------------------------------------------------------------------------------------------
-# atomic writes
-
-_UMASK = os.umask(0)
-os.umask(_UMASK)
-
-
-def atomic_write_bytes(path: PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (temporary file in the same folder, then ``os.replace``).
-
-    Parent folders are created. Returns the path written.
-    """
-    return write_files_together({path: data})[0]
-
-
-def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:
-    """Write several output files all or nothing: each goes to a temporary file beside its target, and
-    only when every one is written are they renamed into place. When any write fails, the temporary
-    files are removed and every earlier file at the targets is left as it was.
-
-    Returns the paths written.
-    """
-    staged: list[tuple[str, Path]] = []
-    try:
-        for target, data in files.items():
-            target = Path(target)
-            try:
-                target.parent.mkdir(parents=True, exist_ok=True)
-                fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-            except OSError as exc:
-                raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
-            staged.append((tmp, target))
-            try:
-                with os.fdopen(fd, "wb") as f:
-                    f.write(data)
-                os.chmod(tmp, 0o666 & ~_UMASK)
-            except OSError as exc:
-                raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
-        for tmp, target in staged:
-            os.replace(tmp, target)
-    except BaseException:
-        for tmp, _ in staged:
-            Path(tmp).unlink(missing_ok=True)
-        raise
-    return [target for _, target in staged]
-
-
-def atomic_write_text(path: PathLike, text: str) -> Path:
-    """Write UTF-8 ``text`` to ``path`` atomically. Returns the path written."""
-    return atomic_write_bytes(path, text.encode("utf-8"))
-
-
-def encode_json(obj: Any) -> bytes:
-    """``obj`` as the bytes of an indented UTF-8 JSON file (NaN/inf are rejected: use None)."""
-    return (json.dumps(obj, indent=2, allow_nan=False) + "\n").encode("utf-8")
-
-
-def check_writable(path: PathLike, flag: str = "--out", *, folder: bool = False) -> Path:
-    """Refuse, before any work, an output that cannot be written where it is named.
-
-    Args:
-        path: the output file (``folder=False``) or folder (``folder=True``); it need not exist.
-        flag: the option that named it, for the message.
-
-    Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
-    folder is, and :class:`OutputError` when a folder on the way to it is a file, or the nearest existing
-    folder is not writable (folders on the way are created by the writers). Nothing is created.
-    """
-    path = Path(os.path.expanduser(os.fspath(path)))
-    if folder and path.exists() and not path.is_dir():
-        raise InvalidOptionError(f"{flag} {path} is a file; give a folder")
-    if not folder and path.is_dir():
-        raise InvalidOptionError(f"{flag} {path} is a folder; give a file name")
-    existing = path.absolute().parent
-    while not existing.exists() and not existing.is_symlink() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir():
-        raise OutputError(f"cannot write {flag} {path}: {existing} is a file, not a folder; choose another path")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise OutputError(f"cannot write {flag} {path}: no permission to write in {existing}; choose a writable "
-                          f"folder")
-    return path
-
-
-def check_writable_files(outputs: Mapping[str, PathLike | None]) -> None:
-    """:func:`check_writable` for every output file given (option → path; None = not given), before any
-    input is read."""
-    for flag, path in outputs.items():
-        if path is not None:
-            check_writable(path, flag)
-
-
-def write_json(path: PathLike, obj: Any) -> Path:
-    """Write ``obj`` as indented JSON (NaN/inf are rejected: use None) atomically."""
-    return atomic_write_bytes(path, encode_json(obj))
-
-
-def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLike | None]) -> None:
-    """Refuse outputs that would overwrite or land among a command's inputs, before any work.
-
-    Args:
-        outputs: option name → output path (file or folder; None = not given).
-        inputs: option name → input path (file or folder; None = not given).
-
-    Raises :class:`InvalidOptionError` when an output is an input, lies inside an input folder, or is a
-    folder that holds an input, or when two outputs are the same path. Symbolic links are resolved
-    first, so a link to an input counts as the input.
-    """
-    def real(p: PathLike) -> Path:
-        return Path(os.path.realpath(os.path.expanduser(os.fspath(p))))
-
-    outs = {k: real(v) for k, v in outputs.items() if v is not None}
-    ins = {k: real(v) for k, v in inputs.items() if v is not None}
-    for out_name, out in outs.items():
-        for in_name, src in ins.items():
-            if out == src:
-                raise InvalidOptionError(f"{out_name} {out} is the input {in_name}; the command would overwrite "
-                                         f"it: choose another output path")
-            if out.is_relative_to(src):
-                raise InvalidOptionError(f"{out_name} {out} lies inside the input {in_name} {src}; choose an "
-                                         f"output outside the input folder")
-            if src.is_relative_to(out):
-                raise InvalidOptionError(f"the input {in_name} {src} lies inside {out_name} {out}; choose an "
-                                         f"output folder that holds no input")
-    seen: dict[Path, str] = {}
-    for out_name, out in outs.items():
-        if out in seen:
-            raise InvalidOptionError(f"{out_name} and {seen[out]} are the same path {out}; give two paths")
-        seen[out] = out_name
-
-
-def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str, Any]],
-              extra: Literal["raise", "ignore"] = "raise") -> Path:
-    """Write ``rows`` (dicts) as a CSV file with the header ``fields``, atomically.
-
-    Values are written with ``str`` (missing keys as empty cells), lines end with ``\n``. ``extra``: what a
-    key outside ``fields`` does — ``"raise"`` (ValueError, a programming error) or ``"ignore"``.
-    """
-    buf = _io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(fields), extrasaction=extra, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    return atomic_write_text(path, buf.getvalue())
-
-
-# ---------------------------------------------------------------------------------------------------
-# images
-
-
-def missing_input(path: PathLike, what: str, kind: Literal["file", "folder"] = "file") -> InputFileError:
-    """The one-line error for an input ``path`` that is not the ``kind`` asked for: that it is a folder
-    where a file is wanted (or the other way round), else that it is not found. ``what`` names it
-    ("checkpoint", "ground-truth folder", ...)."""
-    path = Path(path)
-    if kind == "file" and path.is_dir():
-        return InputFileError(f"{what} {path} is a folder; name a file")
-    if kind == "folder" and path.exists():
-        return InputFileError(f"{what} {path} is a file; give a folder")
-    return InputFileError(f"{what} not found: {path}")
-
-
-def _read_bytes(path: PathLike, what: str) -> bytes:
-    path = Path(path)
-    if not path.is_file():
-        hint = "it is a folder, name a file" if path.is_dir() else "check the path"
-        raise InputFileError(f"{what} not found: {path} ({hint})")
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise InputFileError(f"cannot read {what} {path}: {exc.strerror}") from None
 
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -273,7 +64,7 @@ def _png_damage(data: bytes) -> str | None:
 
 
 def _decode(path: PathLike, what: str, flags: int) -> np.ndarray:
-    data = _read_bytes(path, what)
+    data = read_bytes(path, what)
     damage = _png_damage(data)
     if damage is not None:
         raise CorruptFileError(f"cannot decode {what} {path}: a damaged PNG file ({damage})")
@@ -347,7 +138,7 @@ def _invalid_to_nan(disp: np.ndarray) -> np.ndarray:
 
 
 def _read_pfm(path: PathLike, what: str = "disparity") -> np.ndarray:
-    data = _read_bytes(path, what)
+    data = read_bytes(path, what)
     try:
         header, rest = data.split(b"\n", 1)
         dims, rest = rest.split(b"\n", 1)
@@ -379,7 +170,7 @@ def _read_pfm(path: PathLike, what: str = "disparity") -> np.ndarray:
 
 def _read_npy_2d(path: Path, what: str, expected: str) -> np.ndarray:
     """A real-valued 2-D array from a ``.npy`` file (no pickles), or a one-line error naming ``what``."""
-    _read_bytes(path, what)
+    read_bytes(path, what)
     try:
         arr = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
@@ -501,19 +292,6 @@ def read_depth(path: PathLike, *, png_scale: float = 0.001,
 # road labels
 
 
-@dataclass(frozen=True)
-class RoadLabel:
-    """A road label: ``road`` and ``valid`` are ``bool H×W``; ``valid`` False marks don't-care pixels."""
-
-    road: np.ndarray
-    valid: np.ndarray
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """``(H, W)``."""
-        return self.road.shape  # type: ignore[return-value]
-
-
 def read_road_label(path: PathLike) -> RoadLabel:
     """Read a road label.
 
@@ -553,52 +331,3 @@ def road_label_to_kitti(label: RoadLabel) -> np.ndarray:
     out[label.valid, 0] = 255
     out[label.valid & label.road, 2] = 255
     return out
-
-
-# ---------------------------------------------------------------------------------------------------
-# KITTI calibration
-
-
-def read_kitti_calib(path: PathLike) -> dict[str, np.ndarray]:
-    """Parse a KITTI calibration text file (``KEY: v1 v2 ...`` lines).
-
-    Returns:
-        A dict of float64 arrays: ``P0``–``P3`` are 3×4, ``R0_rect`` (or ``R_rect``) 3×3, ``Tr_*`` 3×4;
-        other keys keep their flat values.
-    """
-    text = _read_bytes(path, "calibration file").decode("utf-8", errors="replace")
-    calib: dict[str, np.ndarray] = {}
-    for lineno, line in enumerate(text.splitlines(), 1):
-        if not line.strip():
-            continue
-        key, sep, values = line.partition(":")
-        try:
-            if not sep:
-                raise ValueError
-            arr = np.array([float(x) for x in values.split()], dtype=np.float64)
-        except ValueError:
-            raise CorruptFileError(f"calibration file {path} line {lineno} is not 'KEY: numbers'") from None
-        key = key.strip()
-        if not np.isfinite(arr).all():
-            raise CorruptFileError(f"calibration file {path}: {key} has a value that is not finite (NaN or inf)")
-        if re.fullmatch(r"P\d|Tr_\w+", key):
-            if arr.size != 12:
-                raise CorruptFileError(f"calibration file {path}: {key} has {arr.size} numbers, a 3×4 matrix "
-                                       f"needs 12")
-            arr = arr.reshape(3, 4)
-        elif re.fullmatch(r"R0?_rect", key):
-            if arr.size != 9:
-                raise CorruptFileError(f"calibration file {path}: {key} has {arr.size} numbers, a 3×3 matrix "
-                                       f"needs 9")
-            arr = arr.reshape(3, 3)
-        calib[key] = arr
-    if "P2" not in calib:
-        raise CorruptFileError(f"calibration file {path} has no P2 line; expected a KITTI calibration file")
-    for key in [k for k in calib if k.startswith("Tr_")] + [k for k in ("R0_rect", "R_rect") if k in calib]:
-        rotation = calib[key][:, :3]
-        if abs(np.linalg.det(rotation)) < 1e-6:
-            raise CorruptFileError(f"calibration file {path}: {key} is singular (its rotation part has "
-                                   f"determinant {np.linalg.det(rotation):.1e}); expected a rigid transform")
-    if abs(np.linalg.det(calib["P2"][:, :3])) < 1e-9:
-        raise CorruptFileError(f"calibration file {path}: P2 is singular; expected a camera projection matrix")
-    return calib
