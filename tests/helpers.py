@@ -4,6 +4,7 @@ synthetic road planes and scenes, the shared real samples (tests skip when absen
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -14,11 +15,12 @@ from freespace.geometry.depth import depth_to_disparity, rig_from_kitti
 from freespace.io.codecs import read_depth
 from freespace.io.kitti import read_kitti_calib
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+#: the shared real samples: ../shared/data beside the checkout, or $FREESPACE_SHARED_DATA (a git worktree elsewhere)
+SHARED = Path(os.environ.get("FREESPACE_SHARED_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 
 
 def shared_path(*parts: str) -> Path:
-    """A path under ../shared/data, or skip the test when the shared samples are not there."""
+    """A path under the shared samples (:data:`SHARED`), or skip the test when they are not there."""
     path = SHARED.joinpath(*parts)
     if not path.exists():
         pytest.skip(f"shared sample data not available ({path})")
