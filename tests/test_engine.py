@@ -277,3 +277,12 @@ def test_the_monitored_validation_score(tmp_path: Path) -> None:
     assert monitored(1) == "val_f_score" and monitored(3) == "val_f_window"
     assert _best_epoch(tmp_path, monitored(1)) == 1      # a lucky epoch
     assert _best_epoch(tmp_path, monitored(3)) == 3      # the best smoothed one
+
+
+def test_min_delta_lets_early_stopping_fire(tiny: Path, tmp_path: Path) -> None:
+    """An F-score that can never rise by half a point more ends the run after --patience epochs."""
+    run = tmp_path / "run"
+    assert _train(tiny, run, "--epochs", "6", "--patience", "1", "--min-delta", "0.5", "--image-size", "64x96") == 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["epochs_run"] == 2 and metrics["best_epoch"] == 0
+    assert _train(tiny, tmp_path / "bad", "--min-delta", "1.5") == 2

@@ -137,6 +137,8 @@ class TrainConfig:
     patience: int = _option("early-stopping patience in epochs", 10)
     val_window: int = _option("early stopping and the best checkpoint follow the validation F-score averaged over "
                               "the last N epochs (1: each epoch's own)", 1, metavar="N")
+    min_delta: float = _option("early stopping counts an epoch as better only when the validation F-score rises by "
+                               "more than this (a fraction: 0.001 = 0.1 point)", 0.0, metavar="F")
     image_size: tuple[int, int] | None = _option("HxW all frames are resized to (default: the first frame's size)",
                                                  None, metavar="HxW", parse=parse_size)
     seed: int = _option("seed of the split, the data order, the augmentation and the weights", 0)
@@ -183,6 +185,8 @@ class TrainConfig:
         parse_ranges(self.virtual_rotate, "--virtual-rotate ROLL,PITCH,YAW (degrees)")
         if not 0 <= self.virtual_prob <= 1:
             raise InvalidOptionError(f"--virtual-prob must be in [0, 1], got {self.virtual_prob}")
+        if not 0 <= self.min_delta < 1:
+            raise InvalidOptionError(f"--min-delta must be a fraction in [0, 1), got {self.min_delta}")
         for name in ("epochs", "batch_size", "patience", "val_window", "devices", "num_nodes"):
             if getattr(self, name) < 1:
                 raise InvalidOptionError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(self, name)}")

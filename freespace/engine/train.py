@@ -75,10 +75,11 @@ class EpochCSV(pl.Callback):
                      row.get("val_iou", "—"), row["seconds"])
 
 
-def _callbacks(run_dir: Path, patience: int, monitor: str) -> tuple[list[pl.Callback], ModelCheckpoint]:
+def _callbacks(run_dir: Path, patience: int, monitor: str,
+               min_delta: float = 0.0) -> tuple[list[pl.Callback], ModelCheckpoint]:
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor=monitor, mode="max",
                            save_top_k=1, save_last=True, enable_version_counter=False)
-    stop = EarlyStopping(monitor=monitor, mode="max", patience=patience, check_finite=True)
+    stop = EarlyStopping(monitor=monitor, mode="max", patience=patience, min_delta=min_delta, check_finite=True)
     return [ckpt, stop, EpochCSV(run_dir)], ckpt
 
 
@@ -260,7 +261,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         # from the training frames themselves (the first items; views and duplicates follow), so that every
         # variant of the protocol fits it from the same labels
         module.net.prepare(train[i]["label"] for i in range(data["frames"]))
-    callbacks, ckpt = _callbacks(run_dir, config.patience, monitored(config.val_window))
+    callbacks, ckpt = _callbacks(run_dir, config.patience, monitored(config.val_window), config.min_delta)
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
         devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",

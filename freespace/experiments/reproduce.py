@@ -327,6 +327,7 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
 
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list[str] | None = None, seeds: int = 3,
               epochs: int = 50, image_size: tuple[int, int] | None = None, patience: int = 10, val_window: int = 1,
+              min_delta: float = 0.0,
               lr: float = 0.001, batch_size: int = 4, workers: int = 0, max_frames: int | None = None, figures: int = 3,
               progress: bool = True, variants: str | tuple[str, ...] | None = None, test_root: TestRoots = None,
               only: str | None = None, encoder_name: str | None = None, encoder_weights: str | None = None,
@@ -347,9 +348,9 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
     """
     if not 1 <= seeds <= MAX_SEEDS:
         raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
-    options = dict(epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window, lr=lr,
-                   image_size=image_size, workers=workers, max_frames=max_frames, encoder_name=encoder_name,
-                   encoder_weights=encoder_weights)
+    options = dict(epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window,
+                   min_delta=min_delta, lr=lr, image_size=image_size, workers=workers, max_frames=max_frames,
+                   encoder_name=encoder_name, encoder_weights=encoder_weights)
     out = check_writable(out, folder=True)
     roots = parse_test_roots(test_root)
     chosen_models = parse_models(models)
@@ -428,8 +429,8 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
                     continue
                 entry.setdefault("test_sets", {})[name] = {k: extra[k] for k in (*METRICS, "max_f", "ap")}
                 settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
-        for key in ("dataset", "root", "epochs", "patience", "val_window", "lr", "batch_size", "max_frames",
-                    *_PER_NETWORK):
+        for key in ("dataset", "root", "epochs", "patience", "val_window", "min_delta", "lr", "batch_size",
+                    "max_frames", *_PER_NETWORK):
             value = config.get(key)
             if key in ("epochs", "patience") and isinstance(value, int):
                 value //= variant.budget  # X-long's budget is part of the variant

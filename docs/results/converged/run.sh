@@ -16,7 +16,8 @@
 # Training on labels nobody drew (issue 22 §3): NETS="unet dupsampling" VARIANTS="X-auto X-mix" bash run.sh WORK
 # The control of pretraining (X with the Lite encoders from scratch, kept in res-scratch/ beside this script):
 #   RES=res-scratch WEIGHTS= NETS="unet dupsampling" VARIANTS=X bash run.sh WORK
-# LR sets the learning rate (default 0.001, the session-1 pilot's; see plan.md for the one the run fixes).
+# LR and MIN_DELTA set the learning rate and early stopping's least improvement (defaults 0.001 and 0, the
+# session-1 pilot's; plan.md names the ones the run fixes).
 # Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace, PYTHON=its python; STOP_AT: a
 #        `date` time after which no new cell starts, e.g. "14:10"; CELLS="net,variant,seed ..." to run only
 #        those; KEEP=DIR to keep the finished cells elsewhere than beside this script). Run it from a git
@@ -51,7 +52,8 @@ SEEDS=${SEEDS:-10}
 export FS WORK HERE STOP_AT RES WEIGHTS
 COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root matched=matched
         --test-root same-rigs=same-rigs --autolabels autolabels --seeds 10
-        --epochs 100 --patience 10 --val-window 3 --lr ${LR:-0.001} --batch-size 2 --no-progress --out $RES"
+        --epochs 100 --patience 10 --val-window 3 --min-delta ${MIN_DELTA:-0}
+        --lr ${LR:-0.001} --batch-size 2 --no-progress --out $RES"
 export COMMON
 
 PY=${PYTHON:-$(dirname "$(command -v "$FS")")/python}
