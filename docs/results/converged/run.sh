@@ -3,14 +3,15 @@
 # DeepLabv3+ (EfficientNet-Lite0, ImageNet weights, output stride 16) at 320x416, DenseASPP at 224x288 (their
 # intact sizes), U-Net and DUpsampling (Lite0, ImageNet) and SegNet (no offline weights for VGG) at 192x256;
 # variants X, HA-X, X-dup, X-long; 10 seeds; each run to early stopping (patience 10 on the 3-epoch mean of
-# the validation F-score, cap 100 epochs; X-long 20 and 200); test sets: test, shifted (rigs the training
+# the validation F-score, cap 100 epochs; X-long 20 and 200; lr and least improvement from the pilot in
+# plan.md: LR=0.01 MIN_DELTA=0.001); test sets: test, shifted (rigs the training
 # set never had, much wider than the evidence run's), matched (shifted's scenes with the training rigs),
 # same-rigs (200 frames of new drives with the training rigs; the primary endpoint's set).
 #
 # Cells run seed-major (every network and variant of seed 0 first, ...), two at a time with one thread each,
 # as `reproduce --only` cells in WORK/res. A cell interrupted by the end of a session resumes from its
 # last.ckpt the next time. After each finished cell its small files (config, per-epoch CSV, metrics, splits,
-# test-set metrics; never checkpoints or views) are copied to runs/ beside this script, and the tables are
+# test-set metrics; never checkpoints or views) are copied to RES/runs/ beside this script, and the tables are
 # rebuilt there; on a new machine the copied cells are restored into WORK first, so they are not run again.
 #
 # Training on labels nobody drew (issue 22 §3): NETS="unet dupsampling" VARIANTS="X-auto X-mix" bash run.sh WORK
@@ -26,9 +27,9 @@
 set -euo pipefail
 FS=${FREESPACE:-freespace}
 HERE=${KEEP:-$(cd "$(dirname "$0")" && pwd)}  # where finished cells are kept (default: beside this script)
-RES=${RES:-res}                      # the reproduce folder in WORK; res-scratch: encoders from scratch
+RES=${RES:-res-final}                # the reproduce folder in WORK, and its copy in KEEP/RES
 WEIGHTS=${WEIGHTS-imagenet}          # the Lite encoders' initial weights; WEIGHTS= (empty) for from scratch
-[ "$RES" = res ] || HERE="$HERE/$RES"
+HERE="$HERE/$RES"
 WORK=$1
 STOP_AT=$(date -d "${2:-tomorrow}" +%s)
 mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
