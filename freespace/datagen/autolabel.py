@@ -551,19 +551,11 @@ def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
 def _label_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options: AutolabelOptions, workers: int,
                   progress: bool, shard: tuple[int, int] | None) -> dict[str, Any]:
     """Label the frames of ``dataset`` not yet done into ``out_dir`` and write the totals."""
-    from freespace.datagen.generate import _plan, _run_jobs, _totals_names, _write_report_csv
+    from freespace.datagen.generate import _totals_names, run_frames
 
-    summary_name, report_name = _totals_names(shard)
-    frames = dataset.frames
-    records, jobs = _plan(frames, out_dir, options, settings)
-    log.info("%d frames: %d to label, %d already done", len(frames), len(jobs), len(records))
     t0 = time.perf_counter()
-    records.update(_run_jobs(dataset, jobs, workers, progress, process=_label_frame, desc="autolabel"))
-    ordered = [records[f.name] for f in frames]
-    for record in ordered:
-        if record["status"] == "failed":
-            log.warning("frame %s failed: %s", record["frame"], record["reason"])
-    _write_report_csv(out_dir / report_name, ordered, _CSV_FIELDS)
+    ordered = run_frames(dataset, out_dir, options, settings, shard, workers, progress, process=_label_frame,
+                         desc="autolabel", verb="label", fields=_CSV_FIELDS)
     ok = [r for r in ordered if r["status"] != "failed"]
     summary = {"dataset": dataset.name, "root": str(dataset.root),
                **({"shard": f"{shard[0]}/{shard[1]}"} if shard is not None else {}),
@@ -573,5 +565,5 @@ def _label_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options
                "mean_coverage": float(np.mean([r["coverage"] for r in ok])) if ok else None,
                "mean_road_fraction": float(np.mean([r["road_fraction"] for r in ok])) if ok else None,
                "wall_seconds": round(time.perf_counter() - t0, 3), "workers": workers, "settings": settings}
-    write_json(out_dir / summary_name, summary)
+    write_json(out_dir / _totals_names(shard)[0], summary)
     return summary

@@ -500,24 +500,34 @@ def frames_folder(out_dir: Path, command: str, settings: dict[str, Any], overwri
 def _generate_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options: FitOptions, workers: int,
                      progress: bool, shard: tuple[int, int] | None) -> dict[str, Any]:
     """Generate the frames of ``dataset`` not yet done into ``out_dir`` and write the totals."""
-    summary_name, report_name = _totals_names(shard)
-    frames = dataset.frames
-    records, jobs = _plan(frames, out_dir, options, settings)
-    log.info("%d frames: %d to generate, %d already done", len(frames), len(jobs), len(records))
     t0 = time.perf_counter()
-    records.update(_run_jobs(dataset, jobs, workers, progress))
-    ordered = [records[f.name] for f in frames]
-    for record in ordered:
-        if record["status"] == "failed":
-            log.warning("frame %s failed: %s", record["frame"], record["reason"])
-    _write_report_csv(out_dir / report_name, ordered)
+    ordered = run_frames(dataset, out_dir, options, settings, shard, workers, progress)
     summary = {"dataset": dataset.name, "root": str(dataset.root),
                **({"shard": f"{shard[0]}/{shard[1]}"} if shard is not None else {}),
                **_totals(ordered), "wall_seconds": round(time.perf_counter() - t0, 3), "workers": workers,
                "options": {"robust": options.robust, "inlier_threshold": options.inlier_threshold,
                            "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode}}
-    write_json(out_dir / summary_name, summary)
+    write_json(out_dir / _totals_names(shard)[0], summary)
     return summary
+
+
+def run_frames(dataset: Any, out_dir: Path, options: Any, settings: dict[str, Any], shard: tuple[int, int] | None,
+               workers: int, progress: bool, *, process: Any = None, desc: str = "generate", verb: str = "generate",
+               fields: list[str] | None = None) -> list[dict[str, Any]]:
+    """Process the frames of ``dataset`` that ``out_dir`` lacks (:func:`_plan`: resumable, redone when made
+    with other settings) with ``process`` (default :func:`_process_frame`; ``desc`` names the progress bar,
+    ``verb`` the work in the log), log each failure and write the run's (or shard's) report CSV with
+    ``fields`` (default: generate's columns). Returns the frames' records in frame order."""
+    frames = dataset.frames
+    records, jobs = _plan(frames, out_dir, options, settings)
+    log.info("%d frames: %d to %s, %d already done", len(frames), len(jobs), verb, len(records))
+    records.update(_run_jobs(dataset, jobs, workers, progress, process=process or _process_frame, desc=desc))
+    ordered = [records[f.name] for f in frames]
+    for record in ordered:
+        if record["status"] == "failed":
+            log.warning("frame %s failed: %s", record["frame"], record["reason"])
+    _write_report_csv(out_dir / _totals_names(shard)[1], ordered, fields or _CSV_FIELDS)
+    return ordered
 
 
 def _check_sgbm_width(dataset: Any, options: FitOptions) -> None:
