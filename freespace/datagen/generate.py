@@ -47,7 +47,7 @@ from freespace.io.codecs import (IMAGE_SUFFIXES, encode_image, read_disparity, r
 from freespace.io.files import (PathLike, check_outputs, check_writable, check_writable_files, encode_json,
     atomic_write_bytes, write_csv, write_json, write_files_together)
 from freespace.io.kitti import read_kitti_calib
-from freespace.io.outdir import claim_folder
+from freespace.io.outdir import check_settings, claim_folder
 from freespace.labels import RoadLabel
 from freespace.shard import select_shard
 
@@ -413,26 +413,6 @@ def _totals_names(shard: tuple[int, int] | None) -> tuple[str, str]:
     return f"summary.shard-{shard[0]}-of-{shard[1]}.json", f"report.shard-{shard[0]}-of-{shard[1]}.csv"
 
 
-def _check_settings(out_dir: Path, settings: dict[str, Any], overwrite: bool) -> None:
-    """Refuse a folder generated with other settings (its ``settings.json``), unless ``overwrite``."""
-    try:
-        recorded = json.loads((out_dir / SETTINGS_NAME).read_text())
-    except FileNotFoundError:
-        return
-    except (OSError, ValueError):
-        recorded = None
-    if not isinstance(recorded, dict):
-        if overwrite:
-            return
-        raise InvalidOptionError(f"--out {out_dir} has an unreadable {SETTINGS_NAME}, so its frames' settings are "
-                                 f"unknown; add --overwrite to generate them again, or choose another --out")
-    differ = [k for k in settings if recorded.get(k) != settings[k]]
-    if differ and not overwrite:
-        what = ", ".join(f"{k} {recorded.get(k)!r} → {settings[k]!r}" for k in differ)
-        raise InvalidOptionError(f"--out {out_dir} holds frames generated with other settings ({what}); choose "
-                                 f"another --out, or add --overwrite to replace them")
-
-
 def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
                      options: FitOptions = FitOptions(), progress: bool = True,
                      overwrite: bool = False, shard: tuple[int, int] | None = None) -> dict[str, Any]:
@@ -489,7 +469,7 @@ def frames_folder(out_dir: Path, command: str, settings: dict[str, Any], overwri
             *(f"{n}.png" for n in names), *(f"reports/{n}.json" for n in names),
             *(f"{e}/{n}.png" for e in extra for n in names)}
     with claim_folder(out_dir, command, shared=shard is not None) as folder:
-        _check_settings(out_dir, settings, overwrite)
+        check_settings(out_dir / SETTINGS_NAME, settings, overwrite, f"frames made by freespace {command}")
         if overwrite:  # only what this run (or shard) would write, and the whole run's totals, now stale
             folder.forget(mine & folder.entries())
         folder.record(mine)

@@ -43,9 +43,10 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError
 from freespace.io.files import write_files_together
@@ -63,7 +64,7 @@ _TEMP = re.compile(r"\.(.+)\.[a-z0-9_]{8}\.tmp")
 #: folders (resolved) that this process holds now: a folder claimed inside one of them is its own nesting
 _HELD: dict[Path, int] = {}
 
-__all__ = ["OwnedFolder", "claim_folder", "META"]
+__all__ = ["OwnedFolder", "claim_folder", "check_settings", "META"]
 
 
 def _umask() -> int:
@@ -415,3 +416,32 @@ def _remove_killed_writes(out: Path, entries: set[str]) -> None:
             if _written_by_a_killed_write(f"{rel}/{path.name}" if rel else path.name) in entries \
                     and not path.is_dir():
                 path.unlink(missing_ok=True)
+
+
+def check_settings(path: Path, settings: dict[str, Any], overwrite: bool, what: str,
+                   recorded_as: Callable[[dict[str, Any]], dict[str, Any]] = lambda d: d) -> None:
+    """Refuse an output whose recorded settings (the JSON file ``path``) differ from ``settings``, unless
+    ``overwrite``; an output with no record yet passes. ``recorded_as`` turns the file's content into the
+    keys of ``settings`` (e.g. filling keys an older version did not write); ``what`` says what the folder
+    holds, for the message ("frames generated", "a dataset rendered").
+
+    Raises:
+        InvalidOptionError: the settings differ (each change named, old → new) or the record is unreadable.
+    """
+    try:
+        recorded = json.loads(path.read_text())
+    except FileNotFoundError:
+        return
+    except (OSError, ValueError):
+        recorded = None
+    if overwrite:
+        return
+    if not isinstance(recorded, dict):
+        raise InvalidOptionError(f"--out {path.parent} has an unreadable {path.name}, so the settings of what it "
+                                 f"holds are unknown; add --overwrite to make it again, or choose another --out")
+    old = recorded_as(recorded)
+    differ = [k for k in settings if old.get(k) != settings[k]]
+    if differ:
+        changes = ", ".join(f"{k} {old.get(k)!r} → {settings[k]!r}" for k in differ)
+        raise InvalidOptionError(f"--out {path.parent} holds {what} with other settings ({changes}); choose another "
+                                 f"--out, or add --overwrite to replace them")

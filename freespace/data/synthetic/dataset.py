@@ -31,7 +31,7 @@ from freespace.data.synthetic.scene import SynthConfig
 from freespace.errors import InvalidOptionError, check_seed
 from freespace.io.codecs import road_label_to_kitti, write_disparity, write_image
 from freespace.io.files import PathLike, atomic_write_text, check_writable, write_csv, write_json
-from freespace.io.outdir import claim_folder
+from freespace.io.outdir import check_settings, claim_folder
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
 
@@ -95,29 +95,12 @@ MAX_FRAMES = 1_000_000
 OUT_ENTRIES = ("data_road/", "data_road_right/", "index.csv", "synth.json")
 
 
-def _check_settings(out: Path, settings: dict[str, Any], overwrite: bool) -> None:
-    """Refuse ``out`` when it holds frames rendered with other settings (its ``synth.json``, written before
-    the first frame), unless ``overwrite``."""
-    try:
-        recorded = json.loads((out / "synth.json").read_text())
-    except FileNotFoundError:
-        return
-    except (OSError, ValueError):
-        recorded = None
-    if not isinstance(recorded, dict):
-        if overwrite:
-            return
-        raise InvalidOptionError(f"--out {out} has an unreadable synth.json, so its frames' settings are unknown; "
-                                 f"add --overwrite to render them again, or choose another --out")
-    defaults = json.loads(json.dumps(asdict(SynthConfig())))  # keys added since the folder was written
-    old = {"seed": recorded.get("seed"), "pitch_sign": recorded.get("pitch_sign", "positive up"), **defaults,
-           **(recorded.get("config") or {})}
-    new = {"seed": settings["seed"], "pitch_sign": settings["pitch_sign"], **settings["config"]}
-    differ = [k for k in new if old.get(k) != new[k]]
-    if differ and not overwrite:
-        what = ", ".join(f"{k} {old.get(k)!r} → {new[k]!r}" for k in differ)
-        raise InvalidOptionError(f"--out {out} holds a dataset rendered with other settings ({what}); choose "
-                                 f"another --out, or add --overwrite to replace it")
+def _recorded(synth_json: dict[str, Any]) -> dict[str, Any]:
+    """The settings of a ``synth.json`` as ``write_dataset`` compares them: keys that an older version did not
+    write take their defaults (index.csv's pitch was positive up before it followed the package)."""
+    defaults = json.loads(json.dumps(asdict(SynthConfig())))
+    return {"seed": synth_json.get("seed"), "pitch_sign": synth_json.get("pitch_sign", "positive up"), **defaults,
+            **(synth_json.get("config") or {})}
 
 
 def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig = SynthConfig(),
@@ -143,7 +126,8 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
     # pitch_sign: index.csv's pitch_deg and --pitches were positive up before they followed the package
     settings = {"seed": seed, "pitch_sign": PITCH_SIGN, "config": json.loads(json.dumps(asdict(config)))}
     with claim_folder(out, "synth", entries=OUT_ENTRIES) as folder:
-        _check_settings(out, settings, overwrite)
+        check_settings(out / "synth.json", {"seed": seed, "pitch_sign": PITCH_SIGN, **settings["config"]}, overwrite,
+                       "a dataset rendered", _recorded)
         if overwrite:
             folder.forget(OUT_ENTRIES)
             folder.record(OUT_ENTRIES)
