@@ -711,6 +711,23 @@ def _refuse_extra_arguments(parser: argparse.ArgumentParser, extra: list[str]) -
         raise InvalidOptionError(f"unexpected argument{'s' if len(extra) > 1 else ''} {shown}: the shell expanded an "
                                  f"unquoted wildcard into many files; quote the pattern, e.g. --input 'frames/*.png'")
     parser.error(f"unrecognized arguments: {' '.join(extra)}")
+def _flags(parser: argparse.ArgumentParser, argv: Sequence[str]) -> dict[str, str]:
+    """``{dest: flag}`` of every option of the (sub-)command ``argv`` runs (``{"image_size": "--image-size"}``):
+    how an error's parameters are written on the command line (:meth:`FreespaceError.render`)."""
+    flags: dict[str, str] = {}
+    words = [a for a in argv if not a.startswith("-")]
+    while parser is not None:
+        sub = None
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                sub = next((action.choices[w] for w in words if w in action.choices), None)
+            longs = [o for o in action.option_strings if o.startswith("--")]
+            if longs:
+                flags.setdefault(action.dest, longs[0])
+        parser = sub
+    return flags
+
+
 def _raise_terminated(signum: int, frame: Any) -> None:
     """``SIGTERM`` handler: raise :class:`~freespace.errors.Terminated` once (so that clean-ups run, as on
     Ctrl-C); further ``SIGTERM`` signals are ignored while they do."""
@@ -730,6 +747,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = next((a for a in argv if not a.startswith("-")), None)  # the global options take no value
     main_thread = threading.current_thread() is threading.main_thread()  # signal handlers live there only
     previous = signal.signal(signal.SIGTERM, _raise_terminated) if main_thread else None
+    parser: argparse.ArgumentParser | None = None
     try:
         config = _config_file_options(argv) if command == "train" else None
         parser = build_parser({command} if command else (), config)
@@ -739,7 +757,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         setup_logging(-1 if args.quiet else args.verbose)
         return int(args.func(args))
     except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
-        message = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in str(exc))
+        flags = _flags(parser or build_parser({command} if command else ()), argv)
+        text = exc.render(lambda name: flags.get(name, name))
+        message = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
         print(f"freespace: error: {message}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:

@@ -3,15 +3,39 @@
 Every error raised for a user mistake derives from :class:`FreespaceError`. Its message is one line
 that says what was wrong and how to fix it; the command-line interface prints it and exits with
 ``exit_code`` (2) instead of showing a traceback.
+
+The library speaks in parameters, the command line in flags. A message names a parameter with
+:func:`param` (``f"{param('image_size')} must be HxW"``): ``str(error)`` writes its Python name
+(``image_size must be HxW``), and the command line, the one place that knows the flags, writes the option
+that set it (``--image-size must be HxW``, :meth:`FreespaceError.render`).
 """
 
 from __future__ import annotations
+
+import re
+from typing import Callable
+
+#: a parameter's name inside a message: NUL-delimited, as no path, argument or option value can hold a NUL
+_PARAM = re.compile("\x00([A-Za-z_][A-Za-z0-9_]*)\x00")
+
+
+def param(name: str) -> str:
+    """The parameter ``name`` (a Python identifier, e.g. ``"image_size"``) as it goes into an error message;
+    shown as ``name`` by ``str(error)`` and as its flag (``--image-size``) by the command line."""
+    return f"\x00{name}\x00"
 
 
 class FreespaceError(Exception):
     """Base class of every error ``freespace`` raises for bad input or bad options."""
 
     exit_code: int = 2
+
+    def render(self, spell: Callable[[str], str] = str) -> str:
+        """The message with every :func:`param` written as ``spell(name)`` (default: the name itself)."""
+        return _PARAM.sub(lambda m: spell(m.group(1)), super().__str__())
+
+    def __str__(self) -> str:
+        return self.render()
 
 
 class InputFileError(FreespaceError, FileNotFoundError):
@@ -52,10 +76,10 @@ class TrainingError(FreespaceError):
 MAX_SEED = 2**32 - 1
 
 
-def check_seed(seed: int, flag: str = "--seed") -> int:
-    """``seed`` if it is an integer in 0…2³²−1, else an :class:`InvalidOptionError` naming ``flag``."""
+def check_seed(seed: int, name: str = "seed") -> int:
+    """``seed`` if it is an integer in 0…2³²−1, else an :class:`InvalidOptionError` naming the parameter ``name``."""
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
-        raise InvalidOptionError(f"{flag} must be an integer in 0…{MAX_SEED}, got {seed!r}")
+        raise InvalidOptionError(f"{param(name)} must be an integer in 0…{MAX_SEED}, got {seed!r}")
     return seed
 
 
