@@ -36,7 +36,7 @@ def components(root: Path, model_name: str, size: tuple[int, int], batch: int, r
     ds = get_dataset("synth", root, disparity_mode="none")
     names = [f.name for f in ds.labelled().frames]
     cold = RoadSegmentationDataset(ds, names, size=size)  # no cache: every call decodes
-    warm = RoadSegmentationDataset(ds, names, size=size, augment=True, cache=True)
+    warm = RoadSegmentationDataset(ds, names, size=size, affine=True, cache=True)
     for i in range(len(names)):
         warm.decoded(i)
     plain = RoadSegmentationDataset(ds, names, size=size, cache=True)

@@ -1,7 +1,8 @@
 """The ``freespace`` command. Thin: parses options, calls the library, reports.
 
 Each command's options are declared beside its handler (``_<command>_parser``); the options of ``train``
-and ``reproduce`` are generated from :class:`~freespace.engine.config.TrainConfig`. Only the parser of the
+and ``reproduce`` are generated from :class:`~freespace.engine.config.TrainConfig`'s fields (the flag of a
+field is ``--name-with-dashes``, or the one :data:`CONFIG_FLAGS` names). Only the parser of the
 command that runs is filled in, and heavy modules are imported inside each command, so that ``freespace
 generate`` starts fast and never imports torch. Every :class:`~freespace.errors.FreespaceError` ends the
 command with a one-line message on stderr and exit code 2; a dataset run with failed frames exits with 1.
@@ -365,19 +366,58 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
 # --- train, evaluate, evaluate-kitti -------------------------------------------------------------------
 
 
-def _train_parser(p: argparse.ArgumentParser, config: Mapping[str, Any] | None = None) -> None:
-    from freespace.engine.config import add_config_arguments
+#: the flags of the :class:`~freespace.engine.config.TrainConfig` fields that are not ``--name-with-dashes``
+CONFIG_FLAGS = {"splits_dir": "--splits"}
 
+
+def _config_flag(name: str) -> str:
+    """The flag of the :class:`~freespace.engine.config.TrainConfig` field ``name``."""
+    return CONFIG_FLAGS.get(name, "--" + name.replace("_", "-"))
+
+
+def _add_config_options(p: argparse.ArgumentParser, names: Collection[str] | None = None,
+                        values: Mapping[str, Any] | None = None) -> None:
+    """An option for each :class:`~freespace.engine.config.TrainConfig` field in ``names`` (default: all), its
+    ``dest`` the field's name (so that an error naming the parameter names this flag), with the field's help,
+    choices and default; ``values`` (from ``--config``) replace the defaults, and a field given there is no
+    longer required. The values are passed on as given (numbers converted); TrainConfig parses and checks
+    them, so that flags and YAML files are checked alike."""
+    from freespace.engine.config import options
+
+    for o in options(names, values):
+        text = FreespaceError(o.help).render(_config_flag).replace("%", "%%")  # its parameters as flags
+        if o.choices is not None:
+            text += f"; one of {', '.join(o.choices)}"
+        if o.default is not None and o.default is not False:
+            text += "; default %(default)s"
+        kwargs: dict[str, Any] = {"dest": o.name, "default": o.default, "help": text}
+        if o.kind is bool:
+            kwargs["action"] = argparse.BooleanOptionalAction
+        else:
+            kwargs.update(type=o.kind, metavar=o.metavar or ("NAME" if o.choices is not None else None),
+                          required=o.required)
+        p.add_argument(_config_flag(o.name), **kwargs)
+
+
+def _config_values(args: argparse.Namespace, names: Collection[str] | None = None) -> dict[str, Any]:
+    """The values of the options :func:`_add_config_options` added, by field name."""
+    from freespace.engine.config import options
+
+    return {o.name: getattr(args, o.name) for o in options(names)}
+
+
+def _train_parser(p: argparse.ArgumentParser, config: Mapping[str, Any] | None = None) -> None:
     p.add_argument("--config", metavar="YAML", help="options from a YAML file, e.g. a run's config.yaml; "
                                                     "flags given as well override it")
-    add_config_arguments(p, defaults=config)
+    _add_config_options(p, values=config)
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_train)
 
 
 def _config_file_options(argv: Sequence[str]) -> dict[str, Any] | None:
-    """The options in ``--config YAML`` when ``argv`` has one (read before the real parse, as timm does)."""
+    """The options in ``--config YAML`` when ``argv`` has one (read before the real parse, as timm does), as
+    typed values (:func:`~freespace.engine.config.read_config_yaml`)."""
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--config")
     known, _ = pre.parse_known_args(argv)
@@ -390,11 +430,10 @@ def _config_file_options(argv: Sequence[str]) -> dict[str, Any] | None:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """``freespace train``: train a network, with or without the homography augmentation."""
-    from freespace.engine.config import TrainConfig, config_from_args
+    from freespace.engine.config import TrainConfig
     from freespace.engine.train import run_training
 
-    config = TrainConfig(**config_from_args(args))
-    config.check()
+    config = TrainConfig(**_config_values(args))  # parsed and checked; run_training checks the files
     metrics = run_training(config, resume=args.resume, progress=not args.no_progress)
     from freespace.engine.data import is_rank_zero
 
@@ -546,9 +585,7 @@ REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "val_window", "min
 
 
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:
-    from freespace.engine.config import add_config_arguments
-
-    add_config_arguments(p, REPRODUCE_OPTIONS, defaults={"dataset": None, "root": None})  # not with --tables
+    _add_config_options(p, REPRODUCE_OPTIONS, values={"dataset": None, "root": None})  # not with --tables
     p.add_argument("--models", help="all or a comma-separated list (default all)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
     p.add_argument("--variants", help="comma-separated arms: X, HA-X (DS-Generator views), "
@@ -573,7 +610,6 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """``freespace reproduce``: every network with and without the augmentation (and the control); tables,
     paired gains and figures; one cell with ``--only``, the tables alone with ``--tables``."""
-    from freespace.engine.config import config_from_args
     from freespace.experiments.reproduce import parse_models, parse_variants, reproduce, write_tables
 
     if args.models is not None:  # names checked in every mode
@@ -590,7 +626,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     else:
         if args.dataset is None or args.root is None:
             raise InvalidOptionError("reproduce needs --dataset and --root (only --tables does without)")
-        options = config_from_args(args, REPRODUCE_OPTIONS)
+        options = _config_values(args, REPRODUCE_OPTIONS)
         r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=args.models, seeds=args.seeds,
                       progress=not args.no_progress, variants=args.variants, test_root=args.test_root,
                       only=args.only, autolabels=args.autolabels, **options)

@@ -383,8 +383,8 @@ def test_torch_dataset_training_options(tmp_path: Path) -> None:
     full = RoadSegmentationDataset(kitti, items)[1]["label"]
     assert torch.equal(a["label"], full[::4, ::4])  # nearest (OpenCV: source pixel 4·i): no new values
     assert torch.equal(a["label"], b["label"]) and set(cached._cache) == {(1, str(tmp_path / "view.png"))} and not plain._cache
-    aug = RoadSegmentationDataset(kitti, items, size=(40, 80), augment=True, seed=3)
-    again = RoadSegmentationDataset(kitti, items, size=(40, 80), augment=True, seed=3)
+    aug = RoadSegmentationDataset(kitti, items, size=(40, 80), affine=True, seed=3)
+    again = RoadSegmentationDataset(kitti, items, size=(40, 80), affine=True, seed=3)
     draws = [aug[(e, 0)]["label"] for e in range(4)]
     assert all(torch.equal(d, again[(e, 0)]["label"]) for e, d in enumerate(draws))  # (seed, epoch, i) only
     assert not all(torch.equal(draws[0], d) for d in draws[1:])  # epochs differ

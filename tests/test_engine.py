@@ -63,6 +63,19 @@ def test_run_folder_and_exact_resume(tiny: Path, tmp_path: Path) -> None:
         assert (a / "splits" / f"{split}.txt").is_file()
 
 
+def test_resume_reads_a_config_yaml_of_older_spellings(tiny: Path, tmp_path: Path) -> None:
+    """A run folder whose config.yaml is spelled as before the typed configuration (the key disparity_mode,
+    a range as the user typed it) resumes: its recorded settings read as the same values."""
+    run = tmp_path / "old"
+    assert _train(tiny, run, "--epochs", "1", "--virtual-shift", "0.50,0.2,0.0") == 0
+    text = (run / "config.yaml").read_text()
+    assert "\ndisparity_source: auto\n" in text and "\nvirtual_shift: 0.5,0.2,0\n" in text
+    (run / "config.yaml").write_text(text.replace("disparity_source:", "disparity_mode:")
+                                     .replace("virtual_shift: 0.5,0.2,0", "virtual_shift: 0.50,0.2,0.0"))
+    assert _train(tiny, run, "--epochs", "2", "--resume") == 0  # image size: the run's (resolved at its start)
+    assert json.loads((run / "metrics.json").read_text())["epochs_run"] == 2
+
+
 def test_homography_augmentation_adds_generated_views(tiny: Path, tmp_path: Path) -> None:
     run = tmp_path / "ha"
     assert _train(tiny, run, "--epochs", "1", "--augment", "homography") == 0
@@ -73,7 +86,7 @@ def test_homography_augmentation_adds_generated_views(tiny: Path, tmp_path: Path
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--model", "fcn"], "unknown model"), (["--augment", "flip"], "--augment"), (["--epochs", "0"], "--epochs"),
+    (["--model", "fcn"], "--model must be one of"), (["--augment", "flip"], "--augment"), (["--epochs", "0"], "--epochs"),
     (["--image-size", "12x5"], "--image-size"), (["--lr", "-1"], "--lr"), (["--strategy", "fsdp"], "--strategy"),
 ])
 def test_bad_options_rejected_before_work(tiny: Path, tmp_path: Path, args: list[str], message: str,
@@ -162,7 +175,7 @@ def test_config_file_and_flags(tiny: Path, tmp_path: Path, monkeypatch: pytest.M
 
     monkeypatch.setattr(train_module, "run_training", fake_training)
     run = TrainConfig(dataset="synth", root=str(tiny), out=str(tmp_path / "a"), model="segnet", epochs=7,
-                      image_size=(64, 96), splits_dir=str(tmp_path / "lists"), disparity_mode="sgbm", tensorboard=False)
+                      image_size=(64, 96), splits_dir=str(tmp_path / "lists"), disparity_source="sgbm", tensorboard=False)
     run.save(tmp_path / "config.yaml")
     # a run's config.yaml, flags override it
     assert main(["train", "--config", str(tmp_path / "config.yaml"), "--epochs", "3", "--out", str(tmp_path / "b")]) == 0
@@ -173,12 +186,12 @@ def test_config_file_and_flags(tiny: Path, tmp_path: Path, monkeypatch: pytest.M
     assert seen[-1] == dataclasses.replace(run, out=str(tmp_path / "c"))
     # a config.yaml written before the renames still reads
     old = {**run.to_dict(), "splits": str(tmp_path / "lists"), "disparity": "sgbm"}
-    del old["splits_dir"], old["disparity_mode"]
+    del old["splits_dir"], old["disparity_source"]
     (tmp_path / "old.yaml").write_text(yaml.safe_dump(old))
     assert TrainConfig.load(tmp_path / "old.yaml") == run
     capsys.readouterr()
     for text, message in [("epoch: 3\n", "unknown option epoch;"), ("epochs: ten\n", "epochs must be an integer"),
-                          ("image_size: 12x5\n", "--image-size must be HxW"), ("- 3\n", "not a freespace training config")]:
+                          ("image_size: 12x5\n", "bad.yaml: image_size must be HxW"), ("- 3\n", "not a freespace training config")]:
         (tmp_path / "bad.yaml").write_text(text)
         assert main(["train", "--config", str(tmp_path / "bad.yaml"), "--dataset", "synth", "--root", str(tiny),
                      "--out", str(tmp_path / "d")]) == 2

@@ -950,7 +950,7 @@ def test_issue20_non_finite_float_in_a_config_file(trained: dict[str, Path], tmp
                                                    capsys: pytest.CaptureFixture) -> None:
     config = tmp_path / "c.yaml"
     config.write_text(f"dataset: synth\nroot: {trained['data']}\nout: {tmp_path / 'run'}\nweight_decay: .nan\n")
-    refused(capsys, ["train", "--config", str(config)], match="--weight-decay must be a finite number")
+    refused(capsys, ["train", "--config", str(config)], match="c.yaml: weight_decay must be a finite number")
     assert not (tmp_path / "run").exists()
 
 

@@ -185,7 +185,7 @@ def test_predict_mistakes_are_one_line(files: dict[str, Path], tmp_path: Path, c
 class _Threshold:
     """A stand-in network (no torch): road = bright pixels."""
 
-    name, image_size = "threshold", None
+    name, resize_to = "threshold", None
 
     def predict(self, images: list[np.ndarray]) -> list[np.ndarray]:
         return [(im.mean(axis=2) > 128).astype(np.float32) for im in images]

@@ -268,7 +268,7 @@ def test_reproduce_passes_the_encoder_to_every_run(tiny: Path, tmp_path: Path) -
     config = _config("synth", tiny, tmp_path / "out", "dupsampling", "X", 0,
                      {"epochs": 1, "patience": 1, "encoder_name": LITE0, "encoder_weights": None})
     assert config.encoder_name == LITE0 and config.model_options() == {"preset": "light", "encoder_name": LITE0}
-    with pytest.raises(InvalidOptionError, match="--encoder-name: denseaspp takes none"):
+    with pytest.raises(InvalidOptionError, match="encoder_name: denseaspp takes none"):
         _config("synth", tiny, tmp_path / "out", "denseaspp", "X", 0, {"epochs": 1, "patience": 1,
                                                                         "encoder_name": LITE0})
 

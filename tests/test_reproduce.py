@@ -198,7 +198,7 @@ def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, caps
     moved = cells / "runs/segnet-dup-s1/same/metrics.json"                     # not mixed silently
     moved.write_text(json.dumps({**json.loads(moved.read_text()), "root": "/elsewhere"}))
     assert main(["reproduce", "--tables", "--out", str(cells)]) == 0
-    assert "**Warning: the runs differ in --test-root same: " in (cells / "results.md").read_text()
+    assert "**Warning: the runs differ in the root of test set same: " in (cells / "results.md").read_text()
     (cells / "runs/segnet-orig-s1/bogus").mkdir()  # a crafted file where a test set's metrics would be: skipped
     (cells / "runs/segnet-orig-s1/bogus/metrics.json").write_text('{"f_score": "x"}')
     assert main(["reproduce", "--tables", "--out", str(cells)]) == 0
@@ -255,7 +255,7 @@ def test_x_long_budget_and_convergence_in_the_index(data: Path, tmp_path: Path) 
 
     long = _config("synth", data, tmp_path, "unet", "X-long", 0, dict(epochs=10, patience=3, lr=0.01))
     assert (long.augment, long.epochs, long.patience, long.lr, Path(long.out).name) == \
-        ("none", 20, 6, 0.01, "unet-long-s0")
+        ((), 20, 6, 0.01, "unet-long-s0")
     _fake_run(tmp_path, data, "unet", "X", 0, 0.8, best=4, run=8)      # early stopping fired after epoch 8
     _fake_run(tmp_path, data, "unet", "X-long", 0, 0.82, best=19, run=20)  # ran to its cap of 20
     _fake_run(tmp_path, data, "segnet", "X", 0, 0.7, best=2, run=5, size=(96, 128))

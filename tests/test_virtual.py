@@ -362,12 +362,12 @@ def test_augment_virtual_is_deterministic_and_needs_no_right_image(frames, tmp_p
     for p in (root / "data_road_right").rglob("*.png"):
         p.unlink()  # monocular: the plane comes from Tr_cam_to_road
     config = TrainConfig(dataset="kitti", root=str(root), out=str(tmp_path / "run"), augment="virtual",
-                         image_size=(96, 128), virtual_prob=1.0, disparity_mode="none")
+                         image_size=(96, 128), virtual_prob=1.0, disparity_source="none")
     config.check()
     data = prepare_data(config, tmp_path / "run")
     assert data["virtual"] is not None and len(data["virtual"].planes) == len(data["train"]) >= 1
     make = lambda seed: RoadSegmentationDataset(data["dataset"], data["train"], size=(96, 128),  # noqa: E731
-                                                augment=True, seed=seed, virtual=data["virtual"])
+                                                affine=True, seed=seed, virtual=data["virtual"])
     a, b = make(0), make(0)
     x0, x0b, x1, y0 = a[(0, 0)], b[(0, 0)], a[(1, 0)], make(1)[(0, 0)]
     assert (x0["image"] == x0b["image"]).all() and (x0["label"] == x0b["label"]).all()  # (seed, epoch, i) only
@@ -379,8 +379,13 @@ def test_augment_virtual_is_deterministic_and_needs_no_right_image(frames, tmp_p
     assert np.abs(shifts).max(0).tolist() <= [0.5, 0.2, 0.0] and np.abs(shifts[:, 0]).max() > 0.45
     assert np.abs(angles).max() <= 3.0 and np.abs(angles).max() > 2.8
     # with a pose, the sample is the virtual view of the resized frame (then the conventional augmentation)
-    plain = RoadSegmentationDataset(data["dataset"], data["train"], size=(96, 128), augment=False, seed=0)
+    plain = RoadSegmentationDataset(data["dataset"], data["train"], size=(96, 128), affine=False, seed=0)
     assert not (plain[0]["image"] == x0["image"]).all()
+    # the virtual views without the conventional augmentation (they used to be dropped silently): every sample
+    # warped (virtual_prob 1), the same way each time
+    alone = RoadSegmentationDataset(data["dataset"], data["train"], size=(96, 128), seed=0, virtual=data["virtual"])
+    v0 = alone[(0, 0)]
+    assert not (v0["image"] == plain[0]["image"]).all() and (alone[(0, 0)]["image"] == v0["image"]).all()
     assert set(np.unique(x0["label"].numpy())) <= {0, 1, 255}
     with pytest.raises(InvalidOptionError):
         TrainConfig(dataset="kitti", root=str(root), out="x", augment="virtual,flip").check()

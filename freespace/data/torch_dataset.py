@@ -7,13 +7,13 @@ Samples are dicts: ``image`` float32 ``3×H×W`` in [0, 1] (normalisation belong
 
 * ``size=(H, W)``: images are resized with area interpolation, labels with nearest (never bilinear);
 * ``cache=True``: decoded (and resized) frames are kept in memory, decoded once;
-* ``augment=True``: the paper's conventional augmentation (random translation ±10 % and rotation ±10° of
+* ``affine=True``: the paper's conventional augmentation (random translation ±10 % and rotation ±10° of
   image and label together; label borders become don't care). Keys may be ``(epoch, i)`` pairs (see
   :class:`freespace.engine.data.EpochSampler`): the augmentation of sample i in an epoch depends only on
   (``seed``, epoch, i), so a resumed run sees exactly the same data;
-* ``virtual=VirtualAugment(...)`` (with ``augment``): road-plane virtual views (``--augment virtual``),
-  drawn from (``seed``, epoch, i) like the conventional augmentation and applied before it, with the
-  torch-free :func:`freespace.geometry.virtual_view`;
+* ``virtual=VirtualAugment(...)``: road-plane virtual views (a training run's ``augment="virtual"``),
+  drawn from (``seed``, epoch, i) like the conventional augmentation and applied before it (when both are
+  on), with the torch-free :func:`freespace.geometry.virtual_view`;
 * ``transform(image, label) -> (image, label)``: a user function on the NumPy arrays (``H×W×3 uint8``,
   ``H×W uint8``), applied last, before the conversion to tensors.
 """
@@ -55,9 +55,10 @@ class Item:
 
 @dataclass(frozen=True)
 class VirtualAugment:
-    """``--augment virtual``: each sample, each epoch, with probability ``prob``, becomes its road-plane
-    virtual view (:func:`freespace.geometry.virtual_view`) from a pose drawn uniformly in ±``shift``
-    (dx, dy, dz metres) and ±``rotate`` (roll, pitch, yaw degrees), from (seed, epoch, i) only.
+    """The road-plane virtual views (``augment="virtual"``): each sample, each epoch, with probability
+    ``prob``, becomes its road-plane virtual view (:func:`freespace.geometry.virtual_view`) from a pose drawn
+    uniformly in ±``shift`` (dx, dy, dz metres) and ±``rotate`` (roll, pitch, yaw degrees), from (seed,
+    epoch, i) only.
 
     ``planes`` maps a dataset frame index to its intrinsics (3×3, pixels of the frame's own size) and
     road plane (:class:`freespace.geometry.RoadPlane`); frames without one are never warped.
@@ -105,10 +106,12 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         names: the frames, by name or as :class:`Item` (default: every labelled frame).
         transform: ``(image, label) -> (image, label)`` on NumPy arrays, applied last.
         size: ``(H, W)`` to resize to, or None (each frame's own size).
-        augment: the conventional augmentation, drawn from (``seed``, epoch, i).
-        seed: the augmentation's seed.
+        affine: the conventional augmentation (random translation and rotation), drawn from (``seed``,
+            epoch, i).
+        seed: the seed of both augmentations.
         cache: keep decoded frames in memory.
-        virtual: road-plane virtual views (only with ``augment``), before the conventional augmentation.
+        virtual: road-plane virtual views, drawn from (``seed``, epoch, i); before the conventional
+            augmentation when both are on.
 
     Raises:
         DatasetError: a requested frame is unknown or has no label.
@@ -116,7 +119,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
 
     def __init__(self, dataset: StereoRoadDataset, names: Sequence[str | Item] | None = None,
                  transform: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None, *,
-                 size: tuple[int, int] | None = None, augment: bool = False, seed: int = 0,
+                 size: tuple[int, int] | None = None, affine: bool = False, seed: int = 0,
                  cache: bool = False, virtual: VirtualAugment | None = None) -> None:
         self.dataset = dataset
         wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
@@ -125,10 +128,10 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         if unlabelled:
             raise DatasetError(f"{len(unlabelled)} frames have no road label (first: {unlabelled[0]}); "
                                f"train on a labelled split")
-        self.transform, self.size, self.augment, self.seed, self.cache = transform, size, augment, seed, cache
+        self.transform, self.size, self.affine, self.seed, self.cache = transform, size, affine, seed, cache
         self._cache: dict[tuple[int, str | None], tuple[np.ndarray, np.ndarray]] = {}
-        self._aug = _augmenter() if augment else None
-        self.virtual = virtual if augment else None
+        self._aug = _augmenter() if affine else None
+        self.virtual = virtual
         self._K: dict[tuple[int, str | None], np.ndarray] = {}  # intrinsics at the decoded size, by frame and image
 
     def __len__(self) -> int:
@@ -138,7 +141,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         """Image (``uint8 H×W×3``) and class map (``uint8 H×W``) of sample i, resized to ``size`` if set
         (before augmentation and ``transform``)."""
         item = self.items[i]
-        key = (item.index, item.image)  # a frame listed twice (``--augment duplicate``) is decoded once
+        key = (item.index, item.image)  # a frame listed twice (``augment="duplicate"``) is decoded once
         if key in self._cache:
             return self._cache[key]
         sample = self.dataset.load(item.index, right=False, disparity=False)

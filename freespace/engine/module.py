@@ -9,7 +9,7 @@ import lightning.pytorch as pl
 import numpy as np
 import torch
 
-from freespace.errors import TrainingError
+from freespace.errors import TrainingError, param
 from freespace.evaluation.metrics import RoadEvaluator
 from freespace.labels import IGNORE_INDEX
 from freespace.models import create_model, main_logits
@@ -69,7 +69,7 @@ class RoadModule(pl.LightningModule):
         loss = losses["total"]
         if not torch.isfinite(loss):
             raise TrainingError(f"the loss became {loss.item()} at epoch {self.current_epoch}, step {batch_idx}; "
-                                f"lower --lr or check the labels")
+                                f"lower {param('lr')} or check the labels")
         for k, v in losses.items():
             self.log(f"train_{'loss' if k == 'total' else k}", v.detach(), on_step=False, on_epoch=True,
                      batch_size=batch["image"].shape[0], sync_dist=True)

@@ -1,7 +1,7 @@
 """A training run: ``freespace train``.
 
 The run folder holds ``config.yaml`` (resolved options), ``splits/`` (train/val/test lists),
-``generated/`` (DS-Generator views, with ``--augment homography``), ``metrics.csv`` (one row per epoch),
+``generated/`` (DS-Generator views, with ``augment="homography"``), ``metrics.csv`` (one row per epoch),
 ``checkpoints/best.ckpt`` and ``checkpoints/last.ckpt`` (written atomically) and, at the end,
 ``metrics.json`` (test split: accuracy, precision, recall, f_score, iou, max_f, ap as fractions, seconds
 per frame). ``resume=True`` continues from ``last.ckpt``; with the same seed on a CPU the result is the
@@ -15,6 +15,7 @@ import io as _io
 import logging
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -24,9 +25,9 @@ from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from freespace.data.torch_dataset import RoadSegmentationDataset
-from freespace.engine.config import TrainConfig
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig
 from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
-from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError
+from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, param
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
 from freespace.io.outdir import claim_folder
@@ -172,6 +173,10 @@ def _confine_paths(state: dict[str, Any], folder: Path) -> None:
 def run_training(config: TrainConfig, resume: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train, validate each epoch, stop early on the validation F-score, test the best checkpoint.
 
+    ``config`` is checked first (:meth:`TrainConfig.check`, before anything is written). ``resume``
+    continues the run in ``config.out`` from its last checkpoint, with the run's options (``epochs`` may
+    grow).
+
     Returns the test metrics (also written to ``RUN_DIR/metrics.json``).
     """
     deterministic = torch.are_deterministic_algorithms_enabled()
@@ -184,18 +189,18 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
 
 
 def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
+    config.check()  # before anything is written
     run_dir = Path(config.out)
     if not is_rank_zero():  # DDP children re-run the command inside the folder their launcher holds
         return _train(config, resume, progress)
     with claim_folder(run_dir, "train", entries=RUN_ENTRIES) as folder:
         last = run_dir / "checkpoints" / "last.ckpt"
         if resume:
-            _check_resume(config, run_dir, last)
+            config = _check_resume(config, run_dir, last)
         elif (run_dir / "config.yaml").is_file():
             if last.is_file():
-                raise InvalidOptionError(f"{run_dir} already holds a run; add --resume to continue it or choose "
-                                         f"another --out")
-            config.check()
+                raise InvalidOptionError(f"{run_dir} already holds a run; add {param('resume')} to continue it or "
+                                         f"choose another {param('out')}")
             log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
             folder.forget(RUN_ENTRIES)
         try:
@@ -206,27 +211,31 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
             raise
 
 
-def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> None:
-    """Refuse ``--resume`` of a folder with no checkpoint, a damaged one, or other options than the run's."""
+def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> TrainConfig:
+    """Refuse to resume a folder with no checkpoint, a damaged one, or other options than the run's (its
+    config.yaml, in the spelling of any version); return ``config`` with the run's image size when it asks
+    for :data:`FIRST_FRAME_SIZE` (resolved when the run started)."""
     if (run_dir / "config.yaml").is_file() and not last.is_file():
         raise InvalidOptionError(f"{run_dir} never reached its first checkpoint, so there is nothing to resume; "
-                                 f"run the same command without --resume to start it again")
+                                 f"run the same command without {param('resume')} to start it again")
     if not (run_dir / "config.yaml").is_file():
-        raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
+        raise InvalidOptionError(f"{param('resume')} needs a run folder with config.yaml and checkpoints/last.ckpt; "
                                  f"{run_dir} has none")
     saved = TrainConfig.load(run_dir / "config.yaml")
     resumed = RunCheckpointIO(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
-    if config.image_size is None:
-        config.image_size = saved.image_size  # "auto" was resolved when the run started
+    if config.image_size == FIRST_FRAME_SIZE:
+        config = replace(config, image_size=saved.image_size)
+    now = config.to_dict()
     changed = [k for k, v in saved.to_dict().items()
                if k not in ("epochs", "out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
-               and config.to_dict()[k] != v]
+               and now[k] != v]
     if changed:
-        raise InvalidOptionError(f"--resume with other options than the run's ({', '.join(changed)}); "
-                                 f"resume with the same options (only --epochs may grow)")
+        raise InvalidOptionError(f"{param('resume')} with other options than the run's ({', '.join(changed)}); "
+                                 f"resume with the same options (only {param('epochs')} may grow)")
     from freespace.models import create_model  # the run's network, named as in RoadModule: before any work
 
     _check_fits(resumed, torch.nn.ModuleDict({"net": create_model(config.model, **config.model_options())}), last)
+    return config
 
 
 def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
@@ -236,15 +245,14 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
 
     run_dir = Path(config.out)
     last = run_dir / "checkpoints" / "last.ckpt"
-    config.check()
     pl.seed_everything(config.seed, workers=True, verbose=False)
     data = prepare_data(config, run_dir)
+    config = replace(config, image_size=tuple(data["size"]))  # resolved
     if is_rank_zero():
-        config.image_size = tuple(data["size"])  # resolved
         config.save(run_dir / "config.yaml")
     ds, size = data["dataset"], tuple(data["size"])
     warn_if_below_intact_size(config.model, config.preset, size)
-    train, val, test = (RoadSegmentationDataset(ds, data[k], size=size, augment=k == "train", seed=config.seed,
+    train, val, test = (RoadSegmentationDataset(ds, data[k], size=size, affine=k == "train", seed=config.seed,
                                                 cache=True, virtual=data["virtual"] if k == "train" else None)
                         for k in ("train", "val", "test"))
 

@@ -11,7 +11,7 @@ For one network and seed all variants share the split and the initial weights; H
 the data order and the conventional augmentation's draws (same number of samples).
 
 ``OUT`` receives ``runs/<model>-<tag>-s<seed>/`` (training run folders; ``<name>/metrics.json`` in each
-for each further test set) and, built from the run folders on disk (:func:`write_tables`, ``reproduce --tables``):
+for each further test set) and, built from the run folders on disk (:func:`write_tables`):
 
 * ``results.csv``: one row per network × variant × test set: ``n`` seeds and each metric's mean and std
   over them (%);
@@ -23,8 +23,14 @@ for each further test set) and, built from the run folders on disk (:func:`write
   FP blue) and ``index.json`` (every run, its status and metrics).
 
 Finished runs are skipped when the command is run again; interrupted ones resume. One cell
-(:func:`run_cell`, ``reproduce --only NETWORK,VARIANT,SEED``) writes only its run folder, so cells can run
-concurrently on a cluster and ``reproduce --tables`` collects them.
+(:func:`run_cell`; :func:`reproduce` with ``only="NETWORK,VARIANT,SEED"``) writes only its run folder, so cells
+can run concurrently on a cluster and :func:`write_tables` collects them.
+
+Names: a *variant* is an arm of the protocol, named as in the tables (``"HA-X"``, :attr:`Variant.name`; its
+run folders carry its short :attr:`Variant.tag`, ``ha``); its ``augment`` is the training configuration's
+(:attr:`freespace.engine.config.TrainConfig.augment`, e.g. ``("homography",)``), which several variants may
+share (X and X-long). index.json holds both: ``variant`` (the name) and ``augment`` (spelled as in
+config.yaml, ``"homography"``).
 """
 
 from __future__ import annotations
@@ -33,14 +39,14 @@ import json
 import logging
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from freespace.engine.config import TrainConfig, read_config_yaml
-from freespace.errors import CorruptFileError, DatasetError, FreespaceError, InvalidOptionError
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, augment_text, read_config_yaml
+from freespace.errors import CorruptFileError, DatasetError, FreespaceError, InvalidOptionError, param
 from freespace.experiments.stats import paired_gain
 from freespace.io.codecs import write_image
 from freespace.io.files import PathLike, atomic_write_bytes, atomic_write_text, check_writable, write_csv, write_json
@@ -54,14 +60,15 @@ __all__ = ["reproduce", "run_cell", "write_tables", "parse_models", "parse_varia
 
 @dataclass(frozen=True)
 class Variant:
-    """One arm of the protocol: its table name (``X`` stands for the network), the training ``--augment``,
-    the tag of its run folders (``runs/<model>-<tag>-s<seed>``), ``budget``, the factor on the epoch cap
+    """A variant (one arm) of the protocol: its ``name`` in the tables (``X`` stands for the network), its
+    training ``augment`` (a :attr:`~freespace.engine.config.TrainConfig.augment` value: ``()`` none), the
+    ``tag`` of its run folders (``runs/<model>-<tag>-s<seed>``), ``budget``, the factor on the epoch cap
     and on the early-stopping patience (X-long: 2, as many optimiser steps as HA-X), and where the training
-    labels come from: ``human`` (the dataset's), ``auto`` (the ``--autolabels`` tree) or ``mix`` (the
+    labels come from: ``human`` (the dataset's), ``auto`` (the ``autolabels`` tree) or ``mix`` (the
     dataset's on :data:`MIX_HUMAN_SHARE` of the training drives, the tree's on the rest)."""
 
     name: str
-    augment: str
+    augment: tuple[str, ...]
     tag: str
     budget: int = 1
     labels: str = "human"
@@ -73,14 +80,14 @@ class Variant:
 
 #: the arms, by table name
 VARIANTS: dict[str, Variant] = {v.name: v for v in (
-    Variant("X", "none", "orig"),                      # conventional augmentation only
-    Variant("HA-X", "homography", "ha"),               # + the DS-Generator views (the paper)
-    Variant("HV-X", "virtual", "hv"),                  # + road-plane virtual views (no right image)
-    Variant("HAV-X", "homography,virtual", "hav"),     # + both
-    Variant("X-dup", "duplicate", "dup"),              # control: HA-X's step count, the frames' own images
-    Variant("X-long", "none", "long", budget=2),       # control: HA-X's step count, each frame once per epoch
-    Variant("X-auto", "none", "auto", labels="auto"),  # labels nobody drew (freespace autolabel)
-    Variant("X-mix", "none", "mix", labels="mix"),     # people's labels on a fifth of the drives, autolabels after
+    Variant("X", (), "orig"),                              # conventional augmentation only
+    Variant("HA-X", ("homography",), "ha"),                # + the DS-Generator views (the paper)
+    Variant("HV-X", ("virtual",), "hv"),                   # + road-plane virtual views (no right image)
+    Variant("HAV-X", ("homography", "virtual"), "hav"),    # + both
+    Variant("X-dup", ("duplicate",), "dup"),               # control: HA-X's step count, the frames' own images
+    Variant("X-long", (), "long", budget=2),               # control: HA-X's step count, each frame once per epoch
+    Variant("X-auto", (), "auto", labels="auto"),          # labels nobody drew (freespace autolabel)
+    Variant("X-mix", (), "mix", labels="mix"),             # people's labels on a fifth of the drives, autolabels after
 )}
 #: the share of the training drives that keep the dataset's labels in X-mix
 MIX_HUMAN_SHARE = 0.2
@@ -94,7 +101,7 @@ PRIMARY = {"versus": "HA-X - X-dup", "metric": "f_score", "test_set": "same-rigs
 #: the ``network`` of the gains averaged over networks
 ALL_NETWORKS = "all"
 GAIN_METRICS = ("f_score", "iou")
-#: the name of a ``--test-root`` given without one
+#: the name of a further test set (``test_root``) given without one
 DEFAULT_TEST_SET = "shifted"
 #: names a further test set cannot take: the test split's, and the run folder's own entries
 _RESERVED_TEST_SETS = {"train", "val", "test", "metrics", "config", "splits", "generated", "checkpoints",
@@ -118,7 +125,7 @@ def _name(model: str, variant: str, seed: int) -> str:
 
 
 def parse_models(text: str | list[str] | tuple[str, ...] | None) -> list[str]:
-    """``"unet,segnet"`` (``--models``) → the networks, in the given order; ``"all"`` or None → every
+    """``"unet,segnet"`` (``models``) → the networks, in the given order; ``"all"`` or None → every
     registered network.
 
     Raises:
@@ -149,7 +156,7 @@ MAX_SEEDS = 1000
 
 
 def parse_cell(text: str, seeds: int) -> tuple[str, str, int]:
-    """``"unet,HA-X,2"`` (``--only``) → ``("unet", "HA-X", 2)``: network, variant, seed.
+    """``"unet,HA-X,2"`` (``only``) → ``("unet", "HA-X", 2)``: network, variant, seed.
 
     Raises:
         InvalidOptionError: not three comma-separated fields, an unknown network or variant, or a seed
@@ -159,20 +166,21 @@ def parse_cell(text: str, seeds: int) -> tuple[str, str, int]:
 
     parts = [p.strip() for p in str(text).split(",")]
     if len(parts) != 3:
-        raise InvalidOptionError(f"--only must be NETWORK,VARIANT,SEED (e.g. unet,HA-X,0), got {text!r}")
+        raise InvalidOptionError(f"{param('only')} must be NETWORK,VARIANT,SEED (e.g. unet,HA-X,0), got {text!r}")
     model, name, seed_text = parts
     if model not in list_models():
-        raise InvalidOptionError(f"--only: unknown network {model!r}; choose from {', '.join(list_models())}")
+        raise InvalidOptionError(f"{param('only')}: unknown network {model!r}; choose from {', '.join(list_models())}")
     if name not in VARIANTS:
-        raise InvalidOptionError(f"--only: unknown variant {name!r}; choose from {', '.join(VARIANTS)}")
+        raise InvalidOptionError(f"{param('only')}: unknown variant {name!r}; choose from {', '.join(VARIANTS)}")
     if not seed_text.isdigit() or not 0 <= int(seed_text) < seeds:
-        raise InvalidOptionError(f"--only: the seed must be an integer in 0…{seeds - 1} (--seeds {seeds}), "
+        raise InvalidOptionError(f"{param('only')}: the seed must be an integer in 0…{seeds - 1} ({param('seeds')} "
+                                 f"{seeds}), "
                                  f"got {seed_text!r}")
     return model, name, int(seed_text)
 
 
 def parse_test_roots(test_root: TestRoots) -> dict[str, Path]:
-    """``--test-root`` values → ``{name: folder}``: ``DIR`` is named ``shifted``, ``NAME=DIR`` ``NAME``
+    """``test_root`` values → ``{name: folder}``: ``DIR`` is named ``shifted``, ``NAME=DIR`` ``NAME``
     (lower-case letters, digits, ``-`` and ``_``; not ``test``, the test split's). A dict is taken as it is.
 
     Raises:
@@ -188,23 +196,26 @@ def parse_test_roots(test_root: TestRoots) -> dict[str, Path]:
             name, sep, folder = str(text).partition("=")
             named = sep and _TEST_SET_NAME.fullmatch(name)  # else a folder, whatever its characters
             if sep and not named and re.fullmatch(r"\w[\w-]*", name) and not Path(text).exists():
-                raise InvalidOptionError(f"--test-root {text}: test set names are lower-case letters, digits, - and _ "
+                raise InvalidOptionError(f"{param('test_root')} {text}: test set names are lower-case letters, digits, "
+                                         f"- and _ "
                                          f"(e.g. {name.lower()}={folder}); {text} is no folder either")
             pairs.append((name, folder) if named else (DEFAULT_TEST_SET, str(text)))
     roots: dict[str, Path] = {}
     for name, folder in pairs:
         if not _TEST_SET_NAME.fullmatch(name) or name in _RESERVED_TEST_SETS:
-            raise InvalidOptionError(f"--test-root: {name!r} cannot name a test set; use lower-case letters, digits, "
+            raise InvalidOptionError(f"{param('test_root')}: {name!r} cannot name a test set; use lower-case letters, "
+                                     f"digits, "
                                      f"- and _, and none of {', '.join(sorted(_RESERVED_TEST_SETS))} (NAME=DIR)")
         if name in roots:
-            raise InvalidOptionError(f"--test-root: two test sets are named {name!r}; give the others NAME=DIR")
+            raise InvalidOptionError(f"{param('test_root')}: two test sets are named {name!r}; give the others "
+                                     f"NAME=DIR")
         roots[name] = Path(folder)
     return roots
 
 
 def _check_test_roots(dataset: str, roots: dict[str, Path], train_root: PathLike) -> None:
-    """Refuse a ``--test-root`` that is not a ``dataset`` tree with labelled frames, or that holds frames of
-    the training data ``train_root`` (the same images, by resolved path: the same folder, or one inside
+    """Refuse a further test set (``roots``) that is not a ``dataset`` tree with labelled frames, or that holds
+    frames of the training data ``train_root`` (the same images, by resolved path: the same folder, or one inside
     it), before any work."""
     from freespace.data.base import check_dataset_root
     from freespace.data.registry import get_dataset, get_dataset_class
@@ -214,12 +225,13 @@ def _check_test_roots(dataset: str, roots: dict[str, Path], train_root: PathLike
         check_dataset_root(root, get_dataset_class(dataset).name)
         frames = get_dataset(dataset, root, disparity_mode="none").labelled().frames
         if not frames:
-            raise DatasetError(f"--test-root {root} has no labelled frames to test on")
+            raise DatasetError(f"{param('test_root')} {root} has no labelled frames to test on")
         if training is None:
             training = {f.left.resolve() for f in get_dataset(dataset, train_root, disparity_mode="none").frames}
         shared = [f.name for f in frames if f.left.resolve() in training]
         if shared:
-            raise InvalidOptionError(f"--test-root {name}={root} holds {len(shared)} of --root's own frames (e.g. "
+            raise InvalidOptionError(f"{param('test_root')} {name}={root} holds {len(shared)} of {param('root')}'s own "
+                                     f"frames (e.g. "
                                      f"{shared[0]}); a further test set must be other data than the training set")
 
 
@@ -227,15 +239,15 @@ def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, s
             options: dict[str, Any], autolabels: PathLike | None = None) -> TrainConfig:
     """The training configuration of one cell (``variant``: a table name; its budget scales the epoch cap
     and the patience; X-auto and X-mix read ``autolabels``)."""
-    arm = VARIANTS[variant]
-    options = {**options, "epochs": options["epochs"] * arm.budget, "patience": options["patience"] * arm.budget}
-    if arm.labels != "human":
+    spec = VARIANTS[variant]
+    options = {**options, "epochs": options["epochs"] * spec.budget, "patience": options["patience"] * spec.budget}
+    if spec.labels != "human":
         if autolabels is None:
-            raise InvalidOptionError(f"{variant} trains on labels nobody drew: give --autolabels DIR, the tree that "
-                                     f"`freespace autolabel --dataset {dataset} --root {root} --out DIR` wrote")
-        options.update(labels=str(autolabels), human_share=MIX_HUMAN_SHARE if arm.labels == "mix" else 0.0)
+            raise InvalidOptionError(f"{variant} trains on labels nobody drew: give {param('autolabels')} DIR, the "
+                                     f"label tree of {root} that `freespace autolabel` wrote")
+        options.update(labels=str(autolabels), human_share=MIX_HUMAN_SHARE if spec.labels == "mix" else 0.0)
     config = TrainConfig(dataset=dataset, root=str(root), out=str(out / "runs" / _name(model, variant, seed)),
-                         model=model, augment=arm.augment, seed=seed, **options)
+                         model=model, augment=spec.augment, seed=seed, **options)
     config.check()
     return config
 
@@ -246,16 +258,19 @@ _CELL_FREE = ("out", "workers", "devices", "num_nodes", "strategy", "tensorboard
 
 def _cell_changes(config: TrainConfig, run_dir: Path) -> list[str]:
     """The settings of ``config`` that differ from those the cell in ``run_dir`` was started with
-    (``key old → new``); ``[]`` when it has no config.yaml yet. ``root`` compares resolved; an
-    ``image_size`` of None ("the first frame's size") matches the size it was resolved to."""
+    (``key old → new``, in config.yaml's spelling); ``[]`` when it has no config.yaml yet. The cell's
+    config.yaml may be of any version (its spellings and renamed keys read as the values they were); ``root``
+    compares resolved; an ``image_size`` of :data:`~freespace.engine.config.FIRST_FRAME_SIZE` matches the
+    size it was resolved to."""
     saved_path = run_dir / "config.yaml"
     if not saved_path.is_file():
         return []
-    saved, new = TrainConfig.load(saved_path).to_dict(), config.to_dict()
+    recorded = TrainConfig.load(saved_path)
+    if config.image_size == FIRST_FRAME_SIZE:
+        config = replace(config, image_size=recorded.image_size)
+    saved, new = recorded.to_dict(), config.to_dict()
     for d in (saved, new):
         d["root"] = str(Path(d["root"]).expanduser().resolve())
-    if new.get("image_size") is None:
-        new["image_size"] = saved.get("image_size")
     return [f"{k} {saved.get(k)!r} → {v!r}" for k, v in new.items() if k not in _CELL_FREE and saved.get(k) != v]
 
 
@@ -275,7 +290,7 @@ def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool
     changes = _cell_changes(config, run_dir)
     if changes:
         raise InvalidOptionError(f"{run_dir} was started with other settings ({'; '.join(changes)}); rerun with its "
-                                 f"settings, or give another --out for the new ones")
+                                 f"settings, or give another {param('out')} for the new ones")
     if (run_dir / "metrics.json").is_file():
         status = "done (skipped)"
     else:
@@ -314,7 +329,7 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     ds = get_dataset(dataset, test_root, disparity_mode="none")
     names = [f.name for f in ds.labelled().frames]
     if not names:
-        raise DatasetError(f"--test-root {test_root} has no labelled frames to test on")
+        raise DatasetError(f"{param('test_root')} {test_root} has no labelled frames to test on")
     with claim_folder(run_dir, "train", entries=[f"{name}/"]):  # the run folder's own entry, under its lock
         scores = evaluate_frames(predictor, ds, names)[0].evaluate()
         metrics = {**{k: scores[k] for k in (*METRICS, "max_f", "ap")}, "frames": len(names), "dataset": dataset,
@@ -326,7 +341,8 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
 
 
 def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list[str] | None = None, seeds: int = 3,
-              epochs: int = 50, image_size: tuple[int, int] | None = None, patience: int = 10, val_window: int = 1,
+              epochs: int = 50, image_size: tuple[int, int] | str = FIRST_FRAME_SIZE, patience: int = 10,
+              val_window: int = 1,
               min_delta: float = 0.0,
               lr: float = 0.001, batch_size: int = 4, workers: int = 0, max_frames: int | None = None, figures: int = 3,
               progress: bool = True, variants: str | tuple[str, ...] | None = None, test_root: TestRoots = None,
@@ -339,7 +355,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
     (None = :data:`DEFAULT_VARIANTS`; ``X`` is always run: gains are against it); a variant's ``budget``
     multiplies ``epochs`` and ``patience`` (X-long).
     ``test_root``: further test sets (:func:`parse_test_roots`). ``autolabels``: the label tree of ``root``
-    that X-auto and X-mix train on (``freespace autolabel --dataset``).
+    that X-auto and X-mix train on (made by ``freespace autolabel``).
+    ``image_size``: (H, W), or :data:`~freespace.engine.config.FIRST_FRAME_SIZE`.
     ``encoder_name``, ``encoder_weights``: every run's encoder and its initial weights (``"imagenet"`` or a
     state-dict file; see :mod:`freespace.models.weights`), for the networks that take them.
     ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell and writes only its run folder; ``models`` and
@@ -347,7 +364,7 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
     table and gains are then empty (collect the cells with :func:`write_tables`).
     """
     if not 1 <= seeds <= MAX_SEEDS:
-        raise InvalidOptionError(f"--seeds must be in 1…{MAX_SEEDS}, got {seeds}")
+        raise InvalidOptionError(f"{param('seeds')} must be in 1…{MAX_SEEDS}, got {seeds}")
     options = dict(epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window,
                    min_delta=min_delta, lr=lr, image_size=image_size, workers=workers, max_frames=max_frames,
                    encoder_name=encoder_name, encoder_weights=encoder_weights)
@@ -358,22 +375,22 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
     if only is not None:
         model, variant, seed = parse_cell(only, seeds)
         if (models is not None and model not in chosen_models) or (variants is not None and variant not in chosen):
-            what = (f"network {model!r} is not among --models" if model not in chosen_models
-                    else f"variant {variant!r} is not among --variants")
-            raise InvalidOptionError(f"--only {only}: its {what}; include it there, or leave the option out")
+            what = (f"network {model!r} is not among {param('models')}" if model not in chosen_models
+                    else f"variant {variant!r} is not among {param('variants')}")
+            raise InvalidOptionError(f"{param('only')} {only}: its {what}; include it there, or leave the option out")
         config = _config(dataset, root, out, model, variant, seed, options, autolabels)
         _check_test_roots(dataset, roots, root)
         with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
             status = run_cell(config, test_root=roots, progress=progress)
         entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": variant,
-                 "augment": VARIANTS[variant].augment, "seed": seed, "status": status}
+                 "augment": augment_text(VARIANTS[variant].augment), "seed": seed, "status": status}
         return {"table": [], "gains": [], "runs": [entry]}
     configs = [_config(dataset, root, out, model, variant, seed, options, autolabels)  # all checked before any work
                for model in chosen_models for variant in chosen for seed in range(seeds)]
     changed = next(((c, ch) for c in configs if (ch := _cell_changes(c, Path(c.out)))), None)
     if changed is not None:
         raise InvalidOptionError(f"{changed[0].out} was started with other settings ({'; '.join(changed[1])}); rerun "
-                                 f"with its settings, or give another --out for the new ones")
+                                 f"with its settings, or give another {param('out')} for the new ones")
     _check_test_roots(dataset, roots, root)
     statuses: dict[str, str] = {}
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
@@ -401,14 +418,14 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
             log.warning("%s skipped: %s", run_dir, exc)
             continue
         named = _RUN_NAME.fullmatch(run_dir.name)
-        variant = _BY_TAG.get(named["tag"]) if named else None
-        if variant is None or "model" not in config or variant.augment != str(config.get("augment", "none")):
+        spec = _BY_TAG.get(named["tag"]) if named else None
+        if spec is None or "model" not in config or spec.augment != config.get("augment", ()):
             log.warning("%s skipped: not a run folder of the protocol (<model>-<tag>-s<seed> with the variant's "
-                        "--augment)", run_dir)
+                        "augment)", run_dir)
             continue
         entry: dict[str, Any] = {"run": str(run_dir.relative_to(out)), "model": config["model"],
-                                 "variant": variant.name, "augment": variant.augment, "seed": int(config.get("seed", 0)),
-                                 "status": "unfinished"}
+                                 "variant": spec.name, "augment": augment_text(spec.augment),
+                                 "seed": int(config.get("seed", 0)), "status": "unfinished"}
         if (run_dir / "metrics.json").is_file():
             metrics = _read_metrics(run_dir / "metrics.json")
             if isinstance(metrics, str):
@@ -428,12 +445,12 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
                     log.warning("%s skipped: %s", path, extra)
                     continue
                 entry.setdefault("test_sets", {})[name] = {k: extra[k] for k in (*METRICS, "max_f", "ap")}
-                settings.setdefault(f"--test-root {name}", set()).add(json.dumps(extra.get("root")))
+                settings.setdefault(f"the root of test set {name}", set()).add(json.dumps(extra.get("root")))
         for key in ("dataset", "root", "epochs", "patience", "val_window", "min_delta", "lr", "batch_size",
                     "max_frames", *_PER_NETWORK):
             value = config.get(key)
             if key in ("epochs", "patience") and isinstance(value, int):
-                value //= variant.budget  # X-long's budget is part of the variant
+                value //= spec.budget  # X-long's budget is part of the variant
             name = f"{key} of {config['model']}" if key in _PER_NETWORK else key
             settings.setdefault(name, set()).add(json.dumps(value))
         entries.append(entry)
@@ -567,7 +584,7 @@ def _cell(v: Any) -> Any:
 
 def write_tables(out: PathLike, *, figures: int = 3, statuses: dict[str, str] | None = None) -> dict[str, Any]:
     """Rebuild ``index.json``, ``results.csv``, ``gains.csv``, ``results.md`` and (``figures`` > 0: test
-    frames per figure) the figures from the run folders under ``OUT/runs`` (``reproduce --tables``).
+    frames per figure) the figures from the run folders under ``OUT/runs``.
 
     Returns ``{"table", "gains", "runs"}`` as :func:`reproduce`.
 
@@ -611,7 +628,7 @@ def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[s
     skipped = sum(e["status"].startswith("skipped") for e in entries)
     md = [f"Results of {finished} finished run{'s' if finished != 1 else ''} ({len(entries) - finished - skipped} "
           "unfinished" + (f", {skipped} skipped for unusable metrics.json" if skipped else "") + "): "
-          "test set `test` = the dataset's test split, any other = every labelled frame of the `--test-root` of "
+          "test set `test` = the dataset's test split, any other = every labelled frame of the further test set of "
           "that name (`shifted` when it was given none); "
           "%, mean ± std over the `n` seeds finished.", ""]
     if differ:

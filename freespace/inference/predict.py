@@ -32,6 +32,10 @@ log = logging.getLogger(__name__)
 
 __all__ = ["predict_folder", "predict_video", "export_model", "kitti_submit"]
 
+#: the size (H, W) of the example input an export is traced and checked with when the checkpoint states no
+#: training size: KITTI road's
+EXPORT_EXAMPLE_SIZE = (384, 1248)
+
 
 def _input_paths(source: FrameSource) -> dict[str, Path]:
     """The input files or folders of ``source`` for :func:`freespace.io.files.check_outputs`: the video, the
@@ -101,7 +105,7 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
 def _summary(predictor: Predictor, frames: int, seconds: float, wall: float, **extra: Any) -> dict[str, Any]:
     return {"frames": frames, "seconds_per_frame": seconds / frames if frames else None,
             "frames_per_second": frames / wall if frames and wall > 0 else None, "model": predictor.name,
-            "image_size": list(predictor.image_size) if predictor.image_size else None, **extra}
+            "image_size": list(predictor.resize_to) if predictor.resize_to is not None else None, **extra}
 
 
 def _predict_into(predictor: Predictor, source: FrameSource, out: Path, batch_size: int, progress: bool,
@@ -182,7 +186,7 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any
     import torch
 
     model, hp = load_checkpoint(checkpoint)
-    size = tuple(hp.get("image_size") or (384, 1248))
+    size = tuple(hp.get("image_size") or EXPORT_EXAMPLE_SIZE)
     example = torch.rand(1, 3, *size)
     checks = [torch.rand(1, 3, *size), torch.rand(2, 3, size[0] - 7, size[1] - 13)]
     out = Path(out)

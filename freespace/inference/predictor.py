@@ -166,19 +166,20 @@ def _fixed(dim: Any) -> int | None:
 class Predictor:
     """Road probabilities from a training checkpoint (PyTorch) or an exported ONNX model (onnxruntime).
 
-    Images are resized to the model's training size (kept in the checkpoint / the ONNX metadata) and the
-    probabilities back to each image's own size. An ONNX model whose input height and width are fixed gets
-    its images resized to that size (whatever its metadata says: it takes no other), and one whose batch
-    size is fixed gets batches of that size (the last padded).
+    Images are resized to ``resize_to``, the model's training size (H, W) kept in the checkpoint / the ONNX
+    metadata, and the probabilities back to each image's own size; a model that states none has ``resize_to``
+    None: each image goes to the network at its own size. An ONNX model whose input height and width are
+    fixed gets its images resized to that size (whatever its metadata says: it takes no other), and one
+    whose batch size is fixed gets batches of that size (the last padded).
     """
 
     def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None) -> None:
         if (checkpoint is None) == (onnx is None):
             raise InvalidOptionError("give exactly one of --checkpoint and --onnx")
-        self.image_size: tuple[int, int] | None = None
+        self.resize_to: tuple[int, int] | None = None
         if checkpoint is not None:
             self.model, hp = load_checkpoint(checkpoint)
-            self.image_size = _image_size(hp.get("image_size"), checkpoint)
+            self.resize_to = _image_size(hp.get("image_size"), checkpoint)
             self.name = hp["model"]
             self.session, self.batch = None, None
         else:
@@ -206,7 +207,7 @@ class Predictor:
             elif any(fixed):
                 raise CorruptFileError(f"{path} fixes one side of its input only ({shape}); freespace resizes images "
                                        f"to a fixed height and width, or to none ({_EXPORT_HINT})")
-            self.image_size = _image_size(size, path)
+            self.resize_to = _image_size(size, path)
             self.batch = _fixed(shape[0])
             self.name = meta.get("model", path.stem)
             self.model = None
@@ -241,8 +242,8 @@ class Predictor:
         for i, img in enumerate(images):
             if img.ndim != 3 or img.shape[2] != 3:
                 raise InvalidOptionError(f"expected RGB images, got shape {img.shape}")
-            if self.image_size and img.shape[:2] != self.image_size:
-                img = cv2.resize(img, (self.image_size[1], self.image_size[0]), interpolation=cv2.INTER_AREA)
+            if self.resize_to is not None and img.shape[:2] != self.resize_to:
+                img = cv2.resize(img, (self.resize_to[1], self.resize_to[0]), interpolation=cv2.INTER_AREA)
             resized.append(img)
             by_size.setdefault(img.shape[:2], []).append(i)
         out: list[np.ndarray | None] = [None] * len(images)

@@ -1,0 +1,263 @@
+"""The training configuration: typed values parsed once, config.yaml of older versions read as the same
+settings, errors naming parameters (the command line their flags), no flag in the library."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from freespace.cli import CONFIG_FLAGS, REPRODUCE_OPTIONS, _flags, build_parser, main
+from freespace.data.synthetic import SynthConfig, write_dataset
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, options, read_config_yaml
+from freespace.errors import InvalidOptionError, param
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# a cell's config.yaml as `freespace reproduce` wrote it before this version (the converged run's unet-ha-s0),
+# its folders put in the test's place
+CAMPAIGN_YAML = """\
+dataset: synth
+root: {root}
+out: {out}
+model: unet
+preset: light
+encoder_name: efficientnet-lite0
+encoder_weights: imagenet
+split: null
+augment: homography
+epochs: 100
+batch_size: 2
+lr: 0.01
+momentum: 0.9
+weight_decay: 0.0
+patience: 10
+val_window: 3
+min_delta: 0.001
+image_size:
+- 192
+- 256
+seed: 0
+devices: 1
+num_nodes: 1
+strategy: auto
+workers: 0
+splits_dir: null
+max_frames: null
+labels: null
+human_share: 0.0
+disparity_mode: auto
+cache_dir: null
+tensorboard: false
+virtual_shift: 0.5,0.2,0
+virtual_rotate: 3,3,3
+virtual_prob: 0.5
+"""
+
+# what the version before wrote for `train --augment virtual,homography --virtual-shift 0.50,0.2,0.0
+# --virtual-rotate 1,2.5,0 --image-size auto --disparity-source sgbm ...` (ranges kept as typed; size unresolved)
+OLDER_YAML = """\
+dataset: synth
+root: {root}
+out: {out}
+model: segnet
+preset: light
+encoder_name: null
+encoder_weights: null
+split: null
+augment: homography,virtual
+epochs: 20
+batch_size: 4
+lr: 0.01
+momentum: 0.9
+weight_decay: 0.0
+patience: 10
+val_window: 1
+min_delta: 0.0
+image_size: null
+seed: 2
+devices: 1
+num_nodes: 1
+strategy: auto
+workers: 0
+splits_dir: {root}/lists
+max_frames: 12
+labels: {root}/auto
+human_share: 0.2
+disparity_mode: sgbm
+cache_dir: null
+tensorboard: false
+virtual_shift: 0.50,0.2,0.0
+virtual_rotate: 1,2.5,0
+virtual_prob: 0.5
+"""
+
+
+def _folders(tmp_path: Path) -> dict[str, str]:
+    return {"root": os.path.realpath(tmp_path / "syn"), "out": os.path.realpath(tmp_path / "res" / "runs" / "cell")}
+
+
+def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) -> None:
+    """The recorded-settings check of reproduce passes for a cell written before this version, and the cell
+    is written back in the same spellings (the disparity source's key renamed, the old key read too)."""
+    from freespace.experiments.reproduce import _cell_changes
+
+    where = _folders(tmp_path)
+    run = Path(where["out"])
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text(CAMPAIGN_YAML.format(**where))
+    cell = TrainConfig(dataset="synth", root=where["root"], out=where["out"], model="unet",
+                       encoder_name="efficientnet-lite0", encoder_weights="imagenet", augment="homography", epochs=100,
+                       batch_size=2, lr=0.01, val_window=3, min_delta=0.001, seed=0)  # image size: the first frame's
+    assert cell.image_size == FIRST_FRAME_SIZE
+    assert _cell_changes(cell, run) == []
+    assert TrainConfig.load(run / "config.yaml") == dataclasses.replace(cell, image_size=(192, 256))
+    assert _cell_changes(dataclasses.replace(cell, lr=0.001), run) == ["lr 0.01 → 0.001"]
+    assert _cell_changes(dataclasses.replace(cell, augment="homography,virtual"), run) == \
+        ["augment 'homography' → 'homography,virtual'"]
+    TrainConfig.load(run / "config.yaml").save(tmp_path / "again.yaml")
+    assert (tmp_path / "again.yaml").read_text() == \
+        CAMPAIGN_YAML.format(**where).replace("disparity_mode:", "disparity_source:")
+
+
+def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:
+    where = _folders(tmp_path)
+    (tmp_path / "old.yaml").write_text(OLDER_YAML.format(**where))
+    old = TrainConfig.load(tmp_path / "old.yaml")
+    assert old == TrainConfig(dataset="synth", root=where["root"], out=where["out"], model="segnet",
+                              augment=("homography", "virtual"), epochs=20, lr=0.01, seed=2,
+                              splits_dir=f"{where['root']}/lists", max_frames=12, labels=f"{where['root']}/auto",
+                              human_share=0.2, disparity_source="sgbm", virtual_shift=(0.5, 0.2, 0.0),
+                              virtual_rotate=(1.0, 2.5, 0.0))
+    assert old.image_size == FIRST_FRAME_SIZE and old.virtual_shift == (0.5, 0.2, 0.0)
+    old.save(tmp_path / "new.yaml")
+    written, before = yaml.safe_load((tmp_path / "new.yaml").read_text()), yaml.safe_load(OLDER_YAML.format(**where))
+    assert written == {**{k if k != "disparity_mode" else "disparity_source": v for k, v in before.items()},
+                       "virtual_shift": "0.5,0.2,0"}  # one spelling per value
+    assert TrainConfig.load(tmp_path / "new.yaml") == old
+    assert read_config_yaml(tmp_path / "old.yaml")["augment"] == ("homography", "virtual")
+
+
+def test_values_are_parsed_once_into_types(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import freespace.data.base
+
+    c = TrainConfig(dataset="synth", root=str(tmp_path / "data"), out=str(tmp_path / "run"),
+                    augment="virtual, homography", virtual_shift="0.5,0.25,0", image_size="64x96")
+    assert (c.augment, c.virtual_shift, c.virtual_rotate, c.image_size) == \
+        (("homography", "virtual"), (0.5, 0.25, 0.0), (3.0, 3.0, 3.0), (64, 96))
+    assert TrainConfig(dataset="synth", root=str(tmp_path), out="o", augment="none").augment == ()
+    for auto in (None, "auto", FIRST_FRAME_SIZE):
+        assert TrainConfig(dataset="synth", root=str(tmp_path), out="o", image_size=auto).image_size == FIRST_FRAME_SIZE
+    assert dataclasses.replace(c, epochs=3) == TrainConfig(**{**c.to_dict(), "epochs": 3})  # the spellings parse back
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        c.augment = ("duplicate",)  # type: ignore[misc]
+    # the checks against the machine run once per configuration
+    seen = []
+    monkeypatch.setattr(freespace.data.base, "check_dataset_root", lambda root, layout: seen.append(root))
+    c.check()
+    c.check()
+    assert seen == [str(tmp_path / "data")]
+    dataclasses.replace(c, epochs=3).check()
+    assert len(seen) == 2
+
+
+@pytest.mark.parametrize("values, message", [
+    ({"epochs": 0}, "epochs must be ≥ 1, got 0"),
+    ({"epochs": True}, "epochs must be an integer, got True"),
+    ({"lr": 20.0}, "lr must be in (0, 10), got 20.0"),
+    ({"lr": float("inf")}, "lr must be a finite number, got inf"),
+    ({"min_delta": 1.0}, "min_delta must be in [0, 1), got 1.0"),
+    ({"seed": -1}, "seed must be in [0, 4294967295], got -1"),
+    ({"max_frames": 2}, "max_frames must be ≥ 3, got 2"),
+    ({"max_frames": "3"}, "max_frames must be an integer or null, got '3'"),
+    ({"augment": "homography,duplicate"}, "augment must be one of none, homography, virtual, homography,virtual, "
+                                          "duplicate, got 'homography,duplicate'"),
+    ({"augment": "virtual,duplicate"}, "augment must be one of"),
+    ({"virtual_shift": "0.5,-1,0"}, "virtual_shift must be three numbers ≥ 0 separated by commas, got '0.5,-1,0'"),
+    ({"image_size": "12x5"}, "image_size must be HxW with both in 32…"),
+    ({"strategy": "fsdp"}, "strategy must be one of auto, ddp, got 'fsdp'"),
+    ({"disparity_source": "laser"}, "disparity_source must be one of"),
+    ({"human_share": 0.5}, "human_share keeps the dataset's labels on a share of the training drives"),
+])
+def test_a_bad_value_names_its_parameter(values: dict, message: str) -> None:
+    with pytest.raises(InvalidOptionError) as caught:
+        TrainConfig(dataset="synth", root=".", out="o", **values)
+    assert str(caught.value).startswith(message) and "--" not in str(caught.value)
+
+
+def test_a_yaml_file_is_read_strictly(tmp_path: Path) -> None:
+    for text, message in [("epochs: 3.0\n", "epochs must be an integer, got 3.0"),
+                          ("lr: '0.1'\n", "lr must be a number, got '0.1'"),
+                          ("augment: [homography]\n", "augment must be one of"),
+                          ("tensorboard: 1\n", "tensorboard must be true or false, got 1"),
+                          ("model: fcn\n", "model must be one of")]:
+        (tmp_path / "c.yaml").write_text(text)
+        with pytest.raises(InvalidOptionError, match=re.escape(f"{tmp_path / 'c.yaml'}: {message}")):
+            read_config_yaml(tmp_path / "c.yaml")
+    (tmp_path / "c.yaml").write_text("image_size: [64, 96]\nmax_frames: null\nlr: 1\n")
+    assert read_config_yaml(tmp_path / "c.yaml") == {"image_size": (64, 96), "max_frames": None, "lr": 1.0}
+
+
+def test_the_command_line_names_the_flags(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every field's option has the field's name as its dest, so that an error naming the parameter names
+    the flag; the flags are the field names with dashes but for CONFIG_FLAGS."""
+    for command, names in (("train", None), ("reproduce", REPRODUCE_OPTIONS)):
+        flags = _flags(build_parser({command}), [command])
+        for o in options(names):
+            assert flags[o.name] == CONFIG_FLAGS.get(o.name, "--" + o.name.replace("_", "-"))
+    assert _flags(build_parser({"train"}), ["train"])["splits_dir"] == "--splits"
+    root = tmp_path / "syn"
+    write_dataset(root, 4, seed=0, config=SynthConfig(width=96, height=64, frames_per_scenario=2), progress=False)
+    for option, value, message in [("--virtual-prob", "2", "--virtual-prob must be in [0, 1], got 2.0"),
+                                   ("--virtual-rotate", "1,2", "--virtual-rotate must be three numbers"),
+                                   ("--human-share", "0.5", "--human-share keeps the dataset's labels on a share of "
+                                                            "the training drives and takes the label tree of --labels "
+                                                            "on the others; give --labels too")]:
+        assert main(["train", "--dataset", "synth", "--root", str(root), "--out", str(tmp_path / "run"), option,
+                     value]) == 2
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+    # the help speaks in flags too
+    help_text = " ".join(o.help for o in options(["augment", "human_share"]))
+    assert param("virtual_shift") in help_text and "--" not in help_text
+    monkeypatch.setenv("COLUMNS", "1000")  # argparse's help: one line per option
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    out = capsys.readouterr().out
+    assert "from --virtual-shift/--virtual-rotate" in out and "with --labels: the share" in out and "\x00" not in out
+
+
+def test_options_spell_defaults_as_config_yaml_does() -> None:
+    found = {o.name: (o.kind, o.default, o.required) for o in options()}
+    assert found["augment"] == (str, "none", False) and found["virtual_shift"] == (str, "0.5,0.2,0", False)
+    assert found["image_size"] == (str, None, False) and found["epochs"] == (int, 50, False)
+    assert found["lr"] == (float, 0.001, False) and found["tensorboard"] == (bool, False, False)
+    assert found["max_frames"] == (int, None, False) and found["root"] == (str, None, True)
+    assert {o.name: o.default for o in options(["augment"], {"augment": ("homography", "virtual")})} == \
+        {"augment": "homography,virtual"}
+
+
+def test_the_library_speaks_in_parameters() -> None:
+    """No command-line flag in the training engine, the protocol or the torch dataset: messages name
+    parameters (freespace.errors.param), the command line writes their flags."""
+    files = [*sorted((ROOT / "freespace" / "engine").glob("*.py")), *sorted((ROOT / "freespace" / "experiments")
+                                                                             .glob("*.py")),
+             ROOT / "freespace" / "data" / "torch_dataset.py"]
+    found = [f"{p.relative_to(ROOT)}:{i}: {line.strip()}" for p in files
+             for i, line in enumerate(p.read_text().splitlines(), 1) if re.search(r"--[a-z]", line)]
+    assert found == []
+
+
+def test_generate_and_the_geometry_do_not_import_pydantic() -> None:
+    """pydantic validates the training configuration only: `freespace generate` and the geometry stay light."""
+    code = ("import sys, freespace.geometry, freespace.datagen.generate, freespace.cli; "
+            "freespace.cli.build_parser({'generate'}); print('pydantic' in sys.modules, 'torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split() == ["False", "False"]
