@@ -22,6 +22,8 @@ _PARAM = re.compile("\x00([A-Za-z_][A-Za-z0-9_]*)\x00")
 def param(name: str) -> str:
     """The parameter ``name`` (a Python identifier, e.g. ``"image_size"``) as it goes into an error message;
     shown as ``name`` by ``str(error)`` and as its flag (``--image-size``) by the command line."""
+    if not name.isidentifier():
+        raise ValueError(f"a parameter is named by its Python identifier, got {name!r}")
     return f"\x00{name}\x00"
 
 

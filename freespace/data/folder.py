@@ -14,7 +14,7 @@ All three pair files by frame stem across folders and decode labels and depth as
     depth_scale: 0.01          # metres per stored unit
     camera: {fx: 320, fy: 320, cx: 320, cy: 240, baseline: 1.5}   # pixels, metres
 
-The camera may also give the road plane, for ``--augment virtual`` on datasets without a right image or
+The camera may also give the road plane, for the virtual-view augmentation on datasets without a right image or
 disparity: ``height`` (metres of the camera centre above a flat road, > 0), ``pitch`` (degrees, positive
 = the camera looks down at the road) and ``roll`` (degrees, about the optical axis), both default 0, as
 in :meth:`freespace.geometry.RoadPlane.from_camera`. With ``height`` the ``baseline`` may be left out

@@ -217,8 +217,8 @@ class TrainConfig:
                                  f"wrote")
         check_writable(self.out, folder=True)
         weights_file = self.encoder_weights if self.encoder_weights and Path(self.encoder_weights).is_file() else None
-        check_outputs({"--out": self.out}, {"--root": self.root, "--splits": self.splits_dir, "--labels": self.labels,
-                                            "--encoder-weights": weights_file})
+        check_outputs({"out": self.out}, {"root": self.root, "splits_dir": self.splits_dir, "labels": self.labels,
+                                          "encoder_weights": weights_file})
 
     def model_options(self) -> dict[str, Any]:
         """The network's options (``create_model(model, **options)``), without its initial weights: a
