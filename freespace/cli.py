@@ -95,6 +95,23 @@ def _check_mode(parser: argparse.ArgumentParser, args: argparse.Namespace, modes
         raise InvalidOptionError(f"{mode.what} needs {', '.join(missing)}{mode.hint} (see --help)")
 
 
+def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], options: Any, done: str) -> int:
+    """The dataset mode of ``generate`` and ``autolabel``: ``run`` (``generate_dataset``, ``autolabel_dataset``)
+    over the dataset the options name, then one line of counts (``summary[done]`` frames made) and one per
+    failed frame; exit code 1 when a frame failed."""
+    from freespace.shard import parse_shard
+
+    shard = parse_shard(args.shard) if args.shard is not None else None
+    summary = run(_open_dataset(args), args.out, workers=args.workers, options=options, overwrite=args.overwrite,
+                  shard=shard)
+    failed = summary["failed"]
+    print(f"{summary[done]} {done}, {summary['skipped']} already done, {len(failed)} failed of {summary['frames']} "
+          f"frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
+    for name, reason in failed.items():
+        print(f"  failed {name}: {reason}")
+    return 1 if failed else 0
+
+
 # --- generate ------------------------------------------------------------------------------------------
 
 
@@ -184,17 +201,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
               f"  rms {m.rms:.3f} px  → {args.out}")
         return 0
     from freespace.datagen.generate import generate_dataset
-    from freespace.shard import parse_shard
 
-    shard = parse_shard(args.shard) if args.shard is not None else None
-    summary = generate_dataset(_open_dataset(args), args.out, workers=args.workers, options=options,
-                               overwrite=args.overwrite, shard=shard)
-    failed = summary["failed"]
-    print(f"{summary['generated']} generated, {summary['skipped']} already done, {len(failed)} failed "
-          f"of {summary['frames']} frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
-    for name, reason in failed.items():
-        print(f"  failed {name}: {reason}")
-    return 1 if failed else 0
+    return _run_dataset(args, generate_dataset, options, "generated")
 
 
 # --- autolabel -----------------------------------------------------------------------------------------
@@ -263,17 +271,7 @@ def cmd_autolabel(args: argparse.Namespace) -> int:
         print(f"road {100 * s['road_fraction']:.1f}%  labelled {100 * s['coverage']:.1f}%  roll "
               f"{result.model.roll_deg:+.2f}°  noise {s['noise_px']:.2f} px  → {args.out}")
         return 0
-    from freespace.shard import parse_shard
-
-    shard = parse_shard(args.shard) if args.shard is not None else None
-    summary = autolabel_dataset(_open_dataset(args), args.out, workers=args.workers, options=options,
-                                overwrite=args.overwrite, shard=shard)
-    failed = summary["failed"]
-    print(f"{summary['labelled']} labelled, {summary['skipped']} already done, {len(failed)} failed of "
-          f"{summary['frames']} frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
-    for name, reason in failed.items():
-        print(f"  failed {name}: {reason}")
-    return 1 if failed else 0
+    return _run_dataset(args, autolabel_dataset, options, "labelled")
 
 
 # --- synth ---------------------------------------------------------------------------------------------
