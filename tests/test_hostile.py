@@ -849,7 +849,7 @@ def test_issue20_bounds_pass_real_kitti_and_every_rig_the_renderer_may_draw(tmp_
     # the six real calibrations' road planes
     for path in sorted(shared_path("kitti_road_calib").glob("*.txt")):
         rig = StereoCalibration.from_kitti(read_kitti_calib(path))
-        rig.road_model().check_plausible(rig.road_distance)
+        rig.road_model().check_plausible(rig.road_plane.height)
     # a real road frame's depth (measured heights 1.62–1.67 m)
     from helpers import disparity_from_depth_file
 
@@ -972,7 +972,7 @@ def test_issue20_one_pitch_convention(tmp_path: Path) -> None:
         pitch, roll, height = float(row["pitch_deg"]), float(row["roll_deg"]), float(row["camera_height_m"])
         assert 3 <= pitch <= 6
         calib = StereoCalibration.from_kitti(read_kitti_calib(training / "calib" / f"{row['frame']}.txt"))
-        truth = RoadPlane.from_calibration(calib)
+        truth = calib.road_plane
         # the same rig through a generic tree's freespace.yaml
         root = tmp_path / row["frame"]
         for sub in ("left", "labels"):
@@ -983,7 +983,7 @@ def test_issue20_one_pitch_convention(tmp_path: Path) -> None:
             f"left: left\nlabel: labels\ncamera: {{fx: {calib.fx}, cx: {calib.cx}, cy: {calib.cy}, "
             f"height: {height}, pitch: {pitch}, roll: {roll}}}\n")
         ds = get_dataset("generic", root)
-        copied = RoadPlane.from_calibration(ds.calibration(ds.frames[0]))
+        copied = ds.calibration(ds.frames[0]).road_plane
         np.testing.assert_allclose(copied.normal, truth.normal, atol=1e-5)
         assert copied.height == pytest.approx(truth.height, rel=1e-5)
         np.testing.assert_allclose(RoadPlane.from_camera(height, pitch, roll).normal, truth.normal, atol=1e-5)
