@@ -91,7 +91,8 @@ def test_export_and_predict(trained: dict[str, Path], tmp_path: Path, capsys: py
     assert onnx.stat().st_size > 0 and ts.stat().st_size > 0
     images = trained["data"] / "data_road" / "training" / "image_2"
     a, b = tmp_path / "pa", tmp_path / "pb"
-    assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--out", str(a), "--no-progress"]) == 0
+    assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--out", str(a),
+                 "--no-progress"]) == 0
     assert main(["predict", "--onnx", str(onnx), "--input", str(images), "--out", str(b), "--no-progress"]) == 0
     for img in images.glob("*.png"):
         ca, cb = read_image(a / img.name), read_image(b / img.name)
@@ -136,7 +137,8 @@ def test_inference_mistakes(trained: dict[str, Path], tmp_path: Path, capsys: py
     assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--batch-size", "0",
                  "--out", str(tmp_path / "p")]) == 2
     assert "--batch-size must be ≥ 1" in capsys.readouterr().err and not (tmp_path / "p").exists()
-    assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(tmp_path / "none"), "--out", str(tmp_path / "p")]) == 2
+    assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(tmp_path / "none"), "--out",
+                 str(tmp_path / "p")]) == 2
     assert "input not found" in capsys.readouterr().err
     (tmp_path / "bad.onnx").write_bytes(b"junk")
     assert main(["predict", "--onnx", str(tmp_path / "bad.onnx"), "--input", str(images), "--out", str(tmp_path / "p")]) == 2
@@ -160,5 +162,6 @@ def test_kitti_submit(trained: dict[str, Path], tmp_path: Path, capsys: pytest.C
     bev = read_image(maps[0])
     assert bev.dtype == np.uint8 and 0 < np.count_nonzero(bev) < bev.size  # the camera's field of view only
     (root / "data_road" / "testing" / "calib" / maps[0].name.replace("_road_", "_").replace(".png", ".txt")).unlink()
-    assert main(["kitti-submit", "--checkpoint", str(trained["ckpt"]), "--root", str(root), "--out", str(tmp_path / "s2")]) == 2
+    assert main(["kitti-submit", "--checkpoint", str(trained["ckpt"]), "--root", str(root), "--out",
+                 str(tmp_path / "s2")]) == 2
     assert "have no calibration" in capsys.readouterr().err and not (tmp_path / "s2").exists()
