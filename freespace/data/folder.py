@@ -187,14 +187,12 @@ class FolderDataset(StereoRoadDataset):
         cam = self._camera(frame)
         if cam is None:
             return None
-        normal = distance = None
+        plane = None
         if cam.get("height") is not None:  # the road plane of a camera height and pitch (and roll)
             plane = RoadPlane.from_camera(float(cam["height"]), float(cam.get("pitch", 0.0)),
                                           float(cam.get("roll", 0.0)))
-            normal, distance = tuple(-x for x in plane.normal), plane.height  # StereoCalibration: n towards the camera
         return StereoCalibration(fx=float(cam["fx"]), fy=float(cam.get("fy", cam["fx"])), cx=float(cam["cx"]),
-                                 cy=float(cam["cy"]), baseline=float(cam.get("baseline", 0.0)),
-                                 road_normal=normal, road_distance=distance)  # type: ignore[arg-type]
+                                 cy=float(cam["cy"]), baseline=float(cam.get("baseline", 0.0)), road_plane=plane)
 
     def _camera(self, frame: FrameRef) -> dict[str, float] | None:
         return self.spec.camera

@@ -310,7 +310,10 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
         timings = {"fit": time.perf_counter() - t0}
         source = "fit"
     else:
-        plane = RoadPlane.from_calibration(rig)
+        if rig.road_plane is None:
+            raise InvalidOptionError("the calibration has no road plane (no Tr_cam_to_road); give a disparity to fit "
+                                     "the road, or the camera height and pitch")
+        plane = rig.road_plane
         timings = {}
         source = "calibration"
     t0 = time.perf_counter()
