@@ -1,7 +1,7 @@
 """Split work over machines: the shard ``K/N`` runs the K-th of N disjoint parts of a list of frames.
 
 Convention: ``K`` is **1-based**, ``1 ≤ K ≤ N`` — the numbering of a SLURM job array started with
-``--array=1-N`` (shard ``${SLURM_ARRAY_TASK_ID}/N``). Shard K takes every N-th frame of the sorted
+``sbatch --array=1-N`` (shard ``${SLURM_ARRAY_TASK_ID}/N``). Shard K takes every N-th frame of the sorted
 frame names, starting with the K-th (round-robin): the shards are disjoint, together they hold every
 frame exactly once, their sizes differ by at most one, and frames of every category and drive spread
 over all of them. The split depends only on the set of names, not on their order or on the machine.

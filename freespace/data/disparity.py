@@ -23,7 +23,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from freespace.errors import DatasetError, InvalidOptionError
+from freespace.errors import DatasetError, InvalidOptionError, param
 from freespace.geometry import StereoCalibration, compute_disparity
 from freespace.geometry.depth import depth_to_disparity
 from freespace.io.codecs import read_disparity
@@ -66,7 +66,7 @@ class DisparityCache:
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "freespace" / "sgbm"
         self.folder = Path(folder) if folder is not None else base
         if self.folder.exists() and not self.folder.is_dir():
-            raise InvalidOptionError(f"--cache-dir {self.folder} is a file; give a folder for the SGBM disparities")
+            raise InvalidOptionError(f"{param('cache_dir')} {self.folder} is a file; give a folder for the SGBM disparities")
         self.settings = dict(sorted(settings.items()))
 
     def path(self, frame: FrameFiles) -> Path:
@@ -115,11 +115,12 @@ def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | N
         if frame.depth is None or calib is None or not calib.baseline > 0:
             what = ("depth map" if frame.depth is None else "camera calibration (f and B for d = f·B/Z)"
                     if calib is None else "baseline (a monocular camera: give `baseline` for d = f·B/Z)")
-            raise DatasetError(f"{frame.name} has no {what}; --disparity-source depth needs one for every frame")
+            raise DatasetError(f"{frame.name} has no {what}; {param('disparity_mode')} depth needs one for every "
+                               f"frame")
         return depth_to_disparity(read_depth(), calib.fx, calib.baseline), "depth"
     if mode == "lidar":
         if frame.velodyne is None or read_lidar is None:
-            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); --disparity-source lidar "
+            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); {param('disparity_mode')} lidar "
                                f"needs one for every frame")
         return read_lidar(), "lidar"
     if mode in ("auto", "file"):

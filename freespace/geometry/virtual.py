@@ -39,7 +39,7 @@ from typing import overload
 import cv2
 import numpy as np
 
-from freespace.errors import InvalidOptionError, ShapeMismatchError
+from freespace.errors import InvalidOptionError, ShapeMismatchError, param
 from freespace.geometry.plane import RoadPlane, rotation_from_angles
 from freespace.labels import RoadLabel
 
@@ -84,8 +84,8 @@ class VirtualPose:
             >>> VirtualPose.parse("0.5,0,0", "0,2,-1")
             VirtualPose(shift=(0.5, 0.0, 0.0), roll=0.0, pitch=2.0, yaw=-1.0)
         """
-        s = _triple(shift, "--shift DX,DY,DZ (metres)") if shift is not None else (0.0, 0.0, 0.0)
-        r = _triple(rotate, "--rotate ROLL,PITCH,YAW (degrees)") if rotate is not None else (0.0, 0.0, 0.0)
+        s = _triple(shift, f"{param('shift')} DX,DY,DZ (metres)") if shift is not None else (0.0, 0.0, 0.0)
+        r = _triple(rotate, f"{param('rotate')} ROLL,PITCH,YAW (degrees)") if rotate is not None else (0.0, 0.0, 0.0)
         return cls(shift=s, roll=r[0], pitch=r[1], yaw=r[2])
 
     @property
@@ -127,7 +127,7 @@ def virtual_homography(K: np.ndarray, plane: RoadPlane, pose: VirtualPose) -> np
     K = _check_K(K)
     if not plane.height - float(plane.n @ pose.C) > 1e-6:
         raise InvalidOptionError(f"the virtual camera at {tuple(pose.shift)} m is on or under the road plane (the "
-                                 f"camera is {plane.height:.3f} m above it); give a smaller --shift")
+                                 f"camera is {plane.height:.3f} m above it); give a smaller {param('shift')}")
     H = K @ pose.R @ (np.eye(3) - np.outer(pose.C, plane.n) / plane.height) @ np.linalg.inv(K)
     s = abs(H[2, 2])
     return H / s if s > 1e-12 else H
