@@ -17,6 +17,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Collection, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -57,11 +58,59 @@ def _open_dataset(args: argparse.Namespace):  # -> StereoRoadDataset (import kep
             raise InvalidOptionError("--disparity-dir is for KITTI road trees; other layouts name their "
                                      "disparity folder in freespace.yaml")
         options["disparity_dir"] = args.disparity_dir
-    if getattr(args, "lidar_densify", None) is not None:
+    if args.lidar_densify is not None:
+        if args.disparity_mode != "lidar":
+            raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
         if args.dataset not in ("kitti", "synth"):
             raise InvalidOptionError("--lidar-densify is for KITTI road trees (the only layout with Velodyne scans)")
         options["lidar_densify"] = args.lidar_densify
     return get_dataset(args.dataset, args.root, args.split, **options)
+
+
+@dataclass(frozen=True)
+class _Mode:
+    """One of the ways a command runs that share its parser (``generate``: one pair, a dataset or a virtual
+    view): the options (argparse ``dest``) that belong to it, those it needs, and how messages call it."""
+
+    what: str
+    options: frozenset[str]
+    required: tuple[str, ...] = ()
+    hint: str = ""
+
+
+def _check_mode(parser: argparse.ArgumentParser, args: argparse.Namespace, modes: Mapping[str, _Mode],
+                chosen: str) -> None:
+    """Refuse, in one line, the options of the other ``modes`` given (not at their default) to the
+    ``chosen`` one, then the options ``chosen`` needs and lacks. An option of no mode belongs to all."""
+    mode = modes[chosen]
+    others = set().union(*(m.options for m in modes.values())) - mode.options
+    flags = _flags(parser, [])
+    given = [a.dest for a in parser._actions if a.dest in others and a.option_strings
+             and getattr(args, a.dest) != a.default]
+    if given:
+        owners = " or ".join(m.what for m in modes.values() if m.options & set(given))
+        raise InvalidOptionError(f"{', '.join(flags[d] for d in given)} {'is' if len(given) == 1 else 'are'} for "
+                                 f"{owners}, not for {mode.what}; leave {'it' if len(given) == 1 else 'them'} out")
+    missing = [flags[d] for d in mode.required if getattr(args, d) in (None, False)]
+    if missing:
+        raise InvalidOptionError(f"{mode.what} needs {', '.join(missing)}{mode.hint} (see --help)")
+
+
+def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], options: Any, done: str) -> int:
+    """The dataset mode of ``generate`` and ``autolabel``: ``run`` (``generate_dataset``, ``autolabel_dataset``)
+    over the dataset the options name, then one line of counts (``summary[done]`` frames made) and one per
+    failed frame; exit code 1 when a frame failed."""
+    from freespace.shard import parse_shard
+
+    shard = parse_shard(args.shard) if args.shard is not None else None
+    summary = run(_open_dataset(args), args.out, workers=args.workers, options=options, overwrite=args.overwrite,
+                  shard=shard)
+    failed = summary["failed"]
+    print(f"{summary[done]} {done}, {summary['skipped']} already done, {len(failed)} failed of {summary['frames']} "
+          f"frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
+    for name, reason in failed.items():
+        print(f"  failed {name}: {reason}")
+    return 1 if failed else 0
 
 
 # --- generate ------------------------------------------------------------------------------------------
@@ -114,33 +163,36 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
                    help="plain least squares over all valid road pixels (no outlier rejection)")
     g.add_argument("--max-disparity", type=int, default=SGBM_MAX_DISPARITY, metavar="PX",
                    help="SGBM search range when no disparity is given (default %(default)s)")
-    p.set_defaults(func=cmd_generate)
+    p.set_defaults(func=cmd_generate, parser=p)
+
+
+_GENERATE_MODES = {
+    "pair": _Mode("one pair", frozenset({"reference", "target", "road_mask", "disparity", "model_json"}),
+                  ("reference", "target", "road_mask"), hint=" (or --dataset and --root: a whole dataset)"),
+    "virtual": _Mode("--virtual", frozenset({"virtual", "reference", "road_mask", "calib", "disparity", "shift",
+                                             "rotate", "label_out", "model_json"}),
+                     ("reference", "road_mask", "calib", "label_out")),
+    "dataset": _Mode("--dataset", frozenset({"dataset", "root", "split", "disparity_dir", "disparity_mode",
+                                             "lidar_densify", "cache_dir", "shard", "workers", "overwrite"}),
+                     ("root",)),
+}
 
 
 def cmd_generate(args: argparse.Namespace) -> int:
-    """``freespace generate``: one pair or a whole dataset (or, with --virtual, one view from another pose)."""
+    """``freespace generate``: one pair, a whole dataset, or (``--virtual``) one view from another pose."""
     from freespace.datagen.generate import FitOptions
 
+    mode = "virtual" if args.virtual else "dataset" if args.dataset else "pair"
+    _check_mode(args.parser, args, _GENERATE_MODES, mode)
     options = FitOptions(robust=args.robust, inlier_threshold=args.inlier_threshold, max_disparity=args.max_disparity)
-    if args.virtual:
+    if mode == "virtual":
         from freespace.datagen.generate import generate_virtual_pair
 
         print(generate_virtual_pair(args.reference, args.road_mask, args.calib, args.disparity, shift=args.shift,
                                     rotate=args.rotate, out=args.out, label_out=args.label_out,
-                                    model_json=args.model_json, options=options,
-                                    unused={"--target": args.target, "--dataset": args.dataset,
-                                            "--disparity-dir": args.disparity_dir, "--shard": args.shard,
-                                            "--lidar-densify": args.lidar_densify is not None}).summary())
+                                    model_json=args.model_json, options=options).summary())
         return 0
-    if args.calib or args.shift or args.rotate or args.label_out:
-        raise InvalidOptionError("--calib, --shift, --rotate and --label-out are for --virtual")
-    pair = [args.reference, args.target, args.road_mask]
-    if args.dataset is None:
-        if not all(pair):
-            raise InvalidOptionError("give --reference, --target and --road-mask (one pair), or --dataset and "
-                                     "--root (a dataset)")
-        if args.shard is not None or args.lidar_densify is not None:
-            raise InvalidOptionError("--shard and --lidar-densify are for --dataset (a whole dataset)")
+    if mode == "pair":
         from freespace.datagen.generate import generate_pair
 
         result = generate_pair(args.reference, args.target, args.road_mask, args.disparity, out=args.out,
@@ -149,26 +201,9 @@ def cmd_generate(args: argparse.Namespace) -> int:
         print(f"roll {m.roll_deg:+.4f}°  ϰ {m.kappa_hat:.6f}  κ {m.kappa:.3f}  inliers {m.num_inliers}/{m.num_valid}"
               f"  rms {m.rms:.3f} px  → {args.out}")
         return 0
-    if any(pair) or args.disparity or args.model_json:
-        raise InvalidOptionError("--dataset generates a whole dataset; --reference/--target/--road-mask/"
-                                 "--disparity/--model-json are for one pair, leave them out")
-    if args.root is None:
-        raise InvalidOptionError("--dataset needs --root DIR, the dataset's folder")
-    if args.lidar_densify is not None and args.disparity_mode != "lidar":
-        raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
     from freespace.datagen.generate import generate_dataset
-    from freespace.shard import parse_shard
 
-    shard = parse_shard(args.shard) if args.shard is not None else None
-    dataset = _open_dataset(args)
-    summary = generate_dataset(dataset, args.out, workers=args.workers, options=options, overwrite=args.overwrite,
-                               shard=shard)
-    failed = summary["failed"]
-    print(f"{summary['generated']} generated, {summary['skipped']} already done, {len(failed)} failed "
-          f"of {summary['frames']} frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
-    for name, reason in failed.items():
-        print(f"  failed {name}: {reason}")
-    return 1 if failed else 0
+    return _run_dataset(args, generate_dataset, options, "generated")
 
 
 # --- autolabel -----------------------------------------------------------------------------------------
@@ -210,52 +245,34 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     g.add_argument("--noise", type=float, metavar="PX", help="disparity noise in pixels (default: estimated)")
     g.add_argument("--max-disparity", type=int, default=SGBM_MAX_DISPARITY, metavar="PX",
                    help="SGBM search range (default %(default)s)")
-    p.set_defaults(func=cmd_autolabel)
+    p.set_defaults(func=cmd_autolabel, parser=p)
+
+
+_DATASET_MODE = _GENERATE_MODES["dataset"]
+_AUTOLABEL_MODES = {
+    "one": _Mode("one image", frozenset({"reference", "target", "disparity", "confidence", "model_json", "calib",
+                                         "baseline"}),
+                 ("reference",), hint=" and --target or --disparity (or --dataset and --root: a whole dataset)"),
+    "dataset": _DATASET_MODE,
+}
 
 
 def cmd_autolabel(args: argparse.Namespace) -> int:
     """``freespace autolabel``: a road label from disparity, for one left image or a whole dataset."""
     from freespace.datagen.autolabel import AutolabelOptions, autolabel_dataset, autolabel_pair
 
+    mode = "dataset" if args.dataset else "one"
+    _check_mode(args.parser, args, _AUTOLABEL_MODES, mode)
     options = AutolabelOptions(curb_height=args.curb_height, camera_height=args.camera_height, noise=args.noise,
                                max_disparity=args.max_disparity)
-    one = {"--reference": args.reference, "--target": args.target, "--disparity": args.disparity,
-           "--confidence": args.confidence, "--model-json": args.model_json, "--calib": args.calib,
-           "--baseline": args.baseline is not None}
-    if args.dataset is None:
-        if not args.reference:
-            raise InvalidOptionError("give --reference and --target or --disparity (one image), or --dataset and "
-                                     "--root (a dataset)")
-        many = [n for n, v in (("--root", args.root), ("--disparity-dir", args.disparity_dir), ("--shard", args.shard),
-                               ("--lidar-densify", args.lidar_densify is not None), ("--overwrite", args.overwrite),
-                               ("--cache-dir", args.cache_dir), ("--split", args.split)) if v]
-        if many or args.disparity_mode != "auto" or args.workers != 1:
-            raise InvalidOptionError(f"{', '.join(many) or '--disparity-source/--workers'} are for --dataset")
+    if mode == "one":
         result = autolabel_pair(args.reference, args.target, args.disparity, out=args.out, confidence=args.confidence,
                                 calib=args.calib, baseline=args.baseline, model_json=args.model_json, options=options)
         s = result.stats
         print(f"road {100 * s['road_fraction']:.1f}%  labelled {100 * s['coverage']:.1f}%  roll "
               f"{result.model.roll_deg:+.2f}°  noise {s['noise_px']:.2f} px  → {args.out}")
         return 0
-    given = [n for n, v in one.items() if v]
-    if given:
-        raise InvalidOptionError(f"--dataset labels a whole dataset; {', '.join(given)} are for one image, leave "
-                                 f"them out")
-    if args.root is None:
-        raise InvalidOptionError("--dataset needs --root DIR, the dataset's folder")
-    if args.lidar_densify is not None and args.disparity_mode != "lidar":
-        raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
-    from freespace.shard import parse_shard
-
-    shard = parse_shard(args.shard) if args.shard is not None else None
-    summary = autolabel_dataset(_open_dataset(args), args.out, workers=args.workers, options=options,
-                                overwrite=args.overwrite, shard=shard)
-    failed = summary["failed"]
-    print(f"{summary['labelled']} labelled, {summary['skipped']} already done, {len(failed)} failed of "
-          f"{summary['frames']} frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
-    for name, reason in failed.items():
-        print(f"  failed {name}: {reason}")
-    return 1 if failed else 0
+    return _run_dataset(args, autolabel_dataset, options, "labelled")
 
 
 # --- synth ---------------------------------------------------------------------------------------------
@@ -279,12 +296,12 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames-per-scenario", type=int, default=10, help="frames per drive (default 10)")
     p.add_argument("--non-planar", action="store_true", help="roads with slopes and camber")
     p.add_argument("--baseline", type=float, help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
-    p.add_argument("--max-roll", type=float, default=3.0, help="rig roll range ± degrees, at most 15 (default 3)")
+    p.add_argument("--max-roll", dest="max_roll_deg", type=float, default=3.0, help="rig roll range ± degrees, at most 15 (default 3)")
     p.add_argument("--baselines", type=_range, default=(0.3, 1.6), metavar="MIN,MAX",
                    help="baseline range in metres, drawn per drive when --baseline is not given (default 0.3,1.6)")
     p.add_argument("--camera-heights", type=_range, default=(1.4, 2.0), metavar="MIN,MAX",
                    help="camera height range above the road in metres, within 0.3–6 (default 1.4,2.0)")
-    p.add_argument("--pitches", type=_range, default=(-2.0, 2.0), metavar="MIN,MAX",
+    p.add_argument("--pitches", dest="pitches_deg", type=_range, default=(-2.0, 2.0), metavar="MIN,MAX",
                    help="rig pitch range in degrees, positive = looking down at the road (default -2,2)")
     p.add_argument("--weather", help="comma-separated subset of clear,cloudy,rain,sunset,dusk,fog (default all)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
@@ -299,8 +316,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     weathers = tuple(w.strip() for w in args.weather.split(",")) if args.weather else WEATHERS
     config = SynthConfig(width=args.width, height=args.height, frames_per_scenario=args.frames_per_scenario,
-                         planar=not args.non_planar, baseline=args.baseline, max_roll_deg=args.max_roll,
-                         baselines=args.baselines, camera_heights=args.camera_heights, pitches_deg=args.pitches,
+                         planar=not args.non_planar, baseline=args.baseline, max_roll_deg=args.max_roll_deg,
+                         baselines=args.baselines, camera_heights=args.camera_heights, pitches_deg=args.pitches_deg,
                          weathers=weathers)
     rows = write_dataset(args.out, args.num, seed=args.seed, config=config, workers=args.workers,
                          overwrite=args.overwrite)
@@ -351,7 +368,7 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
     from freespace.io.outdir import claim_folder
 
     check_writable(args.out, folder=True)
-    check_outputs({"--out": args.out}, {"--root": args.root})
+    check_outputs({"out": args.out}, {"root": args.root})
     dataset = get_dataset(args.dataset, args.root, args.split, disparity_mode="none")
     labelled = [(f.name, f.scenario) for f in dataset.labelled()]
     if not labelled:
@@ -487,7 +504,7 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
         raise InvalidOptionError("--calib is only used with --bev (the bird's-eye view); add --bev, or leave out "
                                  "--calib for the perspective view")
     check_writable(args.out)
-    check_outputs({"--out": args.out}, {"--gt": args.gt, "--pred": args.pred, "--calib": args.calib})
+    check_outputs({"out": args.out}, {"gt": args.gt, "pred": args.pred, "calib": args.calib})
     results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib)
     write_json(args.out, results)
     print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
@@ -521,7 +538,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     from freespace.shard import parse_shard
 
     check_writable(args.out, folder=not is_video_path(args.out))  # before the model is loaded
-    check_outputs({"--out": args.out}, {"--input": args.input, "--checkpoint": args.checkpoint, "--onnx": args.onnx})
+    check_outputs({"out": args.out}, {"input": args.input, "checkpoint": args.checkpoint, "onnx": args.onnx})
     shard = parse_shard(args.shard) if args.shard is not None else None
     video = is_video_path(args.out)
     if video and shard:
@@ -546,7 +563,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
 def _export_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--checkpoint", required=True)
-    p.add_argument("--format", choices=("onnx", "torchscript"), required=True)
+    p.add_argument("--format", dest="fmt", choices=("onnx", "torchscript"), required=True)
     p.add_argument("--out", required=True, help="output file")
     p.set_defaults(func=cmd_export)
 
@@ -555,7 +572,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     """``freespace export``: ONNX or TorchScript, validated against PyTorch."""
     from freespace.inference.predict import export_model
 
-    r = export_model(args.checkpoint, args.format, args.out)
+    r = export_model(args.checkpoint, args.fmt, args.out)
     print(f"{r['format']} → {r['path']}  max abs difference to PyTorch {r['max_abs_diff']:.2e} "
           f"(sizes {', '.join('×'.join(map(str, s[2:])) for s in r['checked_sizes'])})")
     return 0
@@ -640,7 +657,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 def _demo_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="demo_out", help="output folder (default demo_out)")
-    p.add_argument("--num", type=int, default=60, help="number of rendered frames (default 60)")
+    p.add_argument("--num", dest="num_frames", type=int, default=60, help="number of rendered frames (default 60)")
     p.add_argument("--full", action="store_true", help="the six-network protocol with three seeds (long)")
     p.add_argument("--epochs", type=int, help="training epochs (default 12; 30 with --full)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -651,7 +668,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
     from freespace.demo import run_demo
 
-    result = run_demo(args.out, num_frames=args.num, seed=args.seed, full=args.full, epochs=args.epochs)
+    result = run_demo(args.out, num_frames=args.num_frames, seed=args.seed, full=args.full, epochs=args.epochs)
     print(f"{'frame':<12} {'weather':<8} {'roll':>7} {'fit':>7} {'SGBM fit':>8}   road |L−R|  road |L−G|")
     for f in result["frames"]:
         sgbm = f"{f['sgbm_roll_deg']:+8.3f}" if f["sgbm_roll_deg"] is not None else f"{'—':>8}"

@@ -1,5 +1,5 @@
 """The built-in demo: render stereo road scenes, run the DS-Generator on them, then train a light network
-with and without the augmentation, evaluate both and compare (``--full``: the six-network protocol).
+with and without the augmentation, evaluate both and compare (``full``: the six-network protocol).
 
 ``freespace demo`` (and ``make demo``) runs it end to end on a fresh machine, with no data files.
 """
@@ -17,7 +17,7 @@ from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.data.synthetic.dataset import MAX_FRAMES
 from freespace.datagen.generate import generate_dataset
-from freespace.errors import FreespaceError, InvalidOptionError, check_seed
+from freespace.errors import FreespaceError, InvalidOptionError, check_seed, param
 from freespace.evaluation.viz import caption, colorize_disparity, grid, overlay_road
 from freespace.geometry import compute_disparity, fit_road_model
 from freespace.io.codecs import read_disparity, read_image, read_road_label, write_image
@@ -63,11 +63,11 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
     check_seed(seed)
     least = _least_frames(config.frames_per_scenario, seed) if train else 1
     if not least <= num_frames <= MAX_FRAMES:
-        raise InvalidOptionError(f"--num must be in {least}…{MAX_FRAMES:,}"
+        raise InvalidOptionError(f"{param('num_frames')} must be in {least}…{MAX_FRAMES:,}"
                                  + (f" (training needs drives of {config.frames_per_scenario} frames for train, val "
                                     f"and test)" if train else "") + f", got {num_frames}")
     if epochs is not None and epochs < 1:
-        raise InvalidOptionError(f"--epochs must be ≥ 1, got {epochs}")
+        raise InvalidOptionError(f"{param('epochs')} must be ≥ 1, got {epochs}")
     check_writable(out, folder=True)
     with claim_folder(out, "demo", entries=OUT_ENTRIES):
         return _demo(Path(out), num_frames, seed, config, train, full, epochs, figures)

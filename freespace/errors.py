@@ -7,7 +7,7 @@ that says what was wrong and how to fix it; the command-line interface prints it
 The library speaks in parameters, the command line in flags. A message names a parameter with
 :func:`param` (``f"{param('image_size')} must be HxW"``): ``str(error)`` writes its Python name
 (``image_size must be HxW``), and the command line, the one place that knows the flags, writes the option
-that set it (``--image-size must be HxW``, :meth:`FreespaceError.render`).
+that set it (``freespace train --image-size`` for ``image_size``, :meth:`FreespaceError.render`).
 """
 
 from __future__ import annotations
@@ -21,7 +21,9 @@ _PARAM = re.compile("\x00([A-Za-z_][A-Za-z0-9_]*)\x00")
 
 def param(name: str) -> str:
     """The parameter ``name`` (a Python identifier, e.g. ``"image_size"``) as it goes into an error message;
-    shown as ``name`` by ``str(error)`` and as its flag (``--image-size``) by the command line."""
+    shown as ``name`` by ``str(error)`` and as its flag by the command line (``freespace train --image-size``)."""
+    if not name.isidentifier():
+        raise ValueError(f"a parameter is named by its Python identifier, got {name!r}")
     return f"\x00{name}\x00"
 
 

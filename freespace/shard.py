@@ -1,7 +1,7 @@
-"""Split work over machines: ``--shard K/N`` runs the K-th of N disjoint parts of a list of frames.
+"""Split work over machines: the shard ``K/N`` runs the K-th of N disjoint parts of a list of frames.
 
 Convention: ``K`` is **1-based**, ``1 ≤ K ≤ N`` — the numbering of a SLURM job array started with
-``--array=1-N`` (``--shard ${SLURM_ARRAY_TASK_ID}/N``). Shard K takes every N-th frame of the sorted
+``sbatch --array=1-N`` (shard ``${SLURM_ARRAY_TASK_ID}/N``). Shard K takes every N-th frame of the sorted
 frame names, starting with the K-th (round-robin): the shards are disjoint, together they hold every
 frame exactly once, their sizes differ by at most one, and frames of every category and drive spread
 over all of them. The split depends only on the set of names, not on their order or on the machine.
@@ -14,7 +14,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 
-from freespace.errors import InvalidOptionError
+from freespace.errors import InvalidOptionError, param
 
 __all__ = ["parse_shard", "select_shard", "SHARD_FORM"]
 
@@ -35,10 +35,10 @@ def parse_shard(text: str) -> tuple[int, int]:
     """
     m = _SHARD.fullmatch(str(text))
     if m is None:
-        raise InvalidOptionError(f"--shard {text!r} is not of the form {SHARD_FORM}")
+        raise InvalidOptionError(f"{param('shard')} {text!r} is not of the form {SHARD_FORM}")
     k, n = int(m.group(1)), int(m.group(2))
     if n < 1 or not 1 <= k <= n:
-        raise InvalidOptionError(f"--shard {text!r} is out of range: expected {SHARD_FORM}")
+        raise InvalidOptionError(f"{param('shard')} {text!r} is out of range: expected {SHARD_FORM}")
     return k, n
 
 

@@ -19,6 +19,12 @@ from freespace.io.kitti import read_kitti_calib
 SHARED = Path(os.environ.get("FREESPACE_SHARED_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 
 
+#: the session's trained run (conftest.py's ``trained``): ``freespace synth`` frames of this size (W, H), two a drive
+TRAINED_FRAMES, TRAINED_SIZE, TRAINED_SEED = 8, (160, 128), 3
+#: its ``freespace train`` options besides --dataset, --root and --out
+TRAINED_ARGS = ("--model", "segnet", "--epochs", "1", "--batch-size", "4", "--image-size", "64x64", "--no-progress")
+
+
 def shared_path(*parts: str) -> Path:
     """A path under the shared samples (:data:`SHARED`), or skip the test when they are not there."""
     path = SHARED.joinpath(*parts)

@@ -249,3 +249,48 @@ def test_unusable_inputs_raise_typed_errors() -> None:
     road[30:, :] = True
     with pytest.raises(RoadFitError, match="no valid value"):
         generate_arrays(image, image, road, np.full((40, 60), np.nan, np.float32))
+
+
+def test_library_names_parameters_and_the_command_line_names_flags(pair_files: dict[str, Path], tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture) -> None:
+    from freespace.datagen.generate import FitOptions, generate_pair
+    from freespace.errors import InvalidOptionError
+
+    with pytest.raises(InvalidOptionError) as caught:
+        generate_pair(pair_files["left"], pair_files["right"], pair_files["gt"], out=tmp_path / "G.txt")
+    assert str(caught.value).startswith("out ") and "--" not in str(caught.value)
+    with pytest.raises(InvalidOptionError, match="^inlier_threshold must be"):
+        FitOptions(inlier_threshold=0).check()
+    assert main(_pair_args(pair_files, tmp_path / "G.txt")) == 2
+    assert "error: --out " in capsys.readouterr().err
+    assert main(_pair_args(pair_files, tmp_path / "G.png", "--inlier-threshold", "0")) == 2
+    assert "error: --inlier-threshold must be" in capsys.readouterr().err
+    # an output that is an input: both named by their flags
+    assert main(_pair_args(pair_files, pair_files["gt"])) == 2
+    assert f"--out {pair_files['gt']} is the input --road-mask" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--calib", "c.txt"], "--calib is for --virtual, not for one pair; leave it out"),
+    (["--shard", "1/2", "--workers", "2"], "--shard, --workers are for --dataset, not for one pair; leave them out"),
+    (["--virtual", "--calib", "c.txt", "--label-out", "VL.png"], "--target is for one pair, not for --virtual"),
+    (["--dataset", "synth", "--root", "."], "--reference, --target, --road-mask are for one pair or --virtual, not "
+                                            "for --dataset"),
+])
+def test_each_mode_refuses_the_options_of_the_others(extra: list[str], message: str, pair_files: dict[str, Path],
+                                                     tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(_pair_args(pair_files, tmp_path / "G.png", *extra)) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "G.png").exists()
+
+
+def test_each_mode_names_what_it_lacks(pair_files: dict[str, Path], tmp_path: Path,
+                                       capsys: pytest.CaptureFixture) -> None:
+    assert main(["generate", "--reference", str(pair_files["left"]), "--out", str(tmp_path / "G.png")]) == 2
+    assert "one pair needs --target, --road-mask (or --dataset and --root" in capsys.readouterr().err
+    assert main(["generate", "--virtual", "--reference", str(pair_files["left"]), "--road-mask", str(pair_files["gt"]),
+                 "--out", str(tmp_path / "V.png")]) == 2
+    assert "--virtual needs --calib, --label-out" in capsys.readouterr().err
+    assert main(["generate", "--dataset", "synth", "--out", str(tmp_path / "o")]) == 2
+    assert "--dataset needs --root" in capsys.readouterr().err

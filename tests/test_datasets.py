@@ -71,7 +71,7 @@ def test_kitti_training_and_testing(tmp_path: Path) -> None:
     s = train.load(1)
     assert s.left.shape == SHAPE + (3,) and s.right is not None and s.label is not None
     assert s.calibration.fx == 300.0 and s.calibration.baseline == pytest.approx(0.5)
-    assert s.calibration.road_distance == pytest.approx(1.6)
+    assert s.calibration.road_plane.height == pytest.approx(1.6)
     test = KittiRoad(tmp_path, "testing", disparity_mode="none")
     assert len(test) == 2 and test.load(0).label is None
     assert check_dataset(test) == []  # no labels expected in testing

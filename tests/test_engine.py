@@ -86,8 +86,8 @@ def test_homography_augmentation_adds_generated_views(tiny: Path, tmp_path: Path
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--model", "fcn"], "--model must be one of"), (["--augment", "flip"], "--augment"), (["--epochs", "0"], "--epochs"),
-    (["--image-size", "12x5"], "--image-size"), (["--lr", "-1"], "--lr"), (["--strategy", "fsdp"], "--strategy"),
+    (["--model", "fcn"], "--model must be one of"), (["--augment", "flip"], "--augment"),
+    (["--epochs", "0"], "--epochs"), (["--image-size", "12x5"], "--image-size"), (["--lr", "-1"], "--lr"), (["--strategy", "fsdp"], "--strategy"),
 ])
 def test_bad_options_rejected_before_work(tiny: Path, tmp_path: Path, args: list[str], message: str,
                                           capsys: pytest.CaptureFixture) -> None:
@@ -191,7 +191,8 @@ def test_config_file_and_flags(tiny: Path, tmp_path: Path, monkeypatch: pytest.M
     assert TrainConfig.load(tmp_path / "old.yaml") == run
     capsys.readouterr()
     for text, message in [("epoch: 3\n", "unknown option epoch;"), ("epochs: ten\n", "epochs must be an integer"),
-                          ("image_size: 12x5\n", "bad.yaml: image_size must be HxW"), ("- 3\n", "not a freespace training config")]:
+                          ("image_size: 12x5\n", "bad.yaml: image_size must be HxW"),
+                          ("- 3\n", "not a freespace training config")]:
         (tmp_path / "bad.yaml").write_text(text)
         assert main(["train", "--config", str(tmp_path / "bad.yaml"), "--dataset", "synth", "--root", str(tiny),
                      "--out", str(tmp_path / "d")]) == 2

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from freespace.errors import InvalidOptionError
-from freespace.geometry import RoadModel, StereoCalibration, homography_from_pose
+from freespace.geometry import RoadModel, RoadPlane, StereoCalibration, homography_from_pose
 from freespace.io.kitti import read_kitti_calib
 
 from helpers import shared_path
@@ -45,7 +45,7 @@ def test_general_pose_maps_road_points() -> None:
     n = n / np.linalg.norm(n)
     D = 1.6
     X = _road_points(n, D)
-    H = homography_from_pose(K_r, K_t, R, t, n, D)
+    H = homography_from_pose(K_r, K_t, R, t, RoadPlane(tuple(-n), D))  # n·X = h with n towards the road
     p_r = _project(K_r, X)
     p_t = _project(K_t, (R @ X.T).T + t)
     q = (H @ np.c_[p_r, np.ones(len(p_r))].T).T
@@ -55,8 +55,8 @@ def test_general_pose_maps_road_points() -> None:
 def test_stereo_road_model_from_calibration() -> None:
     roll = math.radians(2.0)
     n = _rot(0.03, 0.0, roll) @ np.array([0.0, -1.0, 0.0])
-    calib = StereoCalibration(fx=720.0, fy=720.0, cx=610.0, cy=175.0, baseline=0.54, road_normal=tuple(n),
-                              road_distance=1.65)
+    calib = StereoCalibration(fx=720.0, fy=720.0, cx=610.0, cy=175.0, baseline=0.54,
+                              road_plane=RoadPlane(tuple(-n), 1.65))
     model = calib.road_model()
     # the model's disparity equals f·B/Z at the projections of road points
     X = _road_points(n, 1.65)
@@ -73,12 +73,12 @@ def test_kitti_calibration_parsed() -> None:
     calib = StereoCalibration.from_kitti(read_kitti_calib(shared_path("kitti_road_calib", "um_000000.txt")))
     assert calib.fx == pytest.approx(721.5377)
     assert calib.baseline == pytest.approx(0.5327, abs=1e-3)  # (P2[0,3] − P3[0,3]) / fx
-    assert 1.5 < calib.road_distance < 1.8  # camera height above the road
-    assert calib.road_normal[1] < -0.99
+    assert 1.5 < calib.road_plane.height < 1.8  # camera height above the road
+    assert calib.road_plane.normal[1] > 0.99  # pointing down, to the road
     model = calib.road_model()
     assert abs(model.roll_deg) < 1.0
     # the KITTI road horizon: disparity 0 near the principal row, ~0.33 px per row below
-    assert model.kappa_hat == pytest.approx(calib.baseline / calib.road_distance, rel=0.02)
+    assert model.kappa_hat == pytest.approx(calib.baseline / calib.road_plane.height, rel=0.02)
 
 
 @pytest.mark.parametrize("name", ["um_000000", "umm_000000", "uu_000000", "uu_000001"])
@@ -109,9 +109,25 @@ def test_kitti_road_plane_consistent_with_devkit_transform(name: str) -> None:
 def test_bad_pose_arguments() -> None:
     K = np.eye(3)
     with pytest.raises(InvalidOptionError, match="shape"):
-        homography_from_pose(np.eye(2), K, np.eye(3), np.zeros(3), np.array([0, -1, 0]), 1.0)
-    with pytest.raises(InvalidOptionError, match="D > 0"):
-        homography_from_pose(K, K, np.eye(3), np.zeros(3), np.array([0, -1, 0]), 0.0)
+        homography_from_pose(np.eye(2), K, np.eye(3), np.zeros(3), RoadPlane((0, 1, 0), 1.0))
+    with pytest.raises(InvalidOptionError, match="height > 0"):
+        homography_from_pose(K, K, np.eye(3), np.zeros(3), RoadPlane((0, 1, 0), 0.0))
     with pytest.raises(InvalidOptionError, match="no road plane"):
         StereoCalibration(fx=1, fy=1, cx=0, cy=0, baseline=1).road_model()
-    assert isinstance(StereoCalibration(1, 1, 0, 0, 1, (0, -1, 0), 1.0).road_model(), RoadModel)
+    assert isinstance(StereoCalibration(1, 1, 0, 0, 1, RoadPlane((0, 1, 0), 1.0)).road_model(), RoadModel)
+
+
+def test_kitti_road_frame_either_way_up_gives_one_plane() -> None:
+    """The calibration's plane always has n pointing from the camera to the road: a road frame whose Y points
+    up (Tr_cam_to_road's Y row negated) describes the same plane, and a camera on the plane is refused."""
+    raw = read_kitti_calib(shared_path("kitti_road_calib", "um_000000.txt"))
+    plane = StereoCalibration.from_kitti(raw).road_plane
+    flipped = dict(raw, Tr_cam_to_road=raw["Tr_cam_to_road"] * np.array([[1.0], [-1.0], [1.0]]))
+    same = StereoCalibration.from_kitti(flipped).road_plane
+    assert same is not None and same.normal == plane.normal and same.height == plane.height
+    assert plane.normal[1] > 0.99 and 1.5 < plane.height < 1.8
+    on_road = raw["Tr_cam_to_road"].copy()
+    t_l = np.linalg.solve(raw["P2"][:, :3], raw["P2"][:, 3])  # the P2 camera's centre is −t_l (rectified)
+    on_road[1, 3] = float((raw["R0_rect"] @ on_road[1, :3]) @ t_l)  # road Y = 0 through that centre
+    with pytest.raises(InvalidOptionError, match="on the road plane"):
+        StereoCalibration.from_kitti(dict(raw, Tr_cam_to_road=on_road))

@@ -12,22 +12,11 @@ import numpy as np
 import pytest
 
 from freespace.cli import main
-from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.evaluation.bev import BEV_SHAPE, bev_matrix, to_bev
 from freespace.io.codecs import read_image, read_road_label, write_image
 from freespace.io.kitti import read_kitti_calib
 
-from helpers import shared_path
-
-
-@pytest.fixture(scope="module")
-def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    base = tmp_path_factory.mktemp("infer")
-    data = base / "data"
-    write_dataset(data, 12, seed=5, config=SynthConfig(width=160, height=128, frames_per_scenario=2), progress=False)
-    assert main(["train", "--dataset", "synth", "--root", str(data), "--model", "segnet", "--epochs", "1",
-                 "--batch-size", "4", "--no-progress", "--out", str(base / "run")]) == 0
-    return {"data": data, "ckpt": base / "run" / "checkpoints" / "best.ckpt", "base": base}
+from helpers import TRAINED_FRAMES, shared_path
 
 
 def _literal_bev_cell(calib: dict, row: int, col: int, shape: tuple[int, int]) -> tuple[int, int] | None:
@@ -66,8 +55,8 @@ def test_bev_matches_the_devkit_formula(name: str) -> None:
     assert bev_matrix(calib).shape == (3, 3)
 
 
-def test_bev_of_a_rendered_road_is_the_road_ahead(run: dict[str, Path]) -> None:
-    tr = run["data"] / "data_road" / "training"
+def test_bev_of_a_rendered_road_is_the_road_ahead(trained: dict[str, Path]) -> None:
+    tr = trained["data"] / "data_road" / "training"
     name = sorted(p.stem for p in (tr / "calib").glob("*.txt"))[0]
     calib = read_kitti_calib(tr / "calib" / f"{name}.txt")
     cat, idx = name.split("_")
@@ -77,8 +66,8 @@ def test_bev_of_a_rendered_road_is_the_road_ahead(run: dict[str, Path]) -> None:
     assert bev[520:720, 180:220].mean() > 0.9
 
 
-def test_evaluate_kitti_bev(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    tr = run["data"] / "data_road" / "training"
+def test_evaluate_kitti_bev(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    tr = trained["data"] / "data_road" / "training"
     pred = tmp_path / "pred"
     for gt in (tr / "gt_image_2").glob("*.png"):
         write_image(pred / gt.name, (read_road_label(gt).road * 255).astype(np.uint8))
@@ -87,22 +76,23 @@ def test_evaluate_kitti_bev(run: dict[str, Path], tmp_path: Path, capsys: pytest
                  "--pred", str(pred), "--out", str(out)]) == 0
     res = json.loads(out.read_text())
     assert res["all"]["max_f"] == pytest.approx(1.0, abs=1e-9) and res["all"]["fpr"] == 0.0
-    assert res["all"]["images"] == 12 and res["all"]["ap"] == pytest.approx(1.0, abs=1e-9)
+    assert res["all"]["images"] == TRAINED_FRAMES and res["all"]["ap"] == pytest.approx(1.0, abs=1e-9)
     assert main(["evaluate-kitti", "--bev", "--gt", str(tr / "gt_image_2"), "--pred", str(pred),
                  "--out", str(tmp_path / "x.json")]) == 2
     assert "--bev needs --calib" in capsys.readouterr().err and not (tmp_path / "x.json").exists()
 
 
-def test_export_and_predict(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_export_and_predict(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     onnx, ts = tmp_path / "m.onnx", tmp_path / "m.pt"
-    assert main(["export", "--checkpoint", str(run["ckpt"]), "--format", "onnx", "--out", str(onnx)]) == 0
+    assert main(["export", "--checkpoint", str(trained["ckpt"]), "--format", "onnx", "--out", str(onnx)]) == 0
     out = capsys.readouterr().out
     assert "max abs difference to PyTorch" in out and float(out.split("PyTorch ")[1].split()[0]) < 1e-3
-    assert main(["export", "--checkpoint", str(run["ckpt"]), "--format", "torchscript", "--out", str(ts)]) == 0
+    assert main(["export", "--checkpoint", str(trained["ckpt"]), "--format", "torchscript", "--out", str(ts)]) == 0
     assert onnx.stat().st_size > 0 and ts.stat().st_size > 0
-    images = run["data"] / "data_road" / "training" / "image_2"
+    images = trained["data"] / "data_road" / "training" / "image_2"
     a, b = tmp_path / "pa", tmp_path / "pb"
-    assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(images), "--out", str(a), "--no-progress"]) == 0
+    assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--out", str(a),
+                 "--no-progress"]) == 0
     assert main(["predict", "--onnx", str(onnx), "--input", str(images), "--out", str(b), "--no-progress"]) == 0
     for img in images.glob("*.png"):
         ca, cb = read_image(a / img.name), read_image(b / img.name)
@@ -110,8 +100,8 @@ def test_export_and_predict(run: dict[str, Path], tmp_path: Path, capsys: pytest
         assert np.abs(ca.astype(int) - cb.astype(int)).max() <= 1
         assert (a / "overlays" / img.name).is_file()
     summary = json.loads((a / "summary.json").read_text())
-    assert summary["frames"] == 12 and summary["seconds_per_frame"] > 0
-    assert summary["model"] == "segnet" and summary["image_size"] == [128, 160]
+    assert summary["frames"] == TRAINED_FRAMES and summary["seconds_per_frame"] > 0
+    assert summary["model"] == "segnet" and summary["image_size"] == [64, 64]  # the training size (TRAINED_ARGS)
     # one file works too, and gives that file's map of the folder run
     one = sorted(images.glob("*.png"))[3]
     assert main(["predict", "--onnx", str(onnx), "--input", str(one), "--out", str(tmp_path / "one"), "--no-progress"]) == 0
@@ -120,34 +110,35 @@ def test_export_and_predict(run: dict[str, Path], tmp_path: Path, capsys: pytest
     assert json.loads((tmp_path / "one" / "summary.json").read_text())["frames"] == 1
 
 
-def test_predict_then_evaluate_kitti_equals_evaluate(run: dict[str, Path], tmp_path: Path) -> None:
+def test_predict_then_evaluate_kitti_equals_evaluate(trained: dict[str, Path], tmp_path: Path) -> None:
     """Two paths to the same numbers: `predict` + `evaluate-kitti` on its 8-bit maps, and `evaluate`
     (the same predictor, the same confidence conversion, the same evaluator)."""
-    tr = run["data"] / "data_road" / "training"
+    tr = trained["data"] / "data_road" / "training"
     pred = tmp_path / "pred"
-    assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(tr / "image_2"), "--out", str(pred),
+    assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(tr / "image_2"), "--out", str(pred),
                  "--batch-size", "1", "--no-progress"]) == 0
     assert main(["evaluate-kitti", "--gt", str(tr / "gt_image_2"), "--pred", str(pred), "--out",
                  str(tmp_path / "kitti.json")]) == 0
-    assert main(["evaluate", "--checkpoint", str(run["ckpt"]), "--dataset", "synth", "--root", str(run["data"]),
+    assert main(["evaluate", "--checkpoint", str(trained["ckpt"]), "--dataset", "synth", "--root", str(trained["data"]),
                  "--subset", "all", "--out", str(tmp_path / "eval"), "--no-progress"]) == 0
     kitti = json.loads((tmp_path / "kitti.json").read_text())["all"]
     evaluated = json.loads((tmp_path / "eval" / "metrics.json").read_text())
-    assert kitti["images"] == evaluated["frames"] == 12
+    assert kitti["images"] == evaluated["frames"] == TRAINED_FRAMES
     assert kitti["max_f"] == pytest.approx(evaluated["max_f"], abs=1e-12)
     assert kitti["ap"] == pytest.approx(evaluated["ap"], abs=1e-12)
     assert 0.3 < evaluated["max_f"] <= 1 and 0 < evaluated["ap"] <= 1  # better than no road at all (max_f 0)
 
 
-def test_inference_mistakes(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_inference_mistakes(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "m.onnx"
     assert main(["export", "--checkpoint", str(tmp_path / "none.ckpt"), "--format", "onnx", "--out", str(out)]) == 2
     assert "checkpoint not found" in capsys.readouterr().err and not out.exists()
-    images = run["data"] / "data_road" / "training" / "image_2"
-    assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(images), "--batch-size", "0",
+    images = trained["data"] / "data_road" / "training" / "image_2"
+    assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--batch-size", "0",
                  "--out", str(tmp_path / "p")]) == 2
     assert "--batch-size must be ≥ 1" in capsys.readouterr().err and not (tmp_path / "p").exists()
-    assert main(["predict", "--checkpoint", str(run["ckpt"]), "--input", str(tmp_path / "none"), "--out", str(tmp_path / "p")]) == 2
+    assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(tmp_path / "none"), "--out",
+                 str(tmp_path / "p")]) == 2
     assert "input not found" in capsys.readouterr().err
     (tmp_path / "bad.onnx").write_bytes(b"junk")
     assert main(["predict", "--onnx", str(tmp_path / "bad.onnx"), "--input", str(images), "--out", str(tmp_path / "p")]) == 2
@@ -156,20 +147,21 @@ def test_inference_mistakes(run: dict[str, Path], tmp_path: Path, capsys: pytest
     assert not (tmp_path / "p").exists()
 
 
-def test_kitti_submit(run: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_kitti_submit(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     root = tmp_path / "kitti"
-    src = run["data"] / "data_road" / "training"
+    src = trained["data"] / "data_road" / "training"
     for sub in ("image_2", "calib"):
         shutil.copytree(src / sub, root / "data_road" / "testing" / sub)
     out = tmp_path / "submit"
-    assert main(["kitti-submit", "--checkpoint", str(run["ckpt"]), "--root", str(root), "--out", str(out),
+    assert main(["kitti-submit", "--checkpoint", str(trained["ckpt"]), "--root", str(root), "--out", str(out),
                  "--no-progress"]) == 0
     maps = sorted(out.glob("*_road_*.png"))
-    assert len(maps) == 12 and read_image(maps[0]).shape == BEV_SHAPE
+    assert len(maps) == TRAINED_FRAMES and read_image(maps[0]).shape == BEV_SHAPE
     with zipfile.ZipFile(out / "submission.zip") as zf:
         assert sorted(zf.namelist()) == [m.name for m in maps]
     bev = read_image(maps[0])
     assert bev.dtype == np.uint8 and 0 < np.count_nonzero(bev) < bev.size  # the camera's field of view only
     (root / "data_road" / "testing" / "calib" / maps[0].name.replace("_road_", "_").replace(".png", ".txt")).unlink()
-    assert main(["kitti-submit", "--checkpoint", str(run["ckpt"]), "--root", str(root), "--out", str(tmp_path / "s2")]) == 2
+    assert main(["kitti-submit", "--checkpoint", str(trained["ckpt"]), "--root", str(root), "--out",
+                 str(tmp_path / "s2")]) == 2
     assert "have no calibration" in capsys.readouterr().err and not (tmp_path / "s2").exists()

@@ -5,6 +5,7 @@ other (directly or round a longer loop). Every ``import`` statement counts, also
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -150,3 +151,23 @@ def test_readme_states_these_layers() -> None:
     chain = " → ".join(", ".join(n.removeprefix("freespace.") for n in names if n != "freespace") for names in LAYERS)
     if chain not in " ".join((ROOT / "README.md").read_text().split()):
         pytest.fail(f"the README's Architecture section should state the layers: {chain}")
+
+
+# a flag may stand in a library string only inside a command the user is told to run
+_COMMAND = re.compile(r"(freespace [a-z-]+|pip install|sbatch|SLURM)[^`\n]*$")
+
+
+def test_flags_live_in_the_cli_only() -> None:
+    """The library speaks in parameters (``freespace.errors.param``), the command line in flags: no module but
+    ``cli.py`` spells a ``--flag``, in code, messages or docstrings, except inside a command the text tells
+    the user to run (``freespace export --format onnx``, ``pip install --force-reinstall ...``)."""
+    found = []
+    for module, path in _modules().items():
+        if module == "freespace.cli":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                for m in re.finditer(r"--[a-z][a-z0-9-]*", node.value):
+                    if not _COMMAND.search(node.value[:m.start()]):
+                        found.append(f"{path.relative_to(ROOT)}:{node.lineno} {m.group()}")
+    assert not found, "flags outside cli.py (name the parameter with errors.param):\n" + "\n".join(found)

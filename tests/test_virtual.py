@@ -104,7 +104,7 @@ def test_pose_moves_the_image_as_stated() -> None:
 def test_plane_sources_agree(frames) -> None:
     frame, s = frames[0]
     calib = s.calibration
-    from_tr = RoadPlane.from_calibration(calib)
+    from_tr = calib.road_plane
     from_model = RoadPlane.from_road_model(calib.road_model(), calib.fx, calib.baseline, calib.cx, calib.cy)
     fit = fit_road_model(s.disparity, s.label.road)
     from_fit = RoadPlane.from_road_model(fit, calib.fx, calib.baseline, calib.cx, calib.cy)
@@ -137,7 +137,7 @@ def test_right_camera_pose_gives_the_ds_generator_homography(frames) -> None:
     for _, s in frames:
         calib = s.calibration
         right = VirtualPose(shift=(calib.baseline, 0.0, 0.0))
-        H = virtual_homography(calib.K, RoadPlane.from_calibration(calib), right)
+        H = virtual_homography(calib.K, calib.road_plane, right)
         np.testing.assert_allclose(H, calib.homography(), atol=1e-12)
         # the DS-Generator's H_tr from the road fit of the exact disparity, and the plane fitted from it
         fit = fit_road_model(s.disparity, s.label.road)
@@ -174,7 +174,7 @@ def test_virtual_views_match_renders_from_the_moved_camera(frames) -> None:
     """
     psnrs, ious = [], []
     for frame, s in frames:
-        plane = RoadPlane.from_calibration(s.calibration)
+        plane = s.calibration.road_plane
         for pose in POSES:
             truth = render_view(frame, SMALL, pose)
             image, label, valid = virtual_view(s.left, s.label, s.calibration.K, plane, pose)
@@ -243,7 +243,7 @@ def test_generate_virtual_from_the_calibration(frames, files: dict[str, Path], c
     assert main(_args(files, "--model-json", str(js))) == 0
     assert "plane from calibration" in capsys.readouterr().out
     pose = VirtualPose.parse("0.4,0.1,0", "1,-2,2")
-    image, label, valid = virtual_view(s.left, s.label, s.calibration.K, RoadPlane.from_calibration(s.calibration), pose)
+    image, label, valid = virtual_view(s.left, s.label, s.calibration.K, s.calibration.road_plane, pose)
     assert np.array_equal(read_image(files["out"]), image)
     colours = {tuple(c) for c in read_image(files["label_out"]).reshape(-1, 3)}
     assert colours <= {(0, 0, 0), (255, 0, 0), (255, 0, 255)}
@@ -260,7 +260,7 @@ def test_generate_virtual_from_the_disparity_fit(frames, files: dict[str, Path])
     assert main(_args(files, "--disparity", str(files["disp"]), "--model-json", str(js))) == 0
     report = json.loads(js.read_text())
     assert report["plane_source"] == "fit" and "road_model" in report
-    truth = RoadPlane.from_calibration(s.calibration)
+    truth = s.calibration.road_plane
     np.testing.assert_allclose(report["plane"]["normal"], truth.normal, atol=1e-4)  # uint16 disparity: 1/256 px
     assert report["plane"]["height_m"] == pytest.approx(truth.height, rel=1e-3)
 
@@ -336,7 +336,7 @@ def test_generic_yaml_camera_height_and_pitch(tmp_path: Path) -> None:
     ds = get_dataset("generic", tmp_path)
     calib = ds.calibration(ds.frames[0])
     assert calib is not None and calib.baseline == 0.0
-    plane = RoadPlane.from_calibration(calib)
+    plane = calib.road_plane
     expected = RoadPlane.from_camera(1.6, 2.0)
     np.testing.assert_allclose(plane.normal, expected.normal, atol=1e-12)
     assert plane.height == pytest.approx(1.6)

@@ -18,7 +18,7 @@ from typing import ClassVar
 import numpy as np
 
 from freespace.data.disparity import DisparityCache, check_disparity_mode, resolve_disparity
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
+from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError, param
 from freespace.geometry import SGBM_MAX_DISPARITY, StereoCalibration
 from freespace.io.codecs import read_image, read_road_label
 from freespace.io.files import PathLike
@@ -129,7 +129,7 @@ class StereoRoadDataset(ABC):
             raise DatasetError(f"{self.name}: frame names are not unique under {self.root}")
         kind = {"depth": "depth", "lidar": "velodyne"}.get(self.disparity_mode)
         if kind is not None and not any(getattr(f, kind) is not None for f in self.frames):
-            raise DatasetError(f"--disparity-source {self.disparity_mode}: no frame of {self.name} split "
+            raise DatasetError(f"{param('disparity_mode')} {self.disparity_mode}: no frame of {self.name} split "
                                f"{self.split!r} under {self.root} has a {'depth map' if kind == 'depth' else 'Velodyne scan'}; "
                                f"see the layout's tree in the docs")
 
@@ -192,7 +192,7 @@ class StereoRoadDataset(ABC):
 
     def with_labels(self, folder: PathLike, names: Iterable[str]) -> StereoRoadDataset:
         """This dataset with the road labels of the frames ``names`` read from ``folder/<name>.png`` (KITTI
-        colours: an autolabel tree, ``freespace autolabel --dataset``) instead of its own; other frames keep
+        colours: an autolabel tree, ``freespace autolabel`` of a dataset) instead of its own; other frames keep
         theirs. Every named frame must have its file there.
 
         Raises:

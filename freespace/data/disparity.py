@@ -23,15 +23,15 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from freespace.errors import DatasetError, InvalidOptionError
+from freespace.errors import DatasetError, InvalidOptionError, param
 from freespace.geometry import StereoCalibration, compute_disparity
-from freespace.geometry.depth import depth_to_disparity as _depth_to_disparity
+from freespace.geometry.depth import depth_to_disparity
 from freespace.io.codecs import read_disparity
 from freespace.io.files import PathLike, atomic_write_bytes
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DISPARITY_MODES", "check_disparity_mode", "DisparityCache", "depth_to_disparity", "resolve_disparity"]
+__all__ = ["DISPARITY_MODES", "check_disparity_mode", "DisparityCache", "resolve_disparity"]
 
 DISPARITY_MODES = ("auto", "file", "depth", "lidar", "sgbm", "none")
 """``auto``: file, else depth + camera, else cached SGBM; ``file``: file, else depth + camera; ``depth``:
@@ -57,13 +57,6 @@ def check_disparity_mode(mode: str) -> str:
     return mode
 
 
-def depth_to_disparity(depth: np.ndarray, calib: StereoCalibration) -> np.ndarray:
-    """Disparity ``d = fx·B / Z`` (pixels, ``float32 H×W``) from depth along the optical axis ``Z``
-    (metres, ``H×W``); invalid depth (≤ 0, NaN, inf) gives NaN
-    (:func:`freespace.geometry.depth.depth_to_disparity` with the rig's ``fx`` and ``baseline``)."""
-    return _depth_to_disparity(depth, calib.fx, calib.baseline)
-
-
 class DisparityCache:
     """SGBM disparities on disk, keyed by the frame's image files (path, size, mtime) and the matcher
     settings, so a second run costs one ``.npy`` read. Default folder: ``$XDG_CACHE_HOME/freespace/sgbm``
@@ -73,7 +66,7 @@ class DisparityCache:
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "freespace" / "sgbm"
         self.folder = Path(folder) if folder is not None else base
         if self.folder.exists() and not self.folder.is_dir():
-            raise InvalidOptionError(f"--cache-dir {self.folder} is a file; give a folder for the SGBM disparities")
+            raise InvalidOptionError(f"{param('cache_dir')} {self.folder} is a file; give a folder for the SGBM disparities")
         self.settings = dict(sorted(settings.items()))
 
     def path(self, frame: FrameFiles) -> Path:
@@ -122,18 +115,19 @@ def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | N
         if frame.depth is None or calib is None or not calib.baseline > 0:
             what = ("depth map" if frame.depth is None else "camera calibration (f and B for d = f·B/Z)"
                     if calib is None else "baseline (a monocular camera: give `baseline` for d = f·B/Z)")
-            raise DatasetError(f"{frame.name} has no {what}; --disparity-source depth needs one for every frame")
-        return depth_to_disparity(read_depth(), calib), "depth"
+            raise DatasetError(f"{frame.name} has no {what}; {param('disparity_mode')} depth needs one for every "
+                               f"frame")
+        return depth_to_disparity(read_depth(), calib.fx, calib.baseline), "depth"
     if mode == "lidar":
         if frame.velodyne is None or read_lidar is None:
-            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); --disparity-source lidar "
+            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); {param('disparity_mode')} lidar "
                                f"needs one for every frame")
         return read_lidar(), "lidar"
     if mode in ("auto", "file"):
         if frame.disparity is not None:
             return read_disparity(frame.disparity), "file"
         if frame.depth is not None and calib is not None and calib.baseline > 0:  # 0: monocular, no disparity
-            return depth_to_disparity(read_depth(), calib), "depth"
+            return depth_to_disparity(read_depth(), calib.fx, calib.baseline), "depth"
     if mode in ("auto", "sgbm") and right is not None:
         return cache.get(frame, left, right), "sgbm"
     return None, "none"

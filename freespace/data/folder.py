@@ -14,7 +14,7 @@ All three pair files by frame stem across folders and decode labels and depth as
     depth_scale: 0.01          # metres per stored unit
     camera: {fx: 320, fy: 320, cx: 320, cy: 240, baseline: 1.5}   # pixels, metres
 
-The camera may also give the road plane, for ``--augment virtual`` on datasets without a right image or
+The camera may also give the road plane, for the virtual-view augmentation on datasets without a right image or
 disparity: ``height`` (metres of the camera centre above a flat road, > 0), ``pitch`` (degrees, positive
 = the camera looks down at the road) and ``roll`` (degrees, about the optical axis), both default 0, as
 in :meth:`freespace.geometry.RoadPlane.from_camera`. With ``height`` the ``baseline`` may be left out
@@ -187,14 +187,12 @@ class FolderDataset(StereoRoadDataset):
         cam = self._camera(frame)
         if cam is None:
             return None
-        normal = distance = None
+        plane = None
         if cam.get("height") is not None:  # the road plane of a camera height and pitch (and roll)
             plane = RoadPlane.from_camera(float(cam["height"]), float(cam.get("pitch", 0.0)),
                                           float(cam.get("roll", 0.0)))
-            normal, distance = tuple(-x for x in plane.normal), plane.height  # StereoCalibration: n towards the camera
         return StereoCalibration(fx=float(cam["fx"]), fy=float(cam.get("fy", cam["fx"])), cx=float(cam["cx"]),
-                                 cy=float(cam["cy"]), baseline=float(cam.get("baseline", 0.0)),
-                                 road_normal=normal, road_distance=distance)  # type: ignore[arg-type]
+                                 cy=float(cam["cy"]), baseline=float(cam.get("baseline", 0.0)), road_plane=plane)
 
     def _camera(self, frame: FrameRef) -> dict[str, float] | None:
         return self.spec.camera

@@ -34,7 +34,7 @@ import numpy as np
 
 from freespace.data.base import FrameRef, Problem, StereoRoadDataset
 from freespace.data.registry import register_dataset
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError
+from freespace.errors import DatasetError, InputFileError, InvalidOptionError, param
 from freespace.geometry import StereoCalibration
 from freespace.geometry.depth import rig_from_kitti
 from freespace.geometry.lidar import velodyne_to_disparity
@@ -81,7 +81,7 @@ class KittiRoad(StereoRoadDataset):
             raise missing_input(self.disparity_dir, "disparity folder", "folder")
         if isinstance(lidar_densify, bool) or not (isinstance(lidar_densify, (int, float))
                                                    and math.isfinite(lidar_densify) and lidar_densify >= 0):
-            raise InvalidOptionError(f"--lidar-densify must be a number of pixels ≥ 0, got {lidar_densify!r}")
+            raise InvalidOptionError(f"{param('lidar_densify')} must be a number of pixels ≥ 0, got {lidar_densify!r}")
         self.lidar_densify = float(lidar_densify)
         super().__init__(root, split, **options)
 

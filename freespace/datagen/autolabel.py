@@ -63,6 +63,7 @@ from freespace.errors import (
     InvalidOptionError,
     RoadFitError,
     ShapeMismatchError,
+    param,
 )
 from freespace.geometry import SGBM_MAX_DISPARITY, RoadModel, compute_disparity, fit_road_model
 from freespace.io.codecs import encode_image, read_disparity, read_image, road_label_to_kitti
@@ -120,17 +121,17 @@ class AutolabelOptions:
                     "min_noise": self.min_noise, "max_roll_deg": self.max_roll_deg}
         for name, value in positive.items():
             if not 0 < value < math.inf:
-                raise InvalidOptionError(f"--{name.replace('_', '-')} must be a finite number > 0, got {value}")
+                raise InvalidOptionError(f"{param(name)} must be a finite number > 0, got {value}")
         if self.noise is not None and not 0 < self.noise < math.inf:
-            raise InvalidOptionError(f"--noise must be a finite number of pixels > 0, got {self.noise}")
+            raise InvalidOptionError(f"{param('noise')} must be a finite number of pixels > 0, got {self.noise}")
         if not 1 < self.band < math.inf:
-            raise InvalidOptionError(f"--band must be a finite number > 1, got {self.band}")
+            raise InvalidOptionError(f"{param('band')} must be a finite number > 1, got {self.band}")
         if self.window < 1 or self.window % 2 == 0:
-            raise InvalidOptionError(f"--window must be an odd number of pixels ≥ 1, got {self.window}")
+            raise InvalidOptionError(f"{param('window')} must be an odd number of pixels ≥ 1, got {self.window}")
         if not (0 <= self.min_speck < 1 and 0 <= self.max_hole < 1):
-            raise InvalidOptionError("--min-speck and --max-hole are shares of the image, in [0, 1)")
+            raise InvalidOptionError(f"{param('min_speck')} and {param('max_hole')} are shares of the image, in [0, 1)")
         if not 1 <= self.max_disparity <= 1024:
-            raise InvalidOptionError(f"--max-disparity must be in 1..1024 pixels, got {self.max_disparity}")
+            raise InvalidOptionError(f"{param('max_disparity')} must be in 1..1024 pixels, got {self.max_disparity}")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready settings."""
@@ -394,10 +395,10 @@ def _size(shape: tuple[int, ...]) -> str:
     return f"{shape[1]}×{shape[0]}"
 
 
-def _lossless_png(path: PathLike, flag: str) -> Path:
+def _lossless_png(path: PathLike, name: str) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".png" or path.is_dir():
-        raise InvalidOptionError(f"{flag} {path} must be a .png file name (labels and confidences must stay exact)")
+        raise InvalidOptionError(f"{param(name)} {path} must be a .png file name (labels and confidences must stay exact)")
     return path
 
 
@@ -427,7 +428,7 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
                    out: PathLike, confidence: PathLike | None = None, calib: PathLike | None = None,
                    baseline: float | None = None, model_json: PathLike | None = None,
                    options: AutolabelOptions = AutolabelOptions()) -> AutolabelResult:
-    """Autolabel one left image from files (``freespace autolabel --reference ...``).
+    """Autolabel one left image from files (``freespace autolabel`` with one image)).
 
     Args:
         reference: the left image (its size is checked against the disparity; SGBM input with ``target``).
@@ -444,15 +445,16 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
     """
     options.check()
     if (target is None) == (disparity is None):
-        raise InvalidOptionError("give the right image (--target) or the left disparity (--disparity), one of them")
+        raise InvalidOptionError(f"give the right image ({param('target')}) or the left disparity ({param('disparity')}), "
+                                 f"one of them")
     if calib is not None and baseline is not None:
-        raise InvalidOptionError("give the baseline once: --calib or --baseline, not both")
-    _lossless_png(out, "--out")
+        raise InvalidOptionError(f"give the baseline once: {param('calib')} or {param('baseline')}, not both")
+    _lossless_png(out, "out")
     if confidence is not None:
-        _lossless_png(confidence, "--confidence")
-    check_outputs({"--out": out, "--confidence": confidence, "--model-json": model_json},
-                  {"--reference": reference, "--target": target, "--disparity": disparity, "--calib": calib})
-    check_writable_files({"--out": out, "--confidence": confidence, "--model-json": model_json})
+        _lossless_png(confidence, "confidence")
+    check_outputs({"out": out, "confidence": confidence, "model_json": model_json},
+                  {"reference": reference, "target": target, "disparity": disparity, "calib": calib})
+    check_writable_files({"out": out, "confidence": confidence, "model_json": model_json})
     t0 = time.perf_counter()
     left = read_image(reference, what="reference image")
     if calib is not None:
@@ -518,7 +520,7 @@ def _label_frame(dataset: Any, index: int, out: Path, report: Path, options: Aut
 def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
                       options: AutolabelOptions = AutolabelOptions(), progress: bool = True,
                       overwrite: bool = False, shard: tuple[int, int] | None = None) -> dict[str, Any]:
-    """Autolabel every frame of a dataset (labelled or not) into a label tree that ``train --labels`` reads.
+    """Autolabel every frame of a dataset (labelled or not) into a label tree that training reads as its ``labels``.
 
     Writes ``OUT/<frame>.png`` (KITTI colours), ``OUT/confidence/<frame>.png`` (8-bit), ``OUT/reports/
     <frame>.json`` (road model, noise, coverage, settings), ``OUT/report.csv`` and ``OUT/summary.json``
@@ -535,11 +537,11 @@ def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
 
     options.check()
     if workers < 1:
-        raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
+        raise InvalidOptionError(f"{param('workers')} must be ≥ 1, got {workers}")
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
-        raise InvalidOptionError(f"--out {out_dir} is a file; give a folder for the label tree")
-    check_outputs({"--out": out_dir}, {"--root": dataset.root})
+        raise InvalidOptionError(f"{param('out')} {out_dir} is a file; give a folder for the label tree")
+    check_outputs({"out": out_dir}, {"root": dataset.root})
     settings = _settings(dataset, options)
     if shard is not None:
         dataset = dataset.subset(select_shard((f.name for f in dataset.frames), *shard))

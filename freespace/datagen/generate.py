@@ -1,5 +1,5 @@
 """The DS-Generator over files: one stereo pair, or every labelled frame of a dataset; and one reference
-image seen from a virtual camera pose (``generate --virtual``).
+image seen from a virtual camera pose (:func:`generate_virtual_pair`).
 
 This is what ``freespace generate`` runs. It imports NumPy and OpenCV only (never torch), reads and
 checks every input before it writes anything, and writes every output atomically.
@@ -28,6 +28,7 @@ from freespace.errors import (
     InvalidOptionError,
     RoadFitError,
     ShapeMismatchError,
+    param,
 )
 from freespace.geometry import (
     SGBM_MAX_DISPARITY,
@@ -68,9 +69,10 @@ class FitOptions:
     def check(self) -> None:
         """Raise InvalidOptionError for out-of-range values."""
         if not 0 < self.inlier_threshold < math.inf:
-            raise InvalidOptionError(f"--inlier-threshold must be a finite number of pixels > 0, got {self.inlier_threshold}")
+            raise InvalidOptionError(f"{param('inlier_threshold')} must be a finite number of pixels > 0, got "
+                                     f"{self.inlier_threshold}")
         if not 1 <= self.max_disparity <= 1024:
-            raise InvalidOptionError(f"--max-disparity must be in 1..1024 pixels, got {self.max_disparity}")
+            raise InvalidOptionError(f"{param('max_disparity')} must be in 1..1024 pixels, got {self.max_disparity}")
 
 
 @dataclass
@@ -89,13 +91,15 @@ class GenerateResult:
                 "seconds": {k: round(v, 6) for k, v in self.timings.items()}}
 
 
-def check_output_image_path(path: PathLike) -> Path:
-    """Reject output names whose suffix is not an image format, before any work is done."""
+def check_output_image_path(path: PathLike, name: str = "out") -> Path:
+    """Reject output names whose suffix is not an image format, before any work is done (``name``: the
+    parameter that gave it, for the message)."""
     path = Path(path)
     if path.suffix.lower() not in IMAGE_SUFFIXES:
-        raise InvalidOptionError(f"--out {path} must end in one of {', '.join(IMAGE_SUFFIXES)} (PNG is lossless)")
+        raise InvalidOptionError(f"{param(name)} {path} must end in one of {', '.join(IMAGE_SUFFIXES)} (PNG is "
+                                 f"lossless)")
     if path.is_dir():
-        raise InvalidOptionError(f"--out {path} is a folder; give an image file name")
+        raise InvalidOptionError(f"{param(name)} {path} is a folder; give an image file name")
     return path
 
 
@@ -197,9 +201,9 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
     options.check()
     if out is not None:
         check_output_image_path(out)
-    check_writable_files({"--out": out, "--model-json": model_json})
-    check_outputs({"--out": out, "--model-json": model_json},
-                  {"--reference": reference, "--target": target, "--road-mask": road_mask, "--disparity": disparity})
+    check_writable_files({"out": out, "model_json": model_json})
+    check_outputs({"out": out, "model_json": model_json},
+                  {"reference": reference, "target": target, "road_mask": road_mask, "disparity": disparity})
     t_start = time.perf_counter()
     ref = read_image(reference, what="reference image")
     tgt = read_image(target, what="target image")
@@ -222,7 +226,7 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
 
 @dataclass
 class VirtualResult:
-    """What ``generate --virtual`` made: the view, its label, the plane and where it came from."""
+    """What :func:`generate_virtual_pair` made: the view, its label, the plane and where it came from."""
 
     image: np.ndarray
     label: RoadLabel
@@ -254,9 +258,8 @@ class VirtualResult:
 
 def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathLike, disparity: PathLike | None = None,
                           *, shift: str | None = None, rotate: str | None = None, out: PathLike, label_out: PathLike,
-                          model_json: PathLike | None = None, options: FitOptions = FitOptions(),
-                          unused: dict[str, Any] | None = None) -> VirtualResult:
-    """The reference image and its road label seen from a virtual camera pose (``generate --virtual``).
+                          model_json: PathLike | None = None, options: FitOptions = FitOptions()) -> VirtualResult:
+    """The reference image and its road label seen from a virtual camera pose.
 
     The road plane comes from the road fit of ``disparity`` (on the road pixels of ``road_mask``) and the
     calibration's ``P2``/``P3`` (:meth:`RoadPlane.from_road_model`) when a disparity is given, else from
@@ -269,28 +272,20 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
         out: the virtual image. label_out: its label in KITTI colours (road magenta, non-road red,
             don't care black: outside the reference image or don't care there).
         model_json: optional JSON report (:meth:`VirtualResult.report`).
-        unused: options of other modes that must not be given (name → value), e.g. ``{"--target": ...}``.
 
     Every input is read and every check made before anything is written; outputs are written
     atomically, all or nothing, and may not be any input file.
     """
-    given = [name for name, value in (unused or {}).items() if value]
-    if given:
-        raise InvalidOptionError(f"--virtual makes one view of the reference image; leave out {', '.join(given)}")
-    missing = [n for n, v in (("--reference", reference), ("--road-mask", road_mask), ("--calib", calib),
-                              ("--label-out", label_out)) if not v]
-    if missing:
-        raise InvalidOptionError(f"--virtual needs {', '.join(missing)} (see freespace generate --help)")
     options.check()
     pose = VirtualPose.parse(shift, rotate)
     lossless = tuple(x for x in IMAGE_SUFFIXES if x not in (".jpg", ".jpeg"))
     if Path(label_out).suffix.lower() not in lossless or Path(label_out).is_dir():
-        raise InvalidOptionError(f"--label-out {label_out} must be a lossless image file name ending in one of "
+        raise InvalidOptionError(f"{param('label_out')} {label_out} must be a lossless image file name ending in one of "
                                  f"{', '.join(lossless)} (labels must stay exact)")
     check_output_image_path(out)
-    check_writable_files({"--out": out, "--label-out": label_out, "--model-json": model_json})
-    check_outputs({"--out": out, "--label-out": label_out, "--model-json": model_json},
-                  {"--reference": reference, "--road-mask": road_mask, "--calib": calib, "--disparity": disparity})
+    check_writable_files({"out": out, "label_out": label_out, "model_json": model_json})
+    check_outputs({"out": out, "label_out": label_out, "model_json": model_json},
+                  {"reference": reference, "road_mask": road_mask, "calib": calib, "disparity": disparity})
     t_start = time.perf_counter()
     image = read_image(reference, what="reference image")
     label = read_road_label(road_mask)
@@ -315,7 +310,10 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
         timings = {"fit": time.perf_counter() - t0}
         source = "fit"
     else:
-        plane = RoadPlane.from_calibration(rig)
+        if rig.road_plane is None:
+            raise InvalidOptionError("the calibration has no road plane (no Tr_cam_to_road); give a disparity to fit "
+                                     "the road, or the camera height and pitch")
+        plane = rig.road_plane
         timings = {}
         source = "calibration"
     t0 = time.perf_counter()
@@ -386,7 +384,7 @@ SETTINGS_NAME = "settings.json"
 
 def dataset_settings(dataset: Any) -> dict[str, Any]:
     """What a per-frame output depends on in the dataset: its layout, root, split and where its
-    disparities come from (the source, ``--disparity-dir``, LiDAR densification)."""
+    disparities come from (the source, its folder of disparity files, LiDAR densification)."""
     disparity_dir = getattr(dataset, "disparity_dir", None)
     spec = getattr(dataset, "spec", None)
     settings = {"dataset": dataset.name, "root": str(Path(dataset.root).resolve()), "split": dataset.split,
@@ -406,7 +404,7 @@ def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
 
 
 def _totals_names(shard: tuple[int, int] | None) -> tuple[str, str]:
-    """``(summary, report)`` file names: ``summary.json``/``report.csv``, or with ``--shard K/N``
+    """``(summary, report)`` file names: ``summary.json``/``report.csv``, or for the shard ``(K, N)``
     ``summary.shard-K-of-N.json``/``report.shard-K-of-N.csv`` (shards never overwrite each other's)."""
     if shard is None:
         return "summary.json", "report.csv"
@@ -443,15 +441,14 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     """
     options.check()
     if workers < 1:
-        raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
+        raise InvalidOptionError(f"{param('workers')} must be ≥ 1, got {workers}")
     out_dir = Path(out_dir)
     check_writable(out_dir, folder=True)
-    check_outputs({"--out": out_dir}, {"--root": dataset.root})
+    check_outputs({"out": out_dir}, {"root": dataset.root})
     _check_sgbm_width(dataset, options)
     settings = _settings(dataset, options)
     if shard is not None:
         dataset = dataset.subset(select_shard((f.name for f in dataset.frames), *shard))
-    summary_name, report_name = _totals_names(shard)
     with frames_folder(out_dir, "generate", settings, overwrite, [f.name for f in dataset.frames], shard):
         return _generate_frames(dataset, out_dir, settings, options, workers, progress, shard)
 
@@ -511,9 +508,9 @@ def run_frames(dataset: Any, out_dir: Path, options: Any, settings: dict[str, An
 
 
 def _check_sgbm_width(dataset: Any, options: FitOptions) -> None:
-    """Refuse, once and before any work, a ``--max-disparity`` that SGBM cannot use on the dataset's images:
-    checked on the first frame that would be matched (no disparity or depth file, or ``--disparity-source
-    sgbm``); frames of other sizes still fail one by one."""
+    """Refuse, once and before any work, a ``max_disparity`` that SGBM cannot use on the dataset's images:
+    checked on the first frame that would be matched (no disparity or depth file, or the disparity source
+    ``sgbm``); frames of other sizes still fail one by one."""
     if dataset.disparity_mode not in ("auto", "sgbm"):
         return
     frame = next((f for f in dataset.frames if f.right is not None and f.label is not None
@@ -524,8 +521,8 @@ def _check_sgbm_width(dataset: Any, options: FitOptions) -> None:
         width = read_image(frame.left, what="left image").shape[1]
     except FreespaceError:
         return  # the frame fails with its own reason
-    check_search_range(options.max_disparity, width, "give disparities (--disparity-dir, or depth maps with "
-                                                     "--disparity-source depth)")
+    check_search_range(options.max_disparity, width, f"give disparities ({param('disparity_dir')}, or depth maps "
+                                                     f"with {param('disparity_mode')} depth)")
 
 
 def _plan(frames: list[Any], out_dir: Path, options: FitOptions,

@@ -303,8 +303,8 @@ class TrainConfig:
                                  f"autolabel` wrote for the dataset")
         check_writable(self.out, folder=True)
         weights_file = self.encoder_weights if self.encoder_weights and Path(self.encoder_weights).is_file() else None
-        check_outputs({param("out"): self.out}, {param("root"): self.root, param("splits_dir"): self.splits_dir,
-                                                 param("labels"): self.labels, param("encoder_weights"): weights_file})
+        check_outputs({"out": self.out}, {"root": self.root, "splits_dir": self.splits_dir, "labels": self.labels,
+                                          "encoder_weights": weights_file})
         object.__setattr__(self, "_checked", True)
 
     def model_options(self) -> dict[str, Any]:

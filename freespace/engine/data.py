@@ -158,8 +158,8 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int],
             calib = ds.calibration(frame)
             if calib is None:
                 raise DatasetError("no camera (calibration file or `camera:` in freespace.yaml)")
-            if calib.road_normal is not None:
-                plane = RoadPlane.from_calibration(calib)
+            if calib.road_plane is not None:
+                plane = calib.road_plane
             else:
                 sample = ds.load(i)
                 if sample.disparity is None or sample.label is None or not calib.baseline > 0:

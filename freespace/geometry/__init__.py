@@ -3,10 +3,12 @@ road-plane virtual views and stereo matching. NumPy + OpenCV only — this packa
 
 Conventions: pixels are 0-based, ``u`` = column (right), ``v`` = row (down), pixel centres at
 integers; ``H_tr`` maps reference (left) pixels to target (right) pixels; images are ``H×W×3 uint8``
-RGB; disparity maps are ``float32 H×W`` with NaN for "no value".
+RGB; disparity maps are ``float32 H×W`` with NaN for "no value"; the road plane is a :class:`RoadPlane`
+``n·X = h`` with ``n`` pointing from the camera to the road (:mod:`freespace.geometry.plane`).
 """
 
 from freespace.geometry.homography import StereoCalibration, homography_from_pose
+from freespace.geometry.plane import RoadPlane, rotation_from_angles
 from freespace.geometry.road_model import (
     RoadModel,
     fit_road_model,
@@ -15,7 +17,7 @@ from freespace.geometry.road_model import (
     road_pixels,
 )
 from freespace.geometry.stereo import SGBM_MAX_DISPARITY, compute_disparity
-from freespace.geometry.virtual import RoadPlane, VirtualPose, rotation_from_angles, virtual_homography, virtual_view
+from freespace.geometry.virtual import VirtualPose, virtual_homography, virtual_view
 from freespace.geometry.warp import generate_view, valid_column_ranges
 
 __all__ = [

@@ -4,20 +4,20 @@ Conventions
 -----------
 Pixels are 0-based, ``u`` right, ``v`` down. Camera frames are right-handed with x right, y down,
 z forward. ``R_tr, t_tr`` map reference-camera coordinates to target-camera coordinates:
-``X_t = R_tr X_r + t_tr``. The road is the plane ``{X : nᵀ X + D = 0}`` in the reference frame, with
-``n`` the unit normal pointing from the road towards the camera (≈ (0, −1, 0) for a level rig) and
-``D > 0`` the distance from the reference camera centre to the road. Homographies map homogeneous
-reference pixels to target pixels (``H_tr``).
+``X_t = R_tr X_r + t_tr``. The road is a :class:`~freespace.geometry.plane.RoadPlane`, ``{X : n·X = h}``
+in the reference frame, with ``n`` the unit normal pointing from the camera down to the road (≈ (0, 1, 0)
+for a level rig) and ``h > 0`` the reference camera centre's height above it. Homographies map
+homogeneous reference pixels to target pixels (``H_tr``).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from freespace.errors import InvalidOptionError
+from freespace.geometry.plane import RoadPlane
 from freespace.geometry.road_model import RoadModel
 
 __all__ = ["homography_from_pose", "StereoCalibration"]
@@ -31,16 +31,17 @@ def _as_matrix(x: np.ndarray, shape: tuple[int, ...], name: str) -> np.ndarray:
 
 
 def homography_from_pose(K_r: np.ndarray, K_t: np.ndarray, R_tr: np.ndarray, t_tr: np.ndarray,
-                         n: np.ndarray, D: float) -> np.ndarray:
+                         plane: RoadPlane) -> np.ndarray:
     """The homography induced by the road plane between two views (the paper's eq. H1).
 
-    ``H_tr = K_t (R_tr − t_tr nᵀ / D) K_r⁻¹``, normalised so that ``H[2, 2] = 1`` when possible.
+    ``H_tr = K_t (R_tr + t_tr nᵀ / h) K_r⁻¹`` for the plane ``n·X = h`` (the paper writes it
+    ``K_t (R_tr − t_tr n'ᵀ / D) K_r⁻¹`` with ``n' = −n`` pointing to the camera and ``D = h``), normalised so
+    that ``H[2, 2] = 1`` when possible.
 
     Args:
         K_r, K_t: 3×3 intrinsics of the reference and target cameras.
         R_tr: 3×3 rotation, t_tr: 3-vector (metres): ``X_t = R_tr X_r + t_tr``.
-        n: 3-vector, road normal in the reference frame pointing towards the camera (normalised here).
-        D: distance in metres from the reference camera centre to the road plane ``nᵀX + D = 0``.
+        plane: the road plane in the reference frame (unit ``n`` towards the road, ``h > 0`` metres).
 
     Returns:
         ``H_tr`` (3×3 float64) mapping homogeneous reference pixels to target pixels of road points.
@@ -49,13 +50,7 @@ def homography_from_pose(K_r: np.ndarray, K_t: np.ndarray, R_tr: np.ndarray, t_t
     K_t = _as_matrix(K_t, (3, 3), "K_t")
     R_tr = _as_matrix(R_tr, (3, 3), "R_tr")
     t_tr = _as_matrix(np.ravel(t_tr), (3,), "t_tr")
-    n = _as_matrix(np.ravel(n), (3,), "n")
-    norm = float(np.linalg.norm(n))
-    if norm == 0 or not (math.isfinite(D) and D > 0):
-        raise InvalidOptionError(f"the road normal must be non-zero and the distance D > 0 (got |n| = {norm}, "
-                                 f"D = {D})")
-    n = n / norm
-    H = K_t @ (R_tr - np.outer(t_tr, n) / D) @ np.linalg.inv(K_r)
+    H = K_t @ (R_tr + np.outer(t_tr, plane.n) / plane.height) @ np.linalg.inv(K_r)
     return H / H[2, 2] if abs(H[2, 2]) > 1e-12 else H
 
 
@@ -67,8 +62,7 @@ class StereoCalibration:
         fx, fy: focal lengths in pixels. cx, cy: principal point in pixels (0-based).
         baseline: distance between the camera centres in metres (> 0, target to the right; 0 for a
             monocular camera, which has no disparity).
-        road_normal: unit road normal in the reference frame pointing to the camera, or None.
-        road_distance: reference camera centre to road plane in metres, or None.
+        road_plane: the road plane in the reference (left) camera's frame, or None.
     """
 
     fx: float
@@ -76,8 +70,7 @@ class StereoCalibration:
     cx: float
     cy: float
     baseline: float
-    road_normal: tuple[float, float, float] | None = None
-    road_distance: float | None = None
+    road_plane: RoadPlane | None = None
 
     @property
     def K(self) -> np.ndarray:
@@ -90,7 +83,12 @@ class StereoCalibration:
 
         Focal length and principal point come from ``P2``; the baseline from the difference of the
         4th columns of ``P2`` and ``P3``. When ``Tr_cam_to_road`` (camera 0 → road frame, applied before ``R0_rect`` as in the devkit,
-        road plane ``Y = 0``) is present, the road plane is moved into the ``P2`` camera's frame.
+        road plane ``Y = 0``) is present, the road plane is moved into the ``P2`` camera's frame; its
+        normal is the one pointing from the camera to the road, whichever way the road frame's Y points.
+
+        Raises:
+            InvalidOptionError: ``P3`` is not to the right of ``P2``, or ``Tr_cam_to_road`` puts the
+                camera on the road plane.
         """
         P_l, P_r = calib[left], calib[right]
         fx, fy, cx, cy = P_l[0, 0], P_l[1, 1], P_l[0, 2], P_l[1, 2]
@@ -102,7 +100,7 @@ class StereoCalibration:
         if not baseline > 0:
             raise InvalidOptionError(f"calibration gives a baseline of {baseline:.4g} m between {left} and {right}; "
                                      f"the reference must be the left camera")
-        normal = distance = None
+        plane = None
         if "Tr_cam_to_road" in calib:
             R0 = calib.get("R0_rect", calib.get("R_rect", np.eye(3)))
             tr = np.asarray(calib["Tr_cam_to_road"])
@@ -111,24 +109,27 @@ class StereoCalibration:
             row = R0 @ tr[1, :3]
             offset = float(tr[1, 3])
             s = float(np.linalg.norm(row))
-            n0, d0 = -row / s, -offset / s  # nᵀX_rect + d0 = 0 with n pointing up, towards the camera
-            # left camera frame: X_2 = X_rect + t_l, so nᵀ(X_2 − t_l) + d0 = 0
-            distance = d0 - float(n0 @ t_l)
-            normal = tuple(float(x) for x in n0)
-        return cls(fx=float(fx), fy=float(fy), cx=float(cx), cy=float(cy), baseline=baseline,
-                   road_normal=normal, road_distance=distance)
+            n, h0 = row / s, -offset / s  # n·X_rect = h0
+            # left camera frame: X_2 = X_rect + t_l, so n·X_2 = h0 + n·t_l
+            height = h0 + float(n @ t_l)
+            if abs(height) < 1e-9:  # metres
+                raise InvalidOptionError(f"Tr_cam_to_road puts the {left} camera on the road plane; give the "
+                                         f"calibration's real road transform or leave the Tr_cam_to_road line out")
+            # n towards the road: the camera is on the side of the plane the normal points away from
+            plane = RoadPlane(tuple(float(x) for x in n), height) if height > 0 else \
+                RoadPlane(tuple(-float(x) for x in n), -height)  # type: ignore[arg-type]
+        return cls(fx=float(fx), fy=float(fy), cx=float(cx), cy=float(cy), baseline=baseline, road_plane=plane)
 
     def road_model(self) -> RoadModel:
-        """The road disparity model this calibration predicts (needs ``road_normal`` and ``road_distance``).
+        """The road disparity model this calibration predicts (needs ``road_plane``).
 
-        A road point satisfies ``nᵀX + D = 0`` with ``X = Z K⁻¹ p̃``, so ``d = fx B / Z =
-        −(fx B / D) nᵀ K⁻¹ p̃``, an affine function of (u, v).
+        A road point satisfies ``n·X = h`` with ``X = Z K⁻¹ p̃``, so ``d = fx B / Z =
+        (fx B / h) nᵀ K⁻¹ p̃``, an affine function of (u, v).
         """
-        if self.road_normal is None or self.road_distance is None:
-            raise InvalidOptionError("this calibration has no road plane; give road_normal and road_distance")
-        n = np.asarray(self.road_normal, dtype=np.float64)
-        n = n / np.linalg.norm(n)
-        scale = -self.fx * self.baseline / self.road_distance
+        if self.road_plane is None:
+            raise InvalidOptionError("this calibration has no road plane; give road_plane")
+        n = self.road_plane.n
+        scale = self.fx * self.baseline / self.road_plane.height
         a = scale * n[0] / self.fx
         b = scale * n[1] / self.fy
         c = scale * (n[2] - n[0] * self.cx / self.fx - n[1] * self.cy / self.fy)
@@ -136,7 +137,6 @@ class StereoCalibration:
 
     def homography(self) -> np.ndarray:
         """The road homography ``H_tr`` from the pose: left → right camera, ``t_tr = (−B, 0, 0)``."""
-        if self.road_normal is None or self.road_distance is None:
-            raise InvalidOptionError("this calibration has no road plane; give road_normal and road_distance")
-        return homography_from_pose(self.K, self.K, np.eye(3), np.array([-self.baseline, 0.0, 0.0]),
-                                    np.asarray(self.road_normal), self.road_distance)
+        if self.road_plane is None:
+            raise InvalidOptionError("this calibration has no road plane; give road_plane")
+        return homography_from_pose(self.K, self.K, np.eye(3), np.array([-self.baseline, 0.0, 0.0]), self.road_plane)

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import InvalidOptionError, RoadFitError, ShapeMismatchError
+from freespace.errors import InvalidOptionError, RoadFitError, ShapeMismatchError, param
 
 __all__ = ["RoadModel", "MAX_ROLL_DEG", "CAMERA_HEIGHT_RANGE_M", "MIN_INLIER_SHARE", "fit_road_model",
            "fit_road_model_closed_form", "road_energy", "road_pixels"]
@@ -125,7 +125,7 @@ class RoadModel:
             share = self.num_inliers / self.num_valid
             raise RoadFitError(f"implausible road fit: only {100 * share:.1f} % of the {self.num_valid} valid road "
                                f"pixels agree with the plane, {100 * (MIN_INLIER_SHARE - share):.1f} points below "
-                               f"the {100 * MIN_INLIER_SHARE:g} % a road gives; raise --inlier-threshold if it is "
+                               f"the {100 * MIN_INLIER_SHARE:g} % a road gives; raise {param('inlier_threshold')} if it is "
                                f"below the disparity's noise, else {hint}")
         if abs(self.roll_deg) > MAX_ROLL_DEG:
             raise RoadFitError(f"implausible road fit: roll {self.roll_deg:+.1f}° is "

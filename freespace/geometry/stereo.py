@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from freespace.errors import InvalidOptionError, ShapeMismatchError
+from freespace.errors import InvalidOptionError, ShapeMismatchError, param
 
 __all__ = ["compute_disparity", "SGBM_MAX_DISPARITY"]
 
@@ -29,15 +29,16 @@ def _grey(img: np.ndarray) -> np.ndarray:
 
 
 def check_search_range(max_disparity: int, width: int,
-                       fix: str = "give the disparity (--disparity; --disparity-dir for a dataset)") -> int:
+                       fix: str = "") -> int:
     """SGBM's search range for ``max_disparity`` (pixels, rounded up to a multiple of 16), or an
     :class:`InvalidOptionError` when it is not smaller than the image ``width`` (pixels); ``fix`` ends the
-    message (how else to get a disparity)."""
+    message (how else to get a disparity; default: give a disparity file)."""
+    fix = fix or f"give the disparity ({param('disparity')}; {param('disparity_dir')} for a dataset)"
     num = int(np.ceil(max_disparity / 16.0)) * 16
     if num >= width:
-        raise InvalidOptionError(f"the stereo matcher's maximum disparity ({num} px, --max-disparity rounded up to "
+        raise InvalidOptionError(f"the stereo matcher's maximum disparity ({num} px, {param('max_disparity')} rounded up to "
                                  f"a multiple of 16) must be smaller than the image width ({width} px); "
-                                 f"lower --max-disparity, or {fix}")
+                                 f"lower {param('max_disparity')}, or {fix}")
     return num
 
 

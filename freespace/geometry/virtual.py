@@ -10,9 +10,9 @@ Conventions
 -----------
 * Pixels are 0-based, ``u`` = column (right), ``v`` = row (down), pixel centres at integers.
 * The reference camera frame: x right, y down, z forward, in metres.
-* The road plane :class:`RoadPlane` is ``{X : n·X = h}`` in the reference frame, with ``n`` the unit
-  normal pointing from the camera *down to the road* (≈ (0, 1, 0) for a level camera) and ``h > 0`` the
-  camera centre's height above the road, in metres.
+* The road plane :class:`~freespace.geometry.plane.RoadPlane` is ``{X : n·X = h}`` in the reference frame,
+  with ``n`` the unit normal pointing from the camera *down to the road* (≈ (0, 1, 0) for a level camera)
+  and ``h > 0`` the camera centre's height above the road, in metres (:mod:`freespace.geometry.plane`).
 * A virtual pose :class:`VirtualPose` is a translation ``(dx, dy, dz)`` of the camera centre, in metres in
   the reference frame (``C = (dx, dy, dz)``: positive dx moves the camera to the right, positive dy moves
   it down, positive dz forward), and a rotation given as roll (about z), pitch (about x) and yaw (about y)
@@ -39,26 +39,11 @@ from typing import overload
 import cv2
 import numpy as np
 
-from freespace.errors import InvalidOptionError, ShapeMismatchError
-from freespace.geometry.homography import StereoCalibration
-from freespace.geometry.road_model import RoadModel
+from freespace.errors import InvalidOptionError, ShapeMismatchError, param
+from freespace.geometry.plane import RoadPlane, rotation_from_angles
 from freespace.labels import RoadLabel
 
-__all__ = ["RoadPlane", "VirtualPose", "virtual_homography", "virtual_view", "rotation_from_angles"]
-
-
-def rotation_from_angles(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
-    """``R = Ry(yaw) · Rx(pitch) · Rz(roll)`` (3×3 float64), angles in degrees; see the module conventions.
-
-    Example:
-        >>> np.round(rotation_from_angles(0, 90, 0) @ [0, 0, 1], 6).tolist()  # looking straight down: forward is up
-        [0.0, -1.0, 0.0]
-    """
-    r, p, y = (math.radians(float(a)) for a in (roll_deg, pitch_deg, yaw_deg))
-    Rz = np.array([[math.cos(r), -math.sin(r), 0.0], [math.sin(r), math.cos(r), 0.0], [0.0, 0.0, 1.0]])
-    Rx = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(p), -math.sin(p)], [0.0, math.sin(p), math.cos(p)]])
-    Ry = np.array([[math.cos(y), 0.0, math.sin(y)], [0.0, 1.0, 0.0], [-math.sin(y), 0.0, math.cos(y)]])
-    return Ry @ Rx @ Rz
+__all__ = ["VirtualPose", "virtual_homography", "virtual_view"]
 
 
 def _triple(text: str | tuple[float, float, float] | list[float] | np.ndarray, what: str) -> tuple[float, float, float]:
@@ -99,8 +84,8 @@ class VirtualPose:
             >>> VirtualPose.parse("0.5,0,0", "0,2,-1")
             VirtualPose(shift=(0.5, 0.0, 0.0), roll=0.0, pitch=2.0, yaw=-1.0)
         """
-        s = _triple(shift, "--shift DX,DY,DZ (metres)") if shift is not None else (0.0, 0.0, 0.0)
-        r = _triple(rotate, "--rotate ROLL,PITCH,YAW (degrees)") if rotate is not None else (0.0, 0.0, 0.0)
+        s = _triple(shift, f"{param('shift')} DX,DY,DZ (metres)") if shift is not None else (0.0, 0.0, 0.0)
+        r = _triple(rotate, f"{param('rotate')} ROLL,PITCH,YAW (degrees)") if rotate is not None else (0.0, 0.0, 0.0)
         return cls(shift=s, roll=r[0], pitch=r[1], yaw=r[2])
 
     @property
@@ -116,94 +101,6 @@ class VirtualPose:
     def to_dict(self) -> dict[str, object]:
         """JSON-ready ``{"shift": [dx, dy, dz], "roll", "pitch", "yaw"}``."""
         return {"shift": list(self.shift), "roll": self.roll, "pitch": self.pitch, "yaw": self.yaw}
-
-
-@dataclass(frozen=True)
-class RoadPlane:
-    """The road plane ``{X : n·X = h}`` in a camera frame (see the module conventions).
-
-    Attributes:
-        normal: unit normal ``n``, pointing from the camera down to the road (≈ (0, 1, 0) level).
-        height: ``h > 0``, the camera centre's distance to the plane in metres.
-    """
-
-    normal: tuple[float, float, float]
-    height: float
-
-    def __post_init__(self) -> None:
-        n = np.asarray(self.normal, dtype=np.float64)
-        norm = float(np.linalg.norm(n)) if n.shape == (3,) else 0.0
-        if not (norm > 0 and np.isfinite(n).all() and math.isfinite(self.height) and self.height > 0):
-            raise InvalidOptionError(f"a road plane needs a non-zero finite normal and a height > 0 m under the "
-                                     f"camera, got normal {self.normal} and height {self.height}")
-        object.__setattr__(self, "normal", tuple(float(x) for x in n / norm))
-        object.__setattr__(self, "height", float(self.height))
-
-    @property
-    def n(self) -> np.ndarray:
-        """The unit normal as a 3-vector."""
-        return np.asarray(self.normal, dtype=np.float64)
-
-    @classmethod
-    def from_calibration(cls, calib: StereoCalibration) -> RoadPlane:
-        """The plane of a calibration that knows it (KITTI ``Tr_cam_to_road``, see
-        :meth:`StereoCalibration.from_kitti`; or a camera height and pitch)."""
-        if calib.road_normal is None or calib.road_distance is None:
-            raise InvalidOptionError("the calibration has no road plane (no Tr_cam_to_road); give a disparity to fit "
-                                     "the road, or the camera height and pitch")
-        # StereoCalibration: nᵀX + D = 0 with n towards the camera; here n·X = h with n towards the road
-        return cls(tuple(-float(x) for x in calib.road_normal), float(calib.road_distance))  # type: ignore[arg-type]
-
-    @classmethod
-    def from_road_model(cls, model: RoadModel, fx: float, baseline: float, cx: float, cy: float,
-                        fy: float | None = None) -> RoadPlane:
-        """The 3-D plane of a fitted disparity plane ``d = a·u + b·v + c`` (pixels) on a rectified rig.
-
-        With ``u = fx·X/Z + cx``, ``v = fy·Y/Z + cy``, ``d = fx·B/Z``: ``a·fx·X + b·fy·Y + (a·cx + b·cy + c)·Z
-        = fx·B`` — for ``fx = fy = f`` the plane ``a·X + b·Y + (a·cx + b·cy + c)·Z/f = B``.
-
-        Args:
-            model: the fitted road model. fx, fy: focal lengths (px; ``fy`` defaults to ``fx``).
-            baseline: metres (> 0). cx, cy: principal point (px).
-        """
-        fy = fx if fy is None else fy
-        if not (fx > 0 and fy > 0 and baseline > 0):
-            raise InvalidOptionError(f"the rig needs fx, fy > 0 px and a baseline > 0 m, got fx {fx}, fy {fy}, "
-                                     f"baseline {baseline}")
-        a, b, c = model.affine
-        w = np.array([a * fx, b * fy, a * cx + b * cy + c]) / (fx * baseline)  # w·X = 1
-        norm = float(np.linalg.norm(w))
-        if not norm > 0:
-            raise InvalidOptionError("the road model is flat (d = 0 everywhere): it gives no road plane")
-        return cls(tuple(float(x) for x in w / norm), 1.0 / norm)  # type: ignore[arg-type]
-
-    @classmethod
-    def from_camera(cls, height: float, pitch_deg: float = 0.0, roll_deg: float = 0.0) -> RoadPlane:
-        """The plane under a camera ``height`` metres above a flat road, pitched and rolled (degrees).
-
-        Pitch convention, the one of the whole package (``--rotate``, ``freespace.yaml``'s ``camera``,
-        ``synth --pitches`` and its ``index.csv``): positive pitch tilts the optical axis *down*, towards
-        the road, by ``pitch_deg`` below the horizon. The roll then turns the camera about its optical
-        axis, signed like the paper's Φ (a fit of the road disparity gives ``Φ = roll_deg``). So
-        ``n = Rz(roll)·Rx(pitch)·(0, 1, 0)`` with the elementary rotations of :func:`rotation_from_angles`.
-
-        Example:
-            >>> [round(x, 4) for x in RoadPlane.from_camera(1.5, pitch_deg=90).normal]  # looking straight down
-            [0.0, 0.0, 1.0]
-        """
-        R = rotation_from_angles(roll_deg, 0.0, 0.0) @ rotation_from_angles(0.0, pitch_deg, 0.0)
-        return cls(tuple(float(x) for x in R @ np.array([0.0, 1.0, 0.0])), float(height))  # type: ignore[arg-type]
-
-    def clearance(self, shift: tuple[float, float, float]) -> float:
-        """The lowest height above this plane (metres) of a camera centre moved anywhere within ±``shift``
-        (half-ranges ``(dx, dy, dz) ≥ 0`` in metres, reference frame): ``h − Σ |nᵢ|·shiftᵢ``. Negative when
-        such a move can take the camera through the road.
-
-        Example:
-            >>> RoadPlane((0, 1, 0), 1.65).clearance((0.5, 0.2, 0.0))  # a level camera: only dy counts
-            1.45
-        """
-        return self.height - float(np.abs(self.n) @ np.abs(np.asarray(shift, dtype=np.float64)))
 
 
 def _check_K(K: np.ndarray) -> np.ndarray:
@@ -230,7 +127,7 @@ def virtual_homography(K: np.ndarray, plane: RoadPlane, pose: VirtualPose) -> np
     K = _check_K(K)
     if not plane.height - float(plane.n @ pose.C) > 1e-6:
         raise InvalidOptionError(f"the virtual camera at {tuple(pose.shift)} m is on or under the road plane (the "
-                                 f"camera is {plane.height:.3f} m above it); give a smaller --shift")
+                                 f"camera is {plane.height:.3f} m above it); give a smaller {param('shift')}")
     H = K @ pose.R @ (np.eye(3) - np.outer(pose.C, plane.n) / plane.height) @ np.linalg.inv(K)
     s = abs(H[2, 2])
     return H / s if s > 1e-12 else H

@@ -15,7 +15,7 @@ from typing import Any
 from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError
+from freespace.errors import DatasetError, InputFileError, InvalidOptionError, param
 from freespace.evaluation.metrics import RoadEvaluator
 from freespace.evaluation.viz import overlay_errors, write_pr_curve
 from freespace.inference.predictor import Predictor
@@ -31,7 +31,8 @@ def _frames(ds, subset: str, checkpoint: Path, splits_dir: PathLike | None) -> l
         return [f.name for f in ds.labelled()]
     folder = Path(splits_dir) if splits_dir else checkpoint.parent.parent / "splits"
     if not (folder / f"{subset}.txt").is_file():
-        raise InputFileError(f"no split lists at {folder}; give --splits DIR (train.txt, val.txt, test.txt) or --subset all")
+        raise InputFileError(f"no split lists at {folder}; give {param('splits_dir')} DIR (train.txt, val.txt, test.txt) "
+                             f"or {param('subset')} all")
     return read_splits(folder, known=[f.name for f in ds.frames])[subset]
 
 
@@ -64,10 +65,10 @@ def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out:
     """Evaluate ``checkpoint`` on ``subset`` (train/val/test from the run's lists, or all labelled frames) of
     the on-disk ``split`` of a dataset."""
     if subset not in ("train", "val", "test", "all"):
-        raise InvalidOptionError(f"--subset must be train, val, test or all, got {subset!r}")
+        raise InvalidOptionError(f"{param('subset')} must be train, val, test or all, got {subset!r}")
     checkpoint, out = Path(checkpoint), Path(out)
     check_writable(out, folder=True)
-    check_outputs({"--out": out}, {"--checkpoint": checkpoint, "--root": root})
+    check_outputs({"out": out}, {"checkpoint": checkpoint, "root": root})
     predictor = Predictor(checkpoint=checkpoint)
     ds = get_dataset(dataset, root, split, disparity_mode="none")
     names = _frames(ds, subset, checkpoint, splits_dir)

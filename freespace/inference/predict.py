@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import InputFileError, InvalidOptionError
+from freespace.errors import InputFileError, InvalidOptionError, param
 from freespace.evaluation.metrics import to_confidence
 from freespace.inference.predictor import Predictor, load_checkpoint
 from freespace.io.codecs import write_image
@@ -45,8 +45,8 @@ def _input_paths(source: FrameSource) -> dict[str, Path]:
     elif source.kind == "glob":
         folders = sorted({p.parent for p in source.paths})
     else:
-        return {"--input": source.paths[0]}
-    return {"--input" if i == 0 else f"--input[{i}]": p for i, p in enumerate(folders)}
+        return {"input": source.paths[0]}
+    return {"input" if i == 0 else f"input[{i}]": p for i, p in enumerate(folders)}
 
 
 def _batches(frames: Iterable[VideoFrame], size: int) -> Iterator[list[VideoFrame]]:
@@ -60,8 +60,8 @@ def _batches(frames: Iterable[VideoFrame], size: int) -> Iterator[list[VideoFram
 def _shard_source(source: FrameSource, shard: tuple[int, int]) -> FrameSource:
     """The images of shard ``K/N`` of an image source, by file stem (:func:`freespace.shard.select_shard`)."""
     if source.kind == "video":
-        raise InvalidOptionError("--shard splits folders and globs of images by file name; a video is one output: "
-                                 "predict it without --shard (or split it into frames first)")
+        raise InvalidOptionError(f"{param('shard')} splits folders and globs of images by file name; a video is one "
+                                 f"output: predict it without {param('shard')} (or split it into frames first)")
     keep = set(select_shard((p.stem for p in source.paths), *shard))
     paths = tuple(p for p in source.paths if p.stem in keep)
     return dataclasses.replace(source, paths=paths, count=len(paths))
@@ -90,11 +90,11 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
         decoding, network, writing), ``model``, ``image_size``, ``shard``.
     """
     if batch_size < 1:
-        raise InvalidOptionError("--batch-size must be ≥ 1")
+        raise InvalidOptionError(f"{param('batch_size')} must be ≥ 1")
     check_writable(out, folder=True)
-    check_outputs({"--out": out}, {"--input": inputs})
+    check_outputs({"out": out}, {"input": inputs})
     source = open_frames(inputs)
-    check_outputs({"--out": out}, _input_paths(source))
+    check_outputs({"out": out}, _input_paths(source))
     if shard is not None:
         source = _shard_source(source, shard)
     with claim_folder(out, "predict", shared=shard is not None) as folder, \
@@ -153,14 +153,14 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
     from freespace.evaluation.viz import overlay_road
 
     if batch_size < 1:
-        raise InvalidOptionError("--batch-size must be ≥ 1")
+        raise InvalidOptionError(f"{param('batch_size')} must be ≥ 1")
     out = Path(out)
     if out.suffix.lower() != ".mp4":
-        raise InvalidOptionError(f"--out {out}: a video output must end in .mp4 (or give a folder for PNGs)")
+        raise InvalidOptionError(f"{param('out')} {out}: a video output must end in .mp4 (or give a folder for PNGs)")
     check_writable(out)
-    check_outputs({"--out": out}, {"--input": inputs})
+    check_outputs({"out": out}, {"input": inputs})
     source = open_frames(inputs)
-    check_outputs({"--out": out}, _input_paths(source))
+    check_outputs({"out": out}, _input_paths(source))
     seconds, t_start = 0.0, time.perf_counter()
     bar = progress_bar(None, total=len(source), desc="predict", unit="frame", enabled=progress)
     with VideoWriter(out, fps=source.fps) as writer:
@@ -180,9 +180,9 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike) -> dict[str, Any
     """Export a checkpoint to ONNX (dynamic N, H, W; opset 17) or TorchScript (traced; dynamic H, W),
     validated against PyTorch at the training size and at an odd size. Returns the max abs differences."""
     if fmt not in ("onnx", "torchscript"):
-        raise InvalidOptionError(f"--format must be onnx or torchscript, got {fmt!r}")
+        raise InvalidOptionError(f"{param('fmt')} must be onnx or torchscript, got {fmt!r}")
     check_writable(out)
-    check_outputs({"--out": out}, {"--checkpoint": checkpoint})
+    check_outputs({"out": out}, {"checkpoint": checkpoint})
     import torch
 
     model, hp = load_checkpoint(checkpoint)
@@ -238,7 +238,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
     from freespace.data.kitti_road import KittiRoad
 
     check_writable(out, folder=True)
-    check_outputs({"--out": out}, {"--checkpoint": checkpoint, "--root": root})
+    check_outputs({"out": out}, {"checkpoint": checkpoint, "root": root})
     ds = KittiRoad(root, "testing", disparity_mode="none")
     missing = [f.name for f in ds.frames if f.calib is None]
     if missing:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError
+from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
 from freespace.io.files import PathLike, missing_input
 
@@ -175,7 +175,7 @@ class Predictor:
 
     def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None) -> None:
         if (checkpoint is None) == (onnx is None):
-            raise InvalidOptionError("give exactly one of --checkpoint and --onnx")
+            raise InvalidOptionError(f"give exactly one of {param('checkpoint')} and {param('onnx')}")
         self.resize_to: tuple[int, int] | None = None
         if checkpoint is not None:
             self.model, hp = load_checkpoint(checkpoint)

@@ -16,7 +16,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-from freespace.errors import InputFileError, InvalidOptionError, OutputError
+from freespace.errors import InputFileError, InvalidOptionError, OutputError, param
 
 PathLike = str | os.PathLike[str]
 
@@ -80,18 +80,18 @@ def encode_json(obj: Any) -> bytes:
     return (json.dumps(obj, indent=2, allow_nan=False) + "\n").encode("utf-8")
 
 
-def check_writable(path: PathLike, flag: str = "--out", *, folder: bool = False) -> Path:
+def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -> Path:
     """Refuse, before any work, an output that cannot be written where it is named.
 
     Args:
         path: the output file (``folder=False``) or folder (``folder=True``); it need not exist.
-        flag: the option that named it, for the message.
+        name: the parameter that named it, for the message (:func:`freespace.errors.param`).
 
     Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
     folder is, and :class:`OutputError` when a folder on the way to it is a file, or the nearest existing
     folder is not writable (folders on the way are created by the writers). Nothing is created.
     """
-    path = Path(os.path.expanduser(os.fspath(path)))
+    path, flag = Path(os.path.expanduser(os.fspath(path))), param(name)
     if folder and path.exists() and not path.is_dir():
         raise InvalidOptionError(f"{flag} {path} is a file; give a folder")
     if not folder and path.is_dir():
@@ -108,11 +108,11 @@ def check_writable(path: PathLike, flag: str = "--out", *, folder: bool = False)
 
 
 def check_writable_files(outputs: Mapping[str, PathLike | None]) -> None:
-    """:func:`check_writable` for every output file given (option → path; None = not given), before any
-    input is read."""
-    for flag, path in outputs.items():
+    """:func:`check_writable` for every output file given (parameter name → path; None = not given), before
+    any input is read."""
+    for name, path in outputs.items():
         if path is not None:
-            check_writable(path, flag)
+            check_writable(path, name)
 
 
 def write_json(path: PathLike, obj: Any) -> Path:
@@ -124,8 +124,8 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
     """Refuse outputs that would overwrite or land among a command's inputs, before any work.
 
     Args:
-        outputs: option name → output path (file or folder; None = not given).
-        inputs: option name → input path (file or folder; None = not given).
+        outputs: parameter name → output path (file or folder; None = not given).
+        inputs: parameter name → input path (file or folder; None = not given).
 
     Raises :class:`InvalidOptionError` when an output is an input, lies inside an input folder, or is a
     folder that holds an input, or when two outputs are the same path. Symbolic links are resolved
@@ -134,8 +134,12 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
     def real(p: PathLike) -> Path:
         return Path(os.path.realpath(os.path.expanduser(os.fspath(p))))
 
-    outs = {k: real(v) for k, v in outputs.items() if v is not None}
-    ins = {k: real(v) for k, v in inputs.items() if v is not None}
+    def named(key: str) -> str:  # "input[1]": the second of the paths of the parameter input
+        name, bracket, rest = key.partition("[")
+        return param(name) + bracket + rest
+
+    outs = {named(k): real(v) for k, v in outputs.items() if v is not None}
+    ins = {named(k): real(v) for k, v in inputs.items() if v is not None}
     for out_name, out in outs.items():
         for in_name, src in ins.items():
             if out == src:

@@ -6,10 +6,10 @@ name and every entry it wrote (``"name"`` a file, ``"name/"`` a whole subtree, e
 
 * a command writes into a new or empty folder, or into a folder whose manifest names that command;
 * it refuses a folder that holds any file its manifest does not list (the message names one);
-* it replaces or deletes only entries of its manifest, ``--overwrite`` included, so a file it did not
+* it replaces or deletes only entries of its manifest, ``overwrite`` included, so a file it did not
   write is never touched;
 * a lock (``OUT/.freespace/lock``, ``flock``) keeps two runs out of one folder: a whole run takes it
-  alone, the shards of one run (``--shard K/N``) and the cells of one ``reproduce`` share it;
+  alone, the shards of one run (:mod:`freespace.shard`) and the cells of one ``reproduce`` share it;
 * staged output (:meth:`OwnedFolder.staged`) is written under ``OUT/.freespace/stage-<pid>-…`` and moved
   into place file by file (one atomic rename each) when the block ends; an interrupted stage
   (SIGINT, SIGTERM, or SIGKILL) is removed by the next run that claims the folder.
@@ -26,8 +26,8 @@ refused, unless the command writing that enclosing folder is this very run (``de
 atomic write leaves beside an entry (``.NAME.XXXXXXXX.tmp``) count as the command's and are removed by the
 next run that holds the folder alone.
 
-The folder itself is never renamed or replaced, so an ``--out`` that is a symbolic link stays one, and
-``--out .`` works. Files are listed in the manifest **before** they are written (in place or by a
+The folder itself is never renamed or replaced, so an output folder that is a symbolic link stays one, and
+``.`` works. Files are listed in the manifest **before** they are written (in place or by a
 stage), so a run killed half-way leaves only files that its next run knows.
 
 Also here: :func:`freespace.io.files.write_files_together` (several output files written all or nothing, earlier files kept
@@ -48,12 +48,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from freespace.errors import CorruptFileError, InvalidOptionError, OutputError
+from freespace.errors import CorruptFileError, InvalidOptionError, OutputError, param
 from freespace.io.files import write_files_together
 
 PathLike = str | os.PathLike[str]
 
 #: the hidden folder of an output folder that holds its manifest, lock and stages
+#: the parameters an output folder's messages name
+OUT, OVERWRITE = param("out"), param("overwrite")
 META = ".freespace"
 MANIFEST = "manifest.json"
 _LOCK = "lock"
@@ -118,8 +120,8 @@ class OwnedFolder:
         command: the command that owns it (e.g. ``"predict"``).
     """
 
-    def __init__(self, path: Path, command: str, flag: str) -> None:
-        self.path, self.command, self.flag = path, command, flag
+    def __init__(self, path: Path, command: str, name: str) -> None:
+        self.path, self.command, self.flag = path, command, param(name)
         self._meta = path / META
 
     # -- the manifest -----------------------------------------------------------------------------
@@ -295,7 +297,7 @@ def _unknown_file(out: Path, entries: set[str]) -> str | None:
 
 @contextmanager
 def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), shared: bool = False,
-                 flag: str = "--out") -> Iterator[OwnedFolder]:
+                 name: str = "out") -> Iterator[OwnedFolder]:
     """Claim ``out`` for ``command`` for the length of the block (see the module docstring).
 
     Args:
@@ -306,14 +308,14 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
             in the manifest at once (before they are written).
         shared: share the lock with other runs of ``command`` that pass ``shared`` (the shards of one
             run); otherwise the run holds the folder alone.
-        flag: the option that named the folder, for messages.
+        name: the parameter that named the folder, for messages (:func:`freespace.errors.param`).
 
     Raises:
         InvalidOptionError: ``out`` is a file, holds a file that the command did not write (named), was
             written by another command, or another run holds it.
         OutputError: it cannot be created or written.
     """
-    out = Path(out)
+    out, flag = Path(out), param(name)
     if out.exists() and not out.is_dir():
         raise InvalidOptionError(f"{flag} {out} is a file; give a folder")
     meta = out / META
@@ -357,7 +359,7 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         _remove_stale_stages(meta, alone=not shared)
         if not shared:
             _remove_killed_writes(out, set(known))
-        folder = OwnedFolder(out, command, flag)
+        folder = OwnedFolder(out, command, name)
         if owner is None:
             _write_manifest(meta / MANIFEST, command, set(known))
         folder.record(entries)
@@ -437,11 +439,11 @@ def check_settings(path: Path, settings: dict[str, Any], overwrite: bool, what: 
     if overwrite:
         return
     if not isinstance(recorded, dict):
-        raise InvalidOptionError(f"--out {path.parent} has an unreadable {path.name}, so the settings of what it "
-                                 f"holds are unknown; add --overwrite to make it again, or choose another --out")
+        raise InvalidOptionError(f"{OUT} {path.parent} has an unreadable {path.name}, so the settings of what it "
+                                 f"holds are unknown; add {OVERWRITE} to make it again, or choose another {OUT}")
     old = recorded_as(recorded)
     differ = [k for k in settings if old.get(k) != settings[k]]
     if differ:
         changes = ", ".join(f"{k} {old.get(k)!r} → {settings[k]!r}" for k in differ)
-        raise InvalidOptionError(f"--out {path.parent} holds {what} with other settings ({changes}); choose another "
-                                 f"--out, or add --overwrite to replace them")
+        raise InvalidOptionError(f"{OUT} {path.parent} holds {what} with other settings ({changes}); choose another "
+                                 f"{OUT}, or add {OVERWRITE} to replace them")

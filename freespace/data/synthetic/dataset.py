@@ -10,7 +10,7 @@ Tree written under ``OUT``::
     OUT/index.csv                                          frame, category, scenario, weather, rig
     OUT/synth.json                                         seed and configuration
 
-``pitch_deg`` in ``index.csv`` (and ``--pitches``) is positive when the camera looks down at the road.
+``pitch_deg`` in ``index.csv`` (and ``SynthConfig.pitches_deg``) is positive when the camera looks down at the road.
 ``<id>`` is the global frame index, so frame i has the same name and bytes for a given seed and
 configuration whatever ``num`` is.
 """
@@ -28,7 +28,7 @@ import numpy as np
 
 from freespace.data.synthetic.render import StereoSample, render_sample
 from freespace.data.synthetic.scene import SynthConfig
-from freespace.errors import InvalidOptionError, check_seed
+from freespace.errors import InvalidOptionError, check_seed, param
 from freespace.io.codecs import road_label_to_kitti, write_disparity, write_image
 from freespace.io.files import PathLike, atomic_write_text, check_writable, write_csv, write_json
 from freespace.io.outdir import check_settings, claim_folder
@@ -117,10 +117,10 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
     """
     config.check()
     if not 1 <= num <= MAX_FRAMES:
-        raise InvalidOptionError(f"--num must be in 1…{MAX_FRAMES:,}, got {num}")
+        raise InvalidOptionError(f"{param('num')} must be in 1…{MAX_FRAMES:,}, got {num}")
     check_seed(seed)
     if workers < 1:
-        raise InvalidOptionError(f"--workers must be ≥ 1, got {workers}")
+        raise InvalidOptionError(f"{param('workers')} must be ≥ 1, got {workers}")
     out = Path(out)
     check_writable(out, folder=True)
     # pitch_sign: index.csv's pitch_deg and --pitches were positive up before they followed the package

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from freespace.errors import InvalidOptionError
+from freespace.errors import InvalidOptionError, param
 
 __all__ = ["SynthConfig", "Scenario", "Frame", "Box", "Sphere", "sample_scenario", "sample_frame",
            "WEATHERS", "CATEGORIES"]
@@ -48,7 +48,7 @@ class SynthConfig:
         baselines: (min, max) baseline in metres drawn per scenario when ``baseline`` is None.
         camera_heights: (min, max) height of the rig above the road in metres, per scenario.
         pitches_deg: (min, max) rig pitch in degrees, per scenario: positive = the optical axis tilted down,
-            towards the road (as ``--rotate``, ``RoadPlane.from_camera`` and ``freespace.yaml``'s ``camera``).
+            towards the road (as a virtual view's ``rotate``, ``RoadPlane.from_camera`` and ``freespace.yaml``'s ``camera``).
         max_roll_deg: rig roll drawn in ±this (degrees).
         weathers: weathers to draw from.
         vehicles, pedestrians: (min, max) counts per frame.
@@ -70,18 +70,18 @@ class SynthConfig:
     def check(self) -> None:
         """Raise InvalidOptionError for values the renderer cannot use."""
         if not (32 <= self.width <= 8192 and 32 <= self.height <= 8192):
-            raise InvalidOptionError(f"--width/--height must be 32..8192 pixels, got {self.width}×{self.height}")
+            raise InvalidOptionError(f"{param('width')}/{param('height')} must be 32..8192 pixels, got {self.width}×{self.height}")
         if self.frames_per_scenario < 1:
-            raise InvalidOptionError("--frames-per-scenario must be ≥ 1")
+            raise InvalidOptionError(f"{param('frames_per_scenario')} must be ≥ 1")
         if self.baseline is not None and not 0.01 <= self.baseline <= 10:
-            raise InvalidOptionError(f"--baseline must be 0.01..10 m, got {self.baseline}")
-        for flag, (lo, hi), (least, most) in (("--baselines", self.baselines, (0.01, 10.0)),
-                                               ("--camera-heights", self.camera_heights, CAMERA_HEIGHTS_M),
-                                               ("--pitches", self.pitches_deg, (-20.0, 20.0))):
+            raise InvalidOptionError(f"{param('baseline')} must be 0.01..10 m, got {self.baseline}")
+        for name, (lo, hi), (least, most) in (("baselines", self.baselines, (0.01, 10.0)),
+                                               ("camera_heights", self.camera_heights, CAMERA_HEIGHTS_M),
+                                               ("pitches_deg", self.pitches_deg, (-20.0, 20.0))):
             if not least <= lo <= hi <= most:
-                raise InvalidOptionError(f"{flag} must be MIN,MAX with {least} ≤ MIN ≤ MAX ≤ {most}, got {lo},{hi}")
+                raise InvalidOptionError(f"{param(name)} must be MIN,MAX with {least} ≤ MIN ≤ MAX ≤ {most}, got {lo},{hi}")
         if not 0 <= self.max_roll_deg <= MAX_ROLL_DEG:
-            raise InvalidOptionError(f"--max-roll must be 0..{MAX_ROLL_DEG:g} degrees, got {self.max_roll_deg}")
+            raise InvalidOptionError(f"{param('max_roll_deg')} must be 0..{MAX_ROLL_DEG:g} degrees, got {self.max_roll_deg}")
         bad = [w for w in self.weathers if w not in WEATHERS]
         if bad or not self.weathers:
             raise InvalidOptionError(f"unknown weather {bad}; choose from {', '.join(WEATHERS)}")
