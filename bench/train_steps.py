@@ -33,7 +33,7 @@ from freespace.models import create_model  # noqa: E402
 
 def components(root: Path, model_name: str, size: tuple[int, int], batch: int, repeat: int) -> dict[str, float]:
     """Seconds per batch of each part of a training step (medians over ``repeat``)."""
-    ds = get_dataset("synth", root, disparity_mode="none")
+    ds = get_dataset("synth", root, disparity_source="none")
     names = [f.name for f in ds.labelled().frames]
     cold = RoadSegmentationDataset(ds, names, size=size)  # no cache: every call decodes
     warm = RoadSegmentationDataset(ds, names, size=size, affine=True, cache=True)

@@ -52,14 +52,14 @@ def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, requ
 def _open_dataset(args: argparse.Namespace):  # -> StereoRoadDataset (import kept lazy)
     from freespace.data.registry import get_dataset
 
-    options = {"disparity_mode": args.disparity_mode, "cache_dir": args.cache_dir, "max_disparity": args.max_disparity}
+    options = {"disparity_source": args.disparity_source, "cache_dir": args.cache_dir, "max_disparity": args.max_disparity}
     if args.disparity_dir is not None:
         if args.dataset not in ("kitti", "synth"):
             raise InvalidOptionError("--disparity-dir is for KITTI road trees; other layouts name their "
                                      "disparity folder in freespace.yaml")
         options["disparity_dir"] = args.disparity_dir
     if args.lidar_densify is not None:
-        if args.disparity_mode != "lidar":
+        if args.disparity_source != "lidar":
             raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
         if args.dataset not in ("kitti", "synth"):
             raise InvalidOptionError("--lidar-densify is for KITTI road trees (the only layout with Velodyne scans)")
@@ -117,7 +117,7 @@ def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], o
 
 
 def _generate_parser(p: argparse.ArgumentParser) -> None:
-    from freespace.data.disparity import DISPARITY_MODES
+    from freespace.data.disparity import DISPARITY_SOURCES
     from freespace.geometry import SGBM_MAX_DISPARITY
 
     one = p.add_argument_group("one pair")
@@ -142,7 +142,7 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
-    g.add_argument("--disparity-source", dest="disparity_mode", choices=DISPARITY_MODES, default="auto",
+    g.add_argument("--disparity-source", dest="disparity_source", choices=DISPARITY_SOURCES, default="auto",
                    help="auto: file, else depth + camera, else cached SGBM (default); depth: depth maps only "
                         "(KITTI: depth_u16/); lidar: Velodyne scans only (KITTI: velodyne/<frame>.bin)")
     g.add_argument("--lidar-densify", type=float, metavar="PX",
@@ -172,7 +172,7 @@ _GENERATE_MODES = {
     "virtual": _Mode("--virtual", frozenset({"virtual", "reference", "road_mask", "calib", "disparity", "shift",
                                              "rotate", "label_out", "model_json"}),
                      ("reference", "road_mask", "calib", "label_out")),
-    "dataset": _Mode("--dataset", frozenset({"dataset", "root", "split", "disparity_dir", "disparity_mode",
+    "dataset": _Mode("--dataset", frozenset({"dataset", "root", "split", "disparity_dir", "disparity_source",
                                              "lidar_densify", "cache_dir", "shard", "workers", "overwrite"}),
                      ("root",)),
 }
@@ -210,7 +210,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 
 def _autolabel_parser(p: argparse.ArgumentParser) -> None:
-    from freespace.data.disparity import DISPARITY_MODES
+    from freespace.data.disparity import DISPARITY_SOURCES
     from freespace.datagen.autolabel import AutolabelOptions
     from freespace.geometry import SGBM_MAX_DISPARITY
 
@@ -226,7 +226,7 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
-    g.add_argument("--disparity-source", dest="disparity_mode", choices=DISPARITY_MODES, default="auto",
+    g.add_argument("--disparity-source", dest="disparity_source", choices=DISPARITY_SOURCES, default="auto",
                    help="auto: file, else depth + camera, else cached SGBM (default); depth, lidar, sgbm: only that")
     g.add_argument("--lidar-densify", type=float, metavar="PX", help="--disparity-source lidar: fill holes within "
                                                                       "PX pixels of a point")
@@ -369,7 +369,7 @@ def cmd_datasets_split(args: argparse.Namespace) -> int:
 
     check_writable(args.out, folder=True)
     check_outputs({"out": args.out}, {"root": args.root})
-    dataset = get_dataset(args.dataset, args.root, args.split, disparity_mode="none")
+    dataset = get_dataset(args.dataset, args.root, args.split, disparity_source="none")
     labelled = [(f.name, f.scenario) for f in dataset.labelled()]
     if not labelled:
         raise InvalidOptionError(f"split {dataset.split!r} of {args.root} has no labelled frames to split")

@@ -162,6 +162,13 @@ def test_dataset_resumable_with_bad_frames(tmp_path: Path, capsys: pytest.Captur
     summary = json.loads((out / "summary.json").read_text())
     assert summary["generated"] == 1 and summary["skipped"] == 3 and list(summary["failed"]) == ["uu_000002"]
     assert (out / "um_000000.png").stat().st_mtime_ns == before
+    # a folder whose settings an earlier version recorded as "disparity" (now "disparity_source") is the same
+    for path in [out / "settings.json", *(out / "reports").glob("*.json")]:
+        path.write_text(path.read_text().replace('"disparity_source"', '"disparity"'))
+    assert '"disparity"' in (out / "settings.json").read_text()
+    assert main(args) == 1
+    assert json.loads((out / "summary.json").read_text())["skipped"] == 4
+    assert (out / "um_000000.png").stat().st_mtime_ns == before
 
 
 def test_dataset_workers_and_sgbm(tmp_path: Path) -> None:

@@ -72,7 +72,7 @@ def test_kitti_training_and_testing(tmp_path: Path) -> None:
     assert s.left.shape == SHAPE + (3,) and s.right is not None and s.label is not None
     assert s.calibration.fx == 300.0 and s.calibration.baseline == pytest.approx(0.5)
     assert s.calibration.road_plane.height == pytest.approx(1.6)
-    test = KittiRoad(tmp_path, "testing", disparity_mode="none")
+    test = KittiRoad(tmp_path, "testing", disparity_source="none")
     assert len(test) == 2 and test.load(0).label is None
     assert check_dataset(test) == []  # no labels expected in testing
 
@@ -80,12 +80,12 @@ def test_kitti_training_and_testing(tmp_path: Path) -> None:
 def test_subset_and_labelled(tmp_path: Path) -> None:
     kitti_tree(tmp_path, 4)
     (tmp_path / "data_road" / "training" / "gt_image_2" / "um_road_000003.png").unlink()
-    ds = KittiRoad(tmp_path, disparity_mode="none")
+    ds = KittiRoad(tmp_path, disparity_source="none")
     assert [f.name for f in ds.labelled()] == ["um_000000", "umm_000001", "uu_000002"]
     sub = ds.subset(["uu_000002", "um_000000"])
     assert [f.name for f in sub] == ["uu_000002", "um_000000"] and sub.index("um_000000") == 1
     np.testing.assert_array_equal(sub.load(1).left, ds.load(0).left)
-    assert (sub.split, sub.disparity_mode, len(ds)) == ("training", "none", 4)  # same options; ds untouched
+    assert (sub.split, sub.disparity_source, len(ds)) == ("training", "none", 4)  # same options; ds untouched
     assert ds.subset([]).frames == []
     with pytest.raises(DatasetError, match="'um_000009' is not in kitti training"):
         ds.subset(["um_000009"])
@@ -293,7 +293,7 @@ def test_sgbm_disparity_is_cached(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     other = KittiRoad(tmp_path / "k", cache_dir=tmp_path / "cache", max_disparity=64)
     with pytest.raises(AssertionError, match="SGBM ran again"):  # new settings, new key
         other.load(0)
-    assert KittiRoad(tmp_path / "k", disparity_mode="none").load(0).disparity is None
+    assert KittiRoad(tmp_path / "k", disparity_source="none").load(0).disparity is None
 
 
 # --- splits --------------------------------------------------------------------------------------------
@@ -350,7 +350,7 @@ def test_torch_dataset(tmp_path: Path) -> None:
     from freespace.labels import IGNORE_INDEX
 
     kitti_tree(tmp_path, 3)
-    ds = RoadSegmentationDataset(KittiRoad(tmp_path, disparity_mode="none"))
+    ds = RoadSegmentationDataset(KittiRoad(tmp_path, disparity_source="none"))
     item = ds[0]
     assert item["image"].shape == (3,) + SHAPE and item["image"].dtype == torch.float32
     assert 0 <= float(item["image"].min()) and float(item["image"].max()) <= 1
@@ -371,7 +371,7 @@ def test_torch_dataset_training_options(tmp_path: Path) -> None:
     from freespace.labels import IGNORE_INDEX
 
     names = kitti_tree(tmp_path, 3)
-    kitti = KittiRoad(tmp_path, disparity_mode="none")
+    kitti = KittiRoad(tmp_path, disparity_source="none")
     view = np.full(SHAPE + (3,), 200, np.uint8)
     write_image(tmp_path / "view.png", view)
     items = [Item(kitti.index(names[0]), names[0]), Item(kitti.index(names[1]), names[1], str(tmp_path / "view.png"))]

@@ -43,7 +43,7 @@ def kitti_depth_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.mark.parametrize("split, frames", [("training", ["uu_000000", "uu_000001"]), ("testing", ["um_000000"])])
 def test_kitti_depth_u16_is_the_frames_disparity(kitti_depth_root: Path, split: str, frames: list[str]) -> None:
-    ds = get_dataset("kitti", kitti_depth_root, split, disparity_mode="depth")
+    ds = get_dataset("kitti", kitti_depth_root, split, disparity_source="depth")
     assert [f.name for f in ds.frames] == frames
     for i, frame in enumerate(ds.frames):
         sample = ds.load(i)
@@ -64,7 +64,7 @@ def test_kitti_depth_without_p3_uses_the_virtual_baseline(kitti_depth_root: Path
     shutil.copytree(kitti_depth_root / "data_road" / "testing", root / "data_road" / "testing")
     calib = root / "data_road/testing/calib/um_000000.txt"
     calib.write_text("".join(line for line in calib.read_text().splitlines(True) if not line.startswith("P3")))
-    sample = get_dataset("kitti", root, "testing", disparity_mode="depth").load(0)
+    sample = get_dataset("kitti", root, "testing", disparity_source="depth").load(0)
     assert sample.calibration.baseline == 0.54
     expected, _ = disparity_from_depth_file(root / "data_road/testing/depth_u16/um_000000.png", calib)
     np.testing.assert_array_equal(sample.disparity, expected)
@@ -126,8 +126,8 @@ def lidar_root(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str
 
 def test_lidar_mode_loads_the_projected_scan(lidar_root) -> None:
     root, masks = lidar_root
-    ds = get_dataset("kitti", root, "training", disparity_mode="lidar")
-    exact = get_dataset("kitti", root, "training", disparity_mode="file")
+    ds = get_dataset("kitti", root, "training", disparity_source="lidar")
+    exact = get_dataset("kitti", root, "training", disparity_source="file")
     assert len(ds) == FRAMES
     for i, frame in enumerate(ds.frames):
         sample = ds.load(i)
@@ -140,7 +140,7 @@ def test_lidar_mode_loads_the_projected_scan(lidar_root) -> None:
         np.testing.assert_allclose(sample.disparity[have], truth[have], rtol=1e-5, atol=1e-4)
     # auto never takes the scan: the tree's disparity file wins, and without it SGBM, not LiDAR
     assert get_dataset("kitti", root, "training").load(0).disparity_source == "file"
-    densified = get_dataset("kitti", root, "training", disparity_mode="lidar", lidar_densify=2).load(0).disparity
+    densified = get_dataset("kitti", root, "training", disparity_source="lidar", lidar_densify=2).load(0).disparity
     assert np.isfinite(densified).sum() > 2 * np.isfinite(ds.load(0).disparity).sum()
 
 
@@ -150,7 +150,7 @@ def test_kitti_road_velodyne_folder_is_found(lidar_root, tmp_path: Path) -> None
     shutil.copytree(src / "data_road", root / "data_road")
     shutil.copytree(src / "data_road_right", root / "data_road_right")
     shutil.move(root / "data_road/training/velodyne", root / "data_road_velodyne/training/velodyne")
-    ds = get_dataset("kitti", root, "training", disparity_mode="lidar")
+    ds = get_dataset("kitti", root, "training", disparity_source="lidar")
     assert all(f.velodyne is not None and "data_road_velodyne" in str(f.velodyne) for f in ds.frames)
     assert ds.load(1).disparity_source == "lidar"
 
@@ -171,7 +171,7 @@ def test_generate_from_lidar_matches_the_exact_fit(lidar_root, tmp_path: Path, c
         assert li["kappa_hat"] == pytest.approx(e["kappa_hat"], rel=1e-3)
     assert len(rolls) == FRAMES and max(rolls) < 0.05                   # measured: below 1e-3°
     settings = json.loads((lidar / "settings.json").read_text())
-    assert settings["disparity"] == "lidar" and settings["lidar_densify"] == 0
+    assert settings["disparity_source"] == "lidar" and settings["lidar_densify"] == 0
     # densification changes what was generated: refused in the same folder, like any other setting
     capsys.readouterr()
     assert main(base + ["--disparity-source", "lidar", "--lidar-densify", "2", "--out", str(lidar)]) == 2
@@ -225,7 +225,7 @@ def test_generic_png16_depth_65535_is_none(tmp_path: Path) -> None:
     (tmp_path / "freespace.yaml").write_text(
         "left: rgb\ndepth: depth_u16\ndepth_encoding: png16\ndepth_scale: 0.001\n"
         "camera: {fx: 700.0, fy: 700.0, cx: 30.0, cy: 20.0, baseline: 0.54}\n")
-    sample = get_dataset("generic", tmp_path, disparity_mode="depth").load(0, label=False)
+    sample = get_dataset("generic", tmp_path, disparity_source="depth").load(0, label=False)
     assert sample.disparity_source == "depth"
     assert np.isnan(sample.disparity[:8]).all()                         # 65535 (saturated) and 0: no depth
     np.testing.assert_allclose(sample.disparity[8:], 700.0 * 0.54 / (mm[8:] * 0.001), rtol=1e-5)

@@ -17,7 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from freespace.data.disparity import DisparityCache, check_disparity_mode, resolve_disparity
+from freespace.data.disparity import DisparityCache, check_disparity_source, resolve_disparity
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError, param
 from freespace.geometry import SGBM_MAX_DISPARITY, StereoCalibration
 from freespace.io.codecs import read_image, read_road_label
@@ -98,7 +98,7 @@ class StereoRoadDataset(ABC):
         root: dataset folder.
         split: the layout's on-disk split (``training``/``testing`` for KITTI road; layouts without
             on-disk splits accept only ``all``).
-        disparity_mode: where disparities come from: ``auto`` (file, else depth + calibration, else
+        disparity_source: where disparities come from: ``auto`` (file, else depth + calibration, else
             SGBM), ``file`` (file or depth only), ``depth`` (depth only), ``lidar`` (Velodyne scans
             only), ``sgbm`` (always SGBM), ``none`` (:func:`~freespace.data.disparity.resolve_disparity`).
             ``depth`` and ``lidar`` refuse a dataset without any depth map or scan.
@@ -111,14 +111,14 @@ class StereoRoadDataset(ABC):
     #: frame name → a KITTI-colour label file read instead of the layout's own label (:meth:`with_labels`)
     label_files: dict[str, Path] = {}
 
-    def __init__(self, root: PathLike, split: str | None = None, *, disparity_mode: str = "auto",
+    def __init__(self, root: PathLike, split: str | None = None, *, disparity_source: str = "auto",
                  cache_dir: PathLike | None = None, max_disparity: int = SGBM_MAX_DISPARITY) -> None:
         self.root = check_dataset_root(root, self.name)
         self.split = split or self.splits[0]
         if self.split not in self.splits:
             raise InvalidOptionError(f"unknown split {self.split!r} for {self.name}; choose one of "
                                      f"{', '.join(self.splits)}")
-        self.disparity_mode = check_disparity_mode(disparity_mode)
+        self.disparity_source = check_disparity_source(disparity_source)
         self.cache = DisparityCache(cache_dir, max_disparity=max_disparity)
         self.frames: list[FrameRef] = self._list()
         if not self.frames:
@@ -127,9 +127,9 @@ class StereoRoadDataset(ABC):
         names = [f.name for f in self.frames]
         if len(set(names)) != len(names):
             raise DatasetError(f"{self.name}: frame names are not unique under {self.root}")
-        kind = {"depth": "depth", "lidar": "velodyne"}.get(self.disparity_mode)
+        kind = {"depth": "depth", "lidar": "velodyne"}.get(self.disparity_source)
         if kind is not None and not any(getattr(f, kind) is not None for f in self.frames):
-            raise DatasetError(f"{param('disparity_mode')} {self.disparity_mode}: no frame of {self.name} split "
+            raise DatasetError(f"{param('disparity_source')} {self.disparity_source}: no frame of {self.name} split "
                                f"{self.split!r} under {self.root} has a {'depth map' if kind == 'depth' else 'Velodyne scan'}; "
                                f"see the layout's tree in the docs")
 
@@ -238,7 +238,7 @@ class StereoRoadDataset(ABC):
 
     def _disparity(self, frame: FrameRef, left: np.ndarray, right: np.ndarray | None,
                    calib: StereoCalibration | None) -> tuple[np.ndarray | None, str]:
-        return resolve_disparity(frame, left, right, calib, mode=self.disparity_mode, cache=self.cache,
+        return resolve_disparity(frame, left, right, calib, mode=self.disparity_source, cache=self.cache,
                                  read_depth=lambda: self.read_depth(frame),
                                  read_lidar=lambda: self.read_lidar(frame, left.shape[:2]))
 

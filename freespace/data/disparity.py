@@ -1,7 +1,7 @@
 """Where a frame's left disparity comes from (torch-free): a file, depth and the camera, a LiDAR scan and
 the calibration, or SGBM, which is cached on disk.
 
-The disparity *mode* of a dataset (:data:`DISPARITY_MODES`) says which sources may be used; the *source*
+The disparity *mode* of a dataset (:data:`DISPARITY_SOURCES`) says which sources may be used; the *source*
 of a loaded sample (``file``, ``depth``, ``lidar``, ``sgbm`` or ``none``) says which one was.
 
 ``auto`` takes the file, else depth + camera, else SGBM; it never takes a LiDAR scan: a scan gives a
@@ -31,9 +31,9 @@ from freespace.io.files import PathLike, atomic_write_bytes
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DISPARITY_MODES", "check_disparity_mode", "DisparityCache", "resolve_disparity"]
+__all__ = ["DISPARITY_SOURCES", "check_disparity_source", "DisparityCache", "resolve_disparity"]
 
-DISPARITY_MODES = ("auto", "file", "depth", "lidar", "sgbm", "none")
+DISPARITY_SOURCES = ("auto", "file", "depth", "lidar", "sgbm", "none")
 """``auto``: file, else depth + camera, else cached SGBM; ``file``: file, else depth + camera; ``depth``:
 depth + camera only; ``lidar``: the frame's Velodyne scan projected with its calibration only; ``sgbm``:
 always SGBM; ``none``: no disparity."""
@@ -50,10 +50,10 @@ class FrameFiles(Protocol):
     velodyne: Path | None
 
 
-def check_disparity_mode(mode: str) -> str:
-    """``mode`` if it is one of :data:`DISPARITY_MODES`, else InvalidOptionError."""
-    if mode not in DISPARITY_MODES:
-        raise InvalidOptionError(f"unknown disparity source {mode!r}; choose one of {', '.join(DISPARITY_MODES)}")
+def check_disparity_source(mode: str) -> str:
+    """``mode`` if it is one of :data:`DISPARITY_SOURCES`, else InvalidOptionError."""
+    if mode not in DISPARITY_SOURCES:
+        raise InvalidOptionError(f"unknown disparity source {mode!r}; choose one of {', '.join(DISPARITY_SOURCES)}")
     return mode
 
 
@@ -115,12 +115,12 @@ def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | N
         if frame.depth is None or calib is None or not calib.baseline > 0:
             what = ("depth map" if frame.depth is None else "camera calibration (f and B for d = f·B/Z)"
                     if calib is None else "baseline (a monocular camera: give `baseline` for d = f·B/Z)")
-            raise DatasetError(f"{frame.name} has no {what}; {param('disparity_mode')} depth needs one for every "
+            raise DatasetError(f"{frame.name} has no {what}; {param('disparity_source')} depth needs one for every "
                                f"frame")
         return depth_to_disparity(read_depth(), calib.fx, calib.baseline), "depth"
     if mode == "lidar":
         if frame.velodyne is None or read_lidar is None:
-            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); {param('disparity_mode')} lidar "
+            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); {param('disparity_source')} lidar "
                                f"needs one for every frame")
         return read_lidar(), "lidar"
     if mode in ("auto", "file"):

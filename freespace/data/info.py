@@ -107,7 +107,7 @@ def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int 
     """
     layout = get_dataset_class(name)
     check_dataset_root(root, layout.name)
-    options: dict[str, Any] = {"disparity_mode": "file"}
+    options: dict[str, Any] = {"disparity_source": "file"}
     if disparity_dir is not None:
         options["disparity_dir"] = disparity_dir
     info: dict[str, Any] = {"dataset": name, "root": str(root), "splits": {}, "problems": []}

@@ -66,7 +66,7 @@ class KittiRoad(StereoRoadDataset):
 
     Args:
         disparity_dir: folder of ``<frame>.png|.npy|.pfm`` disparities to use instead of ``disparity/``.
-        lidar_densify: 0 (default) keeps a scan's sparse disparity (``disparity_mode="lidar"``); ``k > 0``
+        lidar_densify: 0 (default) keeps a scan's sparse disparity (``disparity_source="lidar"``); ``k > 0``
             fills every empty pixel within ``k`` pixels of a point with that point's disparity
             (:func:`freespace.geometry.lidar.densify_nearest`).
         Other arguments: :class:`~freespace.data.base.StereoRoadDataset`.

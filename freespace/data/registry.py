@@ -43,7 +43,7 @@ def get_dataset_class(name: str) -> type[StereoRoadDataset]:
 def get_dataset(name: str, root: PathLike, split: str | None = None, **options: Any) -> StereoRoadDataset:
     """Open the dataset layout called ``name`` at ``root``, on-disk ``split`` (default: the layout's first).
 
-    Options: ``disparity_mode``, ``cache_dir``, ``max_disparity`` (:class:`~freespace.data.base.StereoRoadDataset`)
+    Options: ``disparity_source``, ``cache_dir``, ``max_disparity`` (:class:`~freespace.data.base.StereoRoadDataset`)
     and the layout's own (e.g. KITTI's ``disparity_dir``).
     """
     return get_dataset_class(name)(root, split, **options)

@@ -221,7 +221,7 @@ def generate_pair(reference: PathLike, target: PathLike, road_mask: PathLike, di
 
 
 # ---------------------------------------------------------------------------------------------------
-# one reference image from another camera pose (``generate --virtual``)
+# one reference image from another camera pose
 
 
 @dataclass
@@ -388,12 +388,17 @@ def dataset_settings(dataset: Any) -> dict[str, Any]:
     disparity_dir = getattr(dataset, "disparity_dir", None)
     spec = getattr(dataset, "spec", None)
     settings = {"dataset": dataset.name, "root": str(Path(dataset.root).resolve()), "split": dataset.split,
-                "disparity": dataset.disparity_mode,
+                "disparity_source": dataset.disparity_source,
                 "disparity_dir": str(Path(disparity_dir).resolve()) if disparity_dir is not None else None,
                 "layout": json.loads(json.dumps(asdict(spec), default=str)) if is_dataclass(spec) else None}
-    if dataset.disparity_mode == "lidar":
+    if dataset.disparity_source == "lidar":
         settings["lidar_densify"] = getattr(dataset, "lidar_densify", 0.0)
     return settings
+
+
+def recorded_settings(recorded: dict[str, Any]) -> dict[str, Any]:
+    """Settings recorded by an earlier version under the names of today's (``disparity``: ``disparity_source``)."""
+    return {("disparity_source" if k == "disparity" else k): v for k, v in recorded.items()}
 
 
 def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
@@ -466,7 +471,8 @@ def frames_folder(out_dir: Path, command: str, settings: dict[str, Any], overwri
             *(f"{n}.png" for n in names), *(f"reports/{n}.json" for n in names),
             *(f"{e}/{n}.png" for e in extra for n in names)}
     with claim_folder(out_dir, command, shared=shard is not None) as folder:
-        check_settings(out_dir / SETTINGS_NAME, settings, overwrite, f"frames made by freespace {command}")
+        check_settings(out_dir / SETTINGS_NAME, settings, overwrite, f"frames made by freespace {command}",
+                       recorded_as=recorded_settings)
         if overwrite:  # only what this run (or shard) would write, and the whole run's totals, now stale
             folder.forget(mine & folder.entries())
         folder.record(mine)
@@ -483,7 +489,7 @@ def _generate_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], opti
                **({"shard": f"{shard[0]}/{shard[1]}"} if shard is not None else {}),
                **_totals(ordered), "wall_seconds": round(time.perf_counter() - t0, 3), "workers": workers,
                "options": {"robust": options.robust, "inlier_threshold": options.inlier_threshold,
-                           "max_disparity": options.max_disparity, "disparity": dataset.disparity_mode}}
+                           "max_disparity": options.max_disparity, "disparity_source": dataset.disparity_source}}
     write_json(out_dir / _totals_names(shard)[0], summary)
     return summary
 
@@ -511,10 +517,10 @@ def _check_sgbm_width(dataset: Any, options: FitOptions) -> None:
     """Refuse, once and before any work, a ``max_disparity`` that SGBM cannot use on the dataset's images:
     checked on the first frame that would be matched (no disparity or depth file, or the disparity source
     ``sgbm``); frames of other sizes still fail one by one."""
-    if dataset.disparity_mode not in ("auto", "sgbm"):
+    if dataset.disparity_source not in ("auto", "sgbm"):
         return
     frame = next((f for f in dataset.frames if f.right is not None and f.label is not None
-                  and (dataset.disparity_mode == "sgbm" or (f.disparity is None and f.depth is None))), None)
+                  and (dataset.disparity_source == "sgbm" or (f.disparity is None and f.depth is None))), None)
     if frame is None:
         return
     try:
@@ -522,7 +528,7 @@ def _check_sgbm_width(dataset: Any, options: FitOptions) -> None:
     except FreespaceError:
         return  # the frame fails with its own reason
     check_search_range(options.max_disparity, width, f"give disparities ({param('disparity_dir')}, or depth maps "
-                                                     f"with {param('disparity_mode')} depth)")
+                                                     f"with {param('disparity_source')} depth)")
 
 
 def _plan(frames: list[Any], out_dir: Path, options: FitOptions,
@@ -536,7 +542,7 @@ def _plan(frames: list[Any], out_dir: Path, options: FitOptions,
         if image_path.is_file() and report_path.is_file():
             try:
                 report = json.loads(report_path.read_text())
-                if report.get("settings", settings) == settings:  # (reports of older runs have none)
+                if recorded_settings(report.get("settings", settings)) == settings:  # (older runs' have none)
                     records[frame.name] = {**report, "status": "skipped"}
                     continue
                 log.info("%s was generated with other settings: generating it again", frame.name)

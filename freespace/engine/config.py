@@ -174,9 +174,9 @@ def _models() -> tuple[str, ...]:
 
 
 def _disparity_sources() -> tuple[str, ...]:
-    from freespace.data.disparity import DISPARITY_MODES
+    from freespace.data.disparity import DISPARITY_SOURCES
 
-    return DISPARITY_MODES
+    return DISPARITY_SOURCES
 
 
 def _option(help: str, default: Any = MISSING, *,
@@ -195,7 +195,7 @@ class TrainConfig:
 
     ``split`` is the dataset's on-disk split (as everywhere); ``splits_dir`` a folder of train/val/test
     lists (default: the paper's split by scenario); ``disparity_source`` where the DS-Generator's
-    disparities come from (:data:`freespace.data.disparity.DISPARITY_MODES`); ``augment`` the
+    disparities come from (:data:`freespace.data.disparity.DISPARITY_SOURCES`); ``augment`` the
     augmentations on top of the conventional one (random translation and rotation, always on in training):
     ``()`` none, else names of :data:`AUGMENT_NAMES`.
 

@@ -70,7 +70,7 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     (H, W: ``config.image_size``, or the first labelled frame's for :data:`FIRST_FRAME_SIZE`) and
     ``"virtual"`` (a :class:`VirtualAugment`, or None).
     """
-    ds = get_dataset(config.dataset, config.root, config.split, disparity_mode=config.disparity_source,
+    ds = get_dataset(config.dataset, config.root, config.split, disparity_source=config.disparity_source,
                      cache_dir=config.cache_dir)
     labelled = ds.labelled().frames
     if config.max_frames is not None:

@@ -223,11 +223,11 @@ def _check_test_roots(dataset: str, roots: dict[str, Path], train_root: PathLike
     training: set[Path] | None = None
     for name, root in roots.items():
         check_dataset_root(root, get_dataset_class(dataset).name)
-        frames = get_dataset(dataset, root, disparity_mode="none").labelled().frames
+        frames = get_dataset(dataset, root, disparity_source="none").labelled().frames
         if not frames:
             raise DatasetError(f"{param('test_root')} {root} has no labelled frames to test on")
         if training is None:
-            training = {f.left.resolve() for f in get_dataset(dataset, train_root, disparity_mode="none").frames}
+            training = {f.left.resolve() for f in get_dataset(dataset, train_root, disparity_source="none").frames}
         shared = [f.name for f in frames if f.left.resolve() in training]
         if shared:
             raise InvalidOptionError(f"{param('test_root')} {name}={root} holds {len(shared)} of {param('root')}'s own "
@@ -326,7 +326,7 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
                                f"({run if isinstance(run, str) else 'checkpoint: ' + repr(checkpoint.name)}); "
                                f"remove it to train the run again")
     predictor = Predictor(checkpoint=checkpoint)
-    ds = get_dataset(dataset, test_root, disparity_mode="none")
+    ds = get_dataset(dataset, test_root, disparity_source="none")
     names = [f.name for f in ds.labelled().frames]
     if not names:
         raise DatasetError(f"{param('test_root')} {test_root} has no labelled frames to test on")
@@ -740,7 +740,7 @@ def _figure(out: Path, model: str, entries: list[dict[str, Any]], frames: int) -
     if "X" not in runs or len(runs) < 2 or frames < 1:
         return
     config = read_config_yaml(runs["X"] / "config.yaml")
-    ds = get_dataset(config["dataset"], config["root"], config.get("split"), disparity_mode="none")
+    ds = get_dataset(config["dataset"], config["root"], config.get("split"), disparity_source="none")
     names = read_splits(runs["X"] / "splits")["test"][:frames]
     predictors = {v: Predictor(checkpoint=r / "checkpoints" / "best.ckpt") for v, r in runs.items()}
     rows = []

@@ -31,7 +31,7 @@ MIN_ROAD_PIXELS = 50
 #: Physical bounds of a fit (:meth:`RoadModel.check_plausible`), ones that a stereo rig on a road vehicle
 #: cannot leave. Real rigs: KITTI's roll is within ±3° and its cameras 1.65 m above the road; cars, buses
 #: and trucks carry cameras 0.3–4 m up. The renderer (``freespace synth``) draws the roll within
-#: ±``--max-roll`` (at most 15°) and the height within ``--camera-heights`` (0.3–6 m). A flipped
+#: ±``max_roll_deg`` (at most 15°) and the height within ``camera_heights`` (0.3–6 m). A flipped
 #: disparity map, or one of another frame, leaves them: vertically flipped PFMs of the two real KITTI
 #: stereo frames give rolls of −179.7° and +35.0°.
 MAX_ROLL_DEG = 20.0

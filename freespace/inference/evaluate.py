@@ -70,7 +70,7 @@ def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out:
     check_writable(out, folder=True)
     check_outputs({"out": out}, {"checkpoint": checkpoint, "root": root})
     predictor = Predictor(checkpoint=checkpoint)
-    ds = get_dataset(dataset, root, split, disparity_mode="none")
+    ds = get_dataset(dataset, root, split, disparity_source="none")
     names = _frames(ds, subset, checkpoint, splits_dir)
     if not names:
         raise DatasetError(f"subset {subset!r} has no labelled frames")

@@ -239,7 +239,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
 
     check_writable(out, folder=True)
     check_outputs({"out": out}, {"checkpoint": checkpoint, "root": root})
-    ds = KittiRoad(root, "testing", disparity_mode="none")
+    ds = KittiRoad(root, "testing", disparity_source="none")
     missing = [f.name for f in ds.frames if f.calib is None]
     if missing:
         raise InputFileError(f"{len(missing)} testing frames have no calibration (first: {missing[0]}); the BEV "

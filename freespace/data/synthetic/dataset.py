@@ -35,7 +35,7 @@ from freespace.io.outdir import check_settings, claim_folder
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
 
-#: the sign of ``pitch_deg`` and ``--pitches``, recorded in ``synth.json``: a folder written when positive
+#: the sign of ``pitch_deg`` and ``pitches_deg``, recorded in ``synth.json``: a folder written when positive
 #: meant looking up is refused (its index.csv would mix the two signs)
 PITCH_SIGN = "positive down"
 
@@ -123,7 +123,7 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
         raise InvalidOptionError(f"{param('workers')} must be ≥ 1, got {workers}")
     out = Path(out)
     check_writable(out, folder=True)
-    # pitch_sign: index.csv's pitch_deg and --pitches were positive up before they followed the package
+    # pitch_sign: index.csv's pitch_deg and pitches_deg were positive up before they followed the package
     settings = {"seed": seed, "pitch_sign": PITCH_SIGN, "config": json.loads(json.dumps(asdict(config)))}
     with claim_folder(out, "synth", entries=OUT_ENTRIES) as folder:
         check_settings(out / "synth.json", {"seed": seed, "pitch_sign": PITCH_SIGN, **settings["config"]}, overwrite,
