@@ -52,7 +52,8 @@ def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, requ
 def _open_dataset(args: argparse.Namespace):  # -> StereoRoadDataset (import kept lazy)
     from freespace.data.registry import get_dataset
 
-    options = {"disparity_source": args.disparity_source, "cache_dir": args.cache_dir, "max_disparity": args.max_disparity}
+    options = {"disparity_source": args.disparity_source, "cache_dir": args.cache_dir,
+               "max_disparity": args.max_disparity}
     if args.disparity_dir is not None:
         if args.dataset not in ("kitti", "synth"):
             raise InvalidOptionError("--disparity-dir is for KITTI road trees; other layouts name their "
@@ -248,12 +249,11 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     p.set_defaults(func=cmd_autolabel, parser=p)
 
 
-_DATASET_MODE = _GENERATE_MODES["dataset"]
 _AUTOLABEL_MODES = {
     "one": _Mode("one image", frozenset({"reference", "target", "disparity", "confidence", "model_json", "calib",
                                          "baseline"}),
                  ("reference",), hint=" and --target or --disparity (or --dataset and --root: a whole dataset)"),
-    "dataset": _DATASET_MODE,
+    "dataset": _GENERATE_MODES["dataset"],
 }
 
 
@@ -296,7 +296,8 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames-per-scenario", type=int, default=10, help="frames per drive (default 10)")
     p.add_argument("--non-planar", action="store_true", help="roads with slopes and camber")
     p.add_argument("--baseline", type=float, help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
-    p.add_argument("--max-roll", dest="max_roll_deg", type=float, default=3.0, help="rig roll range ± degrees, at most 15 (default 3)")
+    p.add_argument("--max-roll", dest="max_roll_deg", type=float, default=3.0,
+                   help="rig roll range ± degrees, at most 15 (default 3)")
     p.add_argument("--baselines", type=_range, default=(0.3, 1.6), metavar="MIN,MAX",
                    help="baseline range in metres, drawn per drive when --baseline is not given (default 0.3,1.6)")
     p.add_argument("--camera-heights", type=_range, default=(1.4, 2.0), metavar="MIN,MAX",

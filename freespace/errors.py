@@ -79,7 +79,8 @@ MAX_SEED = 2**32 - 1
 
 
 def check_seed(seed: int, name: str = "seed") -> int:
-    """``seed`` if it is an integer in 0…2³²−1, else an :class:`InvalidOptionError` naming the parameter ``name``."""
+    """``seed`` if it is an integer in 0…2³²−1, else an :class:`InvalidOptionError` naming the parameter
+    ``name``."""
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise InvalidOptionError(f"{param(name)} must be an integer in 0…{MAX_SEED}, got {seed!r}")
     return seed

@@ -46,8 +46,8 @@ def setup_logging(verbosity: int = 0) -> None:
 
 def progress_bar(iterable: Iterable[T] | None = None, *, enabled: bool = True, **kwargs: Any) -> Any:
     """A ``tqdm`` progress bar on a terminal; none off a terminal (a log file gets the stage's lines, not
-    carriage-return frames). ``enabled=False`` (the command line's no-progress option) turns it off everywhere; ``kwargs`` go
-    to ``tqdm`` (``total``, ``desc``, ``unit``, ...)."""
+    carriage-return frames). ``enabled=False`` (the command line's no-progress option) turns it off
+    everywhere; ``kwargs`` go to ``tqdm`` (``total``, ``desc``, ``unit``, ...)."""
     from tqdm import tqdm
 
     return tqdm(iterable, disable=not (enabled and sys.stderr.isatty()), **kwargs)

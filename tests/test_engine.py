@@ -87,7 +87,8 @@ def test_homography_augmentation_adds_generated_views(tiny: Path, tmp_path: Path
 
 @pytest.mark.parametrize("args, message", [
     (["--model", "fcn"], "--model must be one of"), (["--augment", "flip"], "--augment"),
-    (["--epochs", "0"], "--epochs"), (["--image-size", "12x5"], "--image-size"), (["--lr", "-1"], "--lr"), (["--strategy", "fsdp"], "--strategy"),
+    (["--epochs", "0"], "--epochs"), (["--image-size", "12x5"], "--image-size"), (["--lr", "-1"], "--lr"),
+    (["--strategy", "fsdp"], "--strategy"),
 ])
 def test_bad_options_rejected_before_work(tiny: Path, tmp_path: Path, args: list[str], message: str,
                                           capsys: pytest.CaptureFixture) -> None:
@@ -175,7 +176,8 @@ def test_config_file_and_flags(tiny: Path, tmp_path: Path, monkeypatch: pytest.M
 
     monkeypatch.setattr(train_module, "run_training", fake_training)
     run = TrainConfig(dataset="synth", root=str(tiny), out=str(tmp_path / "a"), model="segnet", epochs=7,
-                      image_size=(64, 96), splits_dir=str(tmp_path / "lists"), disparity_source="sgbm", tensorboard=False)
+                      image_size=(64, 96), splits_dir=str(tmp_path / "lists"), disparity_source="sgbm",
+                      tensorboard=False)
     run.save(tmp_path / "config.yaml")
     # a run's config.yaml, flags override it
     assert main(["train", "--config", str(tmp_path / "config.yaml"), "--epochs", "3", "--out", str(tmp_path / "b")]) == 0

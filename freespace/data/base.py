@@ -130,8 +130,9 @@ class StereoRoadDataset(ABC):
         kind = {"depth": "depth", "lidar": "velodyne"}.get(self.disparity_source)
         if kind is not None and not any(getattr(f, kind) is not None for f in self.frames):
             raise DatasetError(f"{param('disparity_source')} {self.disparity_source}: no frame of {self.name} split "
-                               f"{self.split!r} under {self.root} has a {'depth map' if kind == 'depth' else 'Velodyne scan'}; "
-                               f"see the layout's tree in the docs")
+                               f"{self.split!r} under {self.root} has a "
+                               f"{'depth map' if kind == 'depth' else 'Velodyne scan'}; see the layout's tree in the "
+                               f"docs")
 
     # --- what a layout provides ---------------------------------------------------------------------
     @abstractmethod

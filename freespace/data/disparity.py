@@ -66,7 +66,8 @@ class DisparityCache:
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "freespace" / "sgbm"
         self.folder = Path(folder) if folder is not None else base
         if self.folder.exists() and not self.folder.is_dir():
-            raise InvalidOptionError(f"{param('cache_dir')} {self.folder} is a file; give a folder for the SGBM disparities")
+            raise InvalidOptionError(f"{param('cache_dir')} {self.folder} is a file; give a folder for the SGBM "
+                                     f"disparities")
         self.settings = dict(sorted(settings.items()))
 
     def path(self, frame: FrameFiles) -> Path:
@@ -120,7 +121,8 @@ def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | N
         return depth_to_disparity(read_depth(), calib.fx, calib.baseline), "depth"
     if mode == "lidar":
         if frame.velodyne is None or read_lidar is None:
-            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); {param('disparity_source')} lidar "
+            raise DatasetError(f"{frame.name} has no Velodyne scan (velodyne/<frame>.bin); "
+                               f"{param('disparity_source')} lidar "
                                f"needs one for every frame")
         return read_lidar(), "lidar"
     if mode in ("auto", "file"):

@@ -135,7 +135,8 @@ def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int 
                 problems.append(Problem("split", f"the train/val/test split by scenario ({sizes}, seed {seed}) leaves "
                                                  f"{' and '.join(empty)} empty: {len(labelled)} labelled frames in "
                                                  f"{len({s for _, s in labelled})} scenarios; train needs frames "
-                                                 f"in each, so add frames of more scenarios or give freespace train --splits"))
+                                                 f"in each, so add frames of more scenarios or give "
+                                                 f"freespace train --splits"))
         info["splits"][split] = entry
         info["problems"] += [f"[{split}] {p}" for p in problems]
     if not info["splits"]:

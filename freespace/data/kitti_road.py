@@ -81,7 +81,8 @@ class KittiRoad(StereoRoadDataset):
             raise missing_input(self.disparity_dir, "disparity folder", "folder")
         if isinstance(lidar_densify, bool) or not (isinstance(lidar_densify, (int, float))
                                                    and math.isfinite(lidar_densify) and lidar_densify >= 0):
-            raise InvalidOptionError(f"{param('lidar_densify')} must be a number of pixels ≥ 0, got {lidar_densify!r}")
+            raise InvalidOptionError(f"{param('lidar_densify')} must be a number of pixels ≥ 0, got "
+                                     f"{lidar_densify!r}")
         self.lidar_densify = float(lidar_densify)
         super().__init__(root, split, **options)
 

@@ -398,7 +398,8 @@ def _size(shape: tuple[int, ...]) -> str:
 def _lossless_png(path: PathLike, name: str) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".png" or path.is_dir():
-        raise InvalidOptionError(f"{param(name)} {path} must be a .png file name (labels and confidences must stay exact)")
+        raise InvalidOptionError(f"{param(name)} {path} must be a .png file name (labels and confidences must "
+                                 f"stay exact)")
     return path
 
 
@@ -445,8 +446,8 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
     """
     options.check()
     if (target is None) == (disparity is None):
-        raise InvalidOptionError(f"give the right image ({param('target')}) or the left disparity ({param('disparity')}), "
-                                 f"one of them")
+        raise InvalidOptionError(f"give the right image ({param('target')}) or the left disparity "
+                                 f"({param('disparity')}), one of them")
     if calib is not None and baseline is not None:
         raise InvalidOptionError(f"give the baseline once: {param('calib')} or {param('baseline')}, not both")
     _lossless_png(out, "out")

@@ -280,7 +280,8 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
     pose = VirtualPose.parse(shift, rotate)
     lossless = tuple(x for x in IMAGE_SUFFIXES if x not in (".jpg", ".jpeg"))
     if Path(label_out).suffix.lower() not in lossless or Path(label_out).is_dir():
-        raise InvalidOptionError(f"{param('label_out')} {label_out} must be a lossless image file name ending in one of "
+        raise InvalidOptionError(f"{param('label_out')} {label_out} must be a lossless image file name ending in "
+                                 f"one of "
                                  f"{', '.join(lossless)} (labels must stay exact)")
     check_output_image_path(out)
     check_writable_files({"out": out, "label_out": label_out, "model_json": model_json})

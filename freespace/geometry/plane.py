@@ -97,7 +97,8 @@ class RoadPlane:
         """The plane under a camera ``height`` metres above a flat road, pitched and rolled (degrees).
 
         Pitch convention, the one of the whole package (a virtual view's ``rotate``, ``freespace.yaml``'s
-        ``camera``, ``SynthConfig.pitches_deg`` and its ``index.csv``): positive pitch tilts the optical axis *down*, towards
+        ``camera``, ``SynthConfig.pitches_deg`` and its ``index.csv``): positive pitch tilts the optical axis
+        *down*, towards
         the road, by ``pitch_deg`` below the horizon. The roll then turns the camera about its optical
         axis, signed like the paper's Φ (a fit of the road disparity gives ``Φ = roll_deg``). So
         ``n = Rz(roll)·Rx(pitch)·(0, 1, 0)`` with the elementary rotations of :func:`rotation_from_angles`.

@@ -125,7 +125,8 @@ class RoadModel:
             share = self.num_inliers / self.num_valid
             raise RoadFitError(f"implausible road fit: only {100 * share:.1f} % of the {self.num_valid} valid road "
                                f"pixels agree with the plane, {100 * (MIN_INLIER_SHARE - share):.1f} points below "
-                               f"the {100 * MIN_INLIER_SHARE:g} % a road gives; raise {param('inlier_threshold')} if it is "
+                               f"the {100 * MIN_INLIER_SHARE:g} % a road gives; raise {param('inlier_threshold')} "
+                               f"if it is "
                                f"below the disparity's noise, else {hint}")
         if abs(self.roll_deg) > MAX_ROLL_DEG:
             raise RoadFitError(f"implausible road fit: roll {self.roll_deg:+.1f}° is "

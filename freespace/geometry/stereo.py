@@ -36,7 +36,8 @@ def check_search_range(max_disparity: int, width: int,
     fix = fix or f"give the disparity ({param('disparity')}; {param('disparity_dir')} for a dataset)"
     num = int(np.ceil(max_disparity / 16.0)) * 16
     if num >= width:
-        raise InvalidOptionError(f"the stereo matcher's maximum disparity ({num} px, {param('max_disparity')} rounded up to "
+        raise InvalidOptionError(f"the stereo matcher's maximum disparity ({num} px, {param('max_disparity')} "
+                                 f"rounded up to "
                                  f"a multiple of 16) must be smaller than the image width ({width} px); "
                                  f"lower {param('max_disparity')}, or {fix}")
     return num

@@ -31,8 +31,8 @@ def _frames(ds, subset: str, checkpoint: Path, splits_dir: PathLike | None) -> l
         return [f.name for f in ds.labelled()]
     folder = Path(splits_dir) if splits_dir else checkpoint.parent.parent / "splits"
     if not (folder / f"{subset}.txt").is_file():
-        raise InputFileError(f"no split lists at {folder}; give {param('splits_dir')} DIR (train.txt, val.txt, test.txt) "
-                             f"or {param('subset')} all")
+        raise InputFileError(f"no split lists at {folder}; give {param('splits_dir')} DIR (train.txt, val.txt, "
+                             f"test.txt) or {param('subset')} all")
     return read_splits(folder, known=[f.name for f in ds.frames])[subset]
 
 

@@ -48,7 +48,8 @@ class SynthConfig:
         baselines: (min, max) baseline in metres drawn per scenario when ``baseline`` is None.
         camera_heights: (min, max) height of the rig above the road in metres, per scenario.
         pitches_deg: (min, max) rig pitch in degrees, per scenario: positive = the optical axis tilted down,
-            towards the road (as a virtual view's ``rotate``, ``RoadPlane.from_camera`` and ``freespace.yaml``'s ``camera``).
+            towards the road (as a virtual view's ``rotate``, ``RoadPlane.from_camera`` and ``freespace.yaml``'s
+            ``camera``).
         max_roll_deg: rig roll drawn in ±this (degrees).
         weathers: weathers to draw from.
         vehicles, pedestrians: (min, max) counts per frame.
@@ -70,7 +71,8 @@ class SynthConfig:
     def check(self) -> None:
         """Raise InvalidOptionError for values the renderer cannot use."""
         if not (32 <= self.width <= 8192 and 32 <= self.height <= 8192):
-            raise InvalidOptionError(f"{param('width')}/{param('height')} must be 32..8192 pixels, got {self.width}×{self.height}")
+            raise InvalidOptionError(f"{param('width')}/{param('height')} must be 32..8192 pixels, got "
+                                     f"{self.width}×{self.height}")
         if self.frames_per_scenario < 1:
             raise InvalidOptionError(f"{param('frames_per_scenario')} must be ≥ 1")
         if self.baseline is not None and not 0.01 <= self.baseline <= 10:
@@ -79,9 +81,11 @@ class SynthConfig:
                                                ("camera_heights", self.camera_heights, CAMERA_HEIGHTS_M),
                                                ("pitches_deg", self.pitches_deg, (-20.0, 20.0))):
             if not least <= lo <= hi <= most:
-                raise InvalidOptionError(f"{param(name)} must be MIN,MAX with {least} ≤ MIN ≤ MAX ≤ {most}, got {lo},{hi}")
+                raise InvalidOptionError(f"{param(name)} must be MIN,MAX with {least} ≤ MIN ≤ MAX ≤ {most}, "
+                                         f"got {lo},{hi}")
         if not 0 <= self.max_roll_deg <= MAX_ROLL_DEG:
-            raise InvalidOptionError(f"{param('max_roll_deg')} must be 0..{MAX_ROLL_DEG:g} degrees, got {self.max_roll_deg}")
+            raise InvalidOptionError(f"{param('max_roll_deg')} must be 0..{MAX_ROLL_DEG:g} degrees, got "
+                                     f"{self.max_roll_deg}")
         bad = [w for w in self.weathers if w not in WEATHERS]
         if bad or not self.weathers:
             raise InvalidOptionError(f"unknown weather {bad}; choose from {', '.join(WEATHERS)}")
