@@ -630,13 +630,13 @@ def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[s
           "unfinished" + (f", {skipped} skipped for unusable metrics.json" if skipped else "") + "): "
           "test set `test` = the dataset's test split, any other = every labelled frame of the further test set of "
           "that name (`shifted` when it was given none); "
-          "%, mean ± std over the `n` seeds finished.", ""]
+          "%, mean ± std over the `n` seeds finished (no std with one seed).", ""]
     if differ:
         md += [f"**Warning: the runs differ in {'; '.join(differ)}.**", ""]
     md += ["| Network | Variant | Test set | n | " + " | ".join(_NAMES.values()) + " |",
            "|---|---|---|---:|" + "---:|" * len(_NAMES)]
     for r in table:
-        cells = [f"{r[k + '_mean']:.2f} ± {r[k + '_std']:.2f}" for k in _NAMES]
+        cells = [f"{r[k + '_mean']:.2f}" + (f" ± {r[k + '_std']:.2f}" if r["n"] > 1 else "") for k in _NAMES]
         md.append(f"| {r['network']} | {r['variant']} | {r['test_set']} | {r['n']} | " + " | ".join(cells) + " |")
     md += ["", f"Paired gains in points (one difference per seed: the variants of a seed share the split and the "
            f"initial weights), mean and 95 % Student t-interval over the `n` seeds (no interval with one seed); "
