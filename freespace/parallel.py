@@ -104,5 +104,10 @@ def worker_pool(workers: int, initializer: Callable[..., None], initargs: tuple[
             p.terminate()
         for p in processes:
             p.join(timeout=5)
+        # the pool's manager thread closes its wake-up pipe when it sees the workers gone; the interpreter's exit
+        # hook writes to that pipe, and when both happen at once the write fails with a traceback on stderr
+        manager = getattr(pool, "_executor_manager_thread", None)
+        if manager is not None:
+            manager.join(timeout=5)
         raise
     pool.shutdown(wait=True)
