@@ -57,25 +57,33 @@ def die_with_parent(parent: int, poll_seconds: float = 1.0) -> None:
 
 def init_worker(parent: int) -> None:
     """What every worker of :func:`worker_pool` does first: ignore Ctrl-C (the parent handles it and ends
-    the workers) and :func:`die_with_parent`."""
+    the workers), take ``SIGTERM`` again (a terminate that came while the worker started ends it now, silently)
+    and :func:`die_with_parent`."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C that came while the worker started is dropped
     if hasattr(signal, "pthread_sigmask"):
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STARTUP_BLOCKED)
     die_with_parent(parent)
 
 
+#: signals blocked while a worker starts (see :class:`_Pool`)
+_STARTUP_BLOCKED = {signal.SIGINT, signal.SIGTERM}
+
+
 class _Pool(ProcessPoolExecutor):
-    """A pool whose workers start with Ctrl-C blocked: ``submit`` starts them (``spawn``), and the blocked
-    signal mask passes on to them through ``exec``, until :func:`init_worker` ignores Ctrl-C. Without it a
-    Ctrl-C while a worker imports its modules prints that worker's traceback."""
+    """A pool whose workers start with Ctrl-C and ``SIGTERM`` blocked: ``submit`` starts them (``spawn``), and
+    the blocked signal mask passes on to them through ``exec``, until :func:`init_worker`. Without it a Ctrl-C
+    while a worker imports its modules prints that worker's traceback, and a ``SIGTERM`` that ends the parent
+    between starting a worker and sending it its start-up data leaves that worker to print an ``EOFError``;
+    blocked, the signal reaches the parent after ``submit``, when every worker it started is known and can be
+    terminated."""
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Any:
         if not hasattr(signal, "pthread_sigmask"):
             return super().submit(fn, *args, **kwargs)
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, _STARTUP_BLOCKED)
         try:
             return super().submit(fn, *args, **kwargs)
-        finally:  # a Ctrl-C that came meanwhile is raised here, in the parent
+        finally:  # a Ctrl-C or SIGTERM that came meanwhile is raised here, in the parent
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
