@@ -274,6 +274,17 @@ def test_tensorboard_is_optional(tiny: Path, tmp_path: Path, capsys: pytest.Capt
     assert "pip install tensorboard" in capsys.readouterr().err
 
 
+def test_the_module_trains_channels_last() -> None:
+    from freespace.engine.module import RoadModule
+
+    module = RoadModule("unet", {}, lr=0.01, momentum=0.9, weight_decay=0.0)
+    module.on_fit_start()
+    conv = next(m for m in module.net.modules() if isinstance(m, torch.nn.Conv2d))
+    assert conv.weight.is_contiguous(memory_format=torch.channels_last)
+    batch = module.on_after_batch_transfer({"image": torch.rand(2, 3, 32, 48), "label": torch.zeros(2, 32, 48)}, 0)
+    assert batch["image"].is_contiguous(memory_format=torch.channels_last) and batch["label"].shape == (2, 32, 48)
+
+
 def test_dropout_draws_depend_on_the_run_seed_and_the_epoch() -> None:
     from freespace.engine.module import epoch_seed
 

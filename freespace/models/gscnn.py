@@ -80,9 +80,9 @@ def image_weighted_cross_entropy(logits: torch.Tensor, target: torch.Tensor,
         if not valid.any():
             total = total + lg.sum() * 0
             continue
-        hist = torch.bincount(t[valid], minlength=num_classes)[:num_classes].float()
+        hist = torch.bincount(t[valid], minlength=num_classes)[:num_classes].to(logits.dtype)
         hist = hist / hist.sum()
-        weight = 1 + (hist > 0).float() * (1 - hist)
+        weight = 1 + (hist > 0).to(logits.dtype) * (1 - hist)
         total = total + F.cross_entropy(lg[None], t[None], weight=weight, ignore_index=ignore_index)
     return total / logits.shape[0]
 
