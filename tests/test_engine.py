@@ -313,3 +313,19 @@ def test_min_delta_lets_early_stopping_fire(tiny: Path, tmp_path: Path) -> None:
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["epochs_run"] == 2 and metrics["best_epoch"] == 0
     assert _train(tiny, tmp_path / "bad", "--min-delta", "1.5") == 2
+
+
+def test_a_larger_patience_extends_a_stopped_run_exactly(tiny: Path, tmp_path: Path) -> None:
+    """Early stopping changes nothing a run computes before it stops: a run that stopped with patience 1 and is
+    resumed with patience 3 ends as a run started with 3 (Lightning's checkpoint would restore the old one)."""
+    stopped, fresh = tmp_path / "stopped", tmp_path / "fresh"
+    common = ("--epochs", "8", "--min-delta", "0.5", "--image-size", "64x96")
+    assert _train(tiny, stopped, *common, "--patience", "1") == 0
+    assert json.loads((stopped / "metrics.json").read_text())["epochs_run"] == 2
+    assert _train(tiny, fresh, *common, "--patience", "3") == 0
+    assert _train(tiny, stopped, *common, "--patience", "3", "--resume") == 0
+    assert _metrics(stopped) == _metrics(fresh) and _metrics(fresh)["epochs_run"] == 4
+    rows = [[{k: v for k, v in r.items() if k != "seconds"} for r in csv.DictReader((run / "metrics.csv").open())]
+            for run in (stopped, fresh)]
+    assert rows[0] == rows[1]
+    assert _train(tiny, stopped, *common, "--patience", "2", "--resume") == 2  # patience may only grow

@@ -696,7 +696,8 @@ def test_an_interrupted_synth_resumes_and_can_be_overwritten(tmp_path: Path, mon
 
 def test_reproduce_refuses_a_cell_with_other_settings(trained: dict[str, Path], tmp_path: Path,
                                                      capsys: pytest.CaptureFixture) -> None:
-    """A finished (or started) cell keeps its settings: --epochs, --image-size or --root changed is refused."""
+    """A finished (or started) cell keeps its settings: a smaller --epochs, another --image-size or --root is
+    refused (a larger epoch cap or patience extends it: test_reproduce)."""
     from freespace.engine.config import TrainConfig
     from freespace.experiments.reproduce import OUT_ENTRIES
     from freespace.io.outdir import claim_folder
@@ -704,19 +705,20 @@ def test_reproduce_refuses_a_cell_with_other_settings(trained: dict[str, Path], 
     out = tmp_path / "exp"
     run = out / "runs" / "segnet-orig-s0"
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES):
-        TrainConfig(dataset="synth", root=str(trained["data"]), out=str(run), model="segnet", epochs=1,
+        TrainConfig(dataset="synth", root=str(trained["data"]), out=str(run), model="segnet", epochs=2,
                     image_size=(64, 64), batch_size=4, patience=10).save(run / "config.yaml")
         (run / "metrics.json").write_text(json.dumps({"f_score": 0.5}))
     before = snapshot(out)
     base = ["reproduce", "--dataset", "synth", "--root", str(trained["data"]), "--out", str(out), "--only",
             "segnet,X,0", "--batch-size", "4", "--patience", "10", "--seeds", "1", "--no-progress"]
-    for change, key in ((["--epochs", "2", "--image-size", "64x64"], "epochs"),
-                        (["--epochs", "1", "--image-size", "96x96"], "image_size")):
+    for change, key in ((["--epochs", "1", "--image-size", "64x64"], "epochs"),
+                        (["--epochs", "2", "--image-size", "96x96"], "image_size"),
+                        (["--epochs", "2", "--image-size", "64x64", "--patience", "5"], "patience")):
         err = refused(capsys, base + change, match="other settings")
         assert key in err
     other = _kitti_root(trained, tmp_path)
     refused(capsys, ["reproduce", "--dataset", "synth", "--root", str(other), "--out", str(out), "--only",
-                     "segnet,X,0", "--batch-size", "4", "--patience", "10", "--seeds", "1", "--epochs", "1",
+                     "segnet,X,0", "--batch-size", "4", "--patience", "10", "--seeds", "1", "--epochs", "2",
                      "--image-size", "64x64"], match="root")
     assert snapshot(out) == before
 

@@ -205,6 +205,31 @@ def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, caps
     assert "bogus" not in (cells / "results.csv").read_text()
 
 
+def test_a_larger_cap_or_patience_extends_a_finished_cell(data: Path, same_rigs: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture) -> None:
+    """A finished cell run again with a larger --epochs resumes from its last checkpoint, ends as a cell started
+    with it, and is tested again on each test set; a smaller patience is refused."""
+    def cell(out: Path, epochs: str, patience: str = "10") -> list[str]:
+        return ["reproduce", "--dataset", "synth", "--root", str(data), "--seeds", "1", "--epochs", epochs,
+                "--patience", patience, "--image-size", "64x96", "--batch-size", "4", "--no-progress",
+                "--test-root", f"same={same_rigs}", "--out", str(out), "--only", "segnet,X,0"]
+
+    extended, fresh = tmp_path / "extended", tmp_path / "fresh"
+    assert main(cell(extended, "1")) == 0
+    run = extended / "runs/segnet-orig-s0"
+    assert json.loads((run / "same/metrics.json").read_text())["trained"] == {"best_epoch": 0, "epochs_run": 1}
+    assert main(cell(extended, "2")) == 0
+    assert main(cell(fresh, "2")) == 0
+    ours, theirs = (json.loads((r / "runs/segnet-orig-s0/metrics.json").read_text()) for r in (extended, fresh))
+    assert {k: ours[k] for k in (*METRICS, "epochs_run")} == {k: theirs[k] for k in (*METRICS, "epochs_run")}
+    assert ours["epochs_run"] == 2
+    same = [json.loads((r / "runs/segnet-orig-s0/same/metrics.json").read_text()) for r in (extended, fresh)]
+    assert same[0]["trained"]["epochs_run"] == 2 and {k: same[0][k] for k in METRICS} == {k: same[1][k] for k in METRICS}
+    capsys.readouterr()
+    assert main(cell(extended, "2", patience="5")) == 2
+    assert "patience 10 → 5" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--models", "fcn"], "unknown models"),
     (["--seeds", "0"], "--seeds must be in 1…1000"),

@@ -80,8 +80,23 @@ def _callbacks(run_dir: Path, patience: int, monitor: str,
                min_delta: float = 0.0) -> tuple[list[pl.Callback], ModelCheckpoint]:
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor=monitor, mode="max",
                            save_top_k=1, save_last=True, enable_version_counter=False)
-    stop = EarlyStopping(monitor=monitor, mode="max", patience=patience, min_delta=min_delta, check_finite=True)
+    stop = _EarlyStopping(monitor=monitor, mode="max", patience=patience, min_delta=min_delta, check_finite=True)
     return [ckpt, stop, EpochCSV(run_dir)], ckpt
+
+
+class _EarlyStopping(EarlyStopping):
+    """Early stopping whose patience is the run's config, not the resumed checkpoint's: a run resumed with a
+    larger patience goes on exactly as a run started with it would (the count of epochs without improvement
+    does not depend on the patience)."""
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        patience = self.patience
+        super().load_state_dict(state_dict)
+        self.patience = patience
+
+
+#: the options a resumed run may raise: it goes on exactly as a run started with the larger values would
+GROWABLE = ("epochs", "patience")
 
 
 #: what a run writes into its folder, as :mod:`freespace.io.outdir` entries (removed when a plain rerun takes
@@ -174,8 +189,9 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
     """Train, validate each epoch, stop early on the validation F-score, test the best checkpoint.
 
     ``config`` is checked first (:meth:`TrainConfig.check`, before anything is written). ``resume``
-    continues the run in ``config.out`` from its last checkpoint, with the run's options (``epochs`` may
-    grow).
+    continues the run in ``config.out`` from its last checkpoint, with the run's options (``epochs`` and
+    ``patience`` may grow: a run that early stopping ended goes on as if started with the larger values, and
+    its ``metrics.json`` is removed until the new end).
 
     Returns the test metrics (also written to ``RUN_DIR/metrics.json``).
     """
@@ -197,6 +213,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         last = run_dir / "checkpoints" / "last.ckpt"
         if resume:
             config = _check_resume(config, run_dir, last)
+            (run_dir / "metrics.json").unlink(missing_ok=True)  # the run is unfinished again until its new end
         elif (run_dir / "config.yaml").is_file():
             if last.is_file():
                 raise InvalidOptionError(f"{run_dir} already holds a run; add {param('resume')} to continue it or "
@@ -227,11 +244,12 @@ def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> TrainConfig
         config = replace(config, image_size=saved.image_size)
     now = config.to_dict()
     changed = [k for k, v in saved.to_dict().items()
-               if k not in ("epochs", "out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
-               and now[k] != v]
+               if k not in ("out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
+               and now[k] != v and not (k in GROWABLE and now[k] > v)]
     if changed:
         raise InvalidOptionError(f"{param('resume')} with other options than the run's ({', '.join(changed)}); "
-                                 f"resume with the same options (only {param('epochs')} may grow)")
+                                 f"resume with the same options (only {param('epochs')} and {param('patience')} "
+                                 f"may grow)")
     from freespace.models import create_model  # the run's network, named as in RoadModule: before any work
 
     _check_fits(resumed, torch.nn.ModuleDict({"net": create_model(config.model, **config.model_options())}), last)

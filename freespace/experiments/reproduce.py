@@ -256,22 +256,28 @@ def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, s
 _CELL_FREE = ("out", "workers", "devices", "num_nodes", "strategy", "tensorboard")
 
 
-def _cell_changes(config: TrainConfig, run_dir: Path) -> list[str]:
+def _cell_changes(config: TrainConfig, run_dir: Path) -> tuple[list[str], bool]:
     """The settings of ``config`` that differ from those the cell in ``run_dir`` was started with
-    (``key old → new``, in config.yaml's spelling); ``[]`` when it has no config.yaml yet. The cell's
+    (``key old → new``, in config.yaml's spelling; ``[]`` when it has no config.yaml yet), but for a larger
+    ``epochs`` or ``patience`` (:data:`~freespace.engine.train.GROWABLE`); and whether one of those grew. The cell's
     config.yaml may be of any version (its spellings and renamed keys read as the values they were); ``root``
     compares resolved; an ``image_size`` of :data:`~freespace.engine.config.FIRST_FRAME_SIZE` matches the
     size it was resolved to."""
+    from freespace.engine.train import GROWABLE
+
     saved_path = run_dir / "config.yaml"
     if not saved_path.is_file():
-        return []
+        return [], False
     recorded = TrainConfig.load(saved_path)
     if config.image_size == FIRST_FRAME_SIZE:
         config = replace(config, image_size=recorded.image_size)
     saved, new = recorded.to_dict(), config.to_dict()
     for d in (saved, new):
         d["root"] = str(Path(d["root"]).expanduser().resolve())
-    return [f"{k} {saved.get(k)!r} → {v!r}" for k, v in new.items() if k not in _CELL_FREE and saved.get(k) != v]
+    grown = [k for k in GROWABLE if new[k] > saved[k]]
+    changes = [f"{k} {saved.get(k)!r} → {v!r}" for k, v in new.items()
+               if k not in (*_CELL_FREE, *grown) and saved.get(k) != v]
+    return changes, bool(grown)
 
 
 def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool = True) -> str:
@@ -280,25 +286,33 @@ def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool
     (:func:`parse_test_roots`; ``RUN/<name>/metrics.json``). Writes nothing outside the run folder.
 
     A cell started with other settings (its ``config.yaml``: every training option but where the files go
-    and how the work is spread) is refused, finished or not, so a campaign never mixes regimes.
+    and how the work is spread) is refused, finished or not, so a campaign never mixes regimes. A larger
+    epoch cap or patience extends the cell instead: it resumes from its last checkpoint, exactly as a cell
+    started with them would have gone on, and is tested again.
 
     Returns the status: ``"done"`` or ``"done (skipped)"``.
     """
     from freespace.engine.train import run_training
 
     run_dir = Path(config.out)
-    changes = _cell_changes(config, run_dir)
+    changes, grown = _cell_changes(config, run_dir)
     if changes:
         raise InvalidOptionError(f"{run_dir} was started with other settings ({'; '.join(changes)}); rerun with its "
                                  f"settings, or give another {param('out')} for the new ones")
-    if (run_dir / "metrics.json").is_file():
+    finished = (run_dir / "metrics.json").is_file()
+    tests = parse_test_roots(test_root)
+    if finished and not grown:
         status = "done (skipped)"
     else:
+        if finished:  # extended: its test scores were the old end's
+            for name in tests:
+                (run_dir / name / "metrics.json").unlink(missing_ok=True)
         resume = (run_dir / "checkpoints" / "last.ckpt").is_file()
-        log.info("training %s (%s)", run_dir.name, "resuming" if resume else "new")
+        log.info("training %s (%s)", run_dir.name, "extending" if finished and resume else
+                 "resuming" if resume else "new")
         run_training(config, resume=resume, progress=progress)
         status = "done"
-    for name, root in parse_test_roots(test_root).items():
+    for name, root in tests.items():
         evaluate_test_set(run_dir, config.dataset, root, name)
     return status
 
@@ -307,7 +321,8 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
                       name: str = DEFAULT_TEST_SET) -> dict[str, Any]:
     """Test a finished run's checkpoint on every labelled frame of ``test_root`` (a ``dataset`` tree):
     ``RUN/<name>/metrics.json`` (accuracy, precision, recall, f_score, iou at p ≥ 0.5, max_f, ap as
-    fractions; frames; the resolved root). Skipped when that file exists for the same root."""
+    fractions; frames; the resolved root; the run's ``best_epoch`` and ``epochs_run``). Skipped when that file
+    exists for the same root and the same end of training (an extended run is tested again)."""
     from freespace.data.registry import get_dataset
     from freespace.inference.evaluate import evaluate_frames
     from freespace.inference.predictor import Predictor
@@ -315,11 +330,12 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     run_dir = Path(run_dir)
     path = run_dir / name / "metrics.json"
     root = str(Path(test_root).resolve())
+    run = _read_metrics(run_dir / "metrics.json")
+    trained = {k: run.get(k) for k in ("best_epoch", "epochs_run")} if isinstance(run, dict) else {}
     if path.is_file():
         done = _read_metrics(path)
-        if isinstance(done, dict) and done.get("root") == root:
-            return done
-    run = _read_metrics(run_dir / "metrics.json")
+        if isinstance(done, dict) and done.get("root") == root and done.get("trained", trained) == trained:
+            return done  # (a file of an older version records no end of training)
     checkpoint = run_dir / str(run.get("checkpoint") if isinstance(run, dict) else "")
     if isinstance(run, str) or not checkpoint.is_file() or not checkpoint.resolve().is_relative_to(run_dir.resolve()):
         raise CorruptFileError(f"{run_dir / 'metrics.json'} names no checkpoint of the run "
@@ -333,7 +349,7 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     with claim_folder(run_dir, "train", entries=[f"{name}/"]):  # the run folder's own entry, under its lock
         scores = evaluate_frames(predictor, ds, names)[0].evaluate()
         metrics = {**{k: scores[k] for k in (*METRICS, "max_f", "ap")}, "frames": len(names), "dataset": dataset,
-                   "root": root, "checkpoint": checkpoint.relative_to(run_dir).as_posix()}
+                   "root": root, "checkpoint": checkpoint.relative_to(run_dir).as_posix(), "trained": trained}
         write_json(path, metrics)
     log.info("%s on the %s set (%d frames): F %.4f  IoU %.4f", run_dir.name, name, len(names),
              metrics["f_score"], metrics["iou"])

@@ -2,11 +2,12 @@
 # The converged run (issue 23; plan and costs in plan.md beside this file): the claim in the paper's regime.
 # DeepLabv3+ (EfficientNet-Lite0, ImageNet weights, output stride 16) at 320x416, DenseASPP at 224x288 (their
 # intact sizes), U-Net and DUpsampling (Lite0, ImageNet) and SegNet (no offline weights for VGG) at 192x256;
-# variants X, HA-X, X-dup, X-long; 10 seeds; each run to early stopping (patience 10 on the 3-epoch mean of
-# the validation F-score, cap 100 epochs; X-long 20 and 200; lr and least improvement from the pilot in
-# plan.md: LR=0.01 MIN_DELTA=0.001); test sets: test, shifted (rigs the training
-# set never had, much wider than the evidence run's), matched (shifted's scenes with the training rigs),
-# same-rigs (200 frames of new drives with the training rigs; the primary endpoint's set).
+# variants X, HA-X, X-dup, X-long; 10 seeds; each run to early stopping (patience 20 on the 3-epoch mean of
+# the validation F-score, cap 200 epochs; X-long 40 and 400; lr and least improvement from the pilot in
+# plan.md: LR=0.01 MIN_DELTA=0.001 PATIENCE=20 CAP=200; sessions 1-3 ran patience 10, cap 100); test sets:
+# test, shifted (rigs the training set never had, much wider than the evidence run's), matched (shifted's
+# scenes with the training rigs), same-rigs (200 frames of new drives with the training rigs; the primary
+# endpoint's set).
 #
 # Cells run seed-major (every network and variant of seed 0 first, ...), two at a time with one thread each,
 # as `reproduce --only` cells in WORK/res. A cell interrupted by the end of a session resumes from its
@@ -18,7 +19,8 @@
 # The control of pretraining (X with the Lite encoders from scratch, kept in res-scratch/ beside this script):
 #   RES=res-scratch WEIGHTS= NETS="unet dupsampling" VARIANTS=X bash run.sh WORK
 # LR and MIN_DELTA set the learning rate and early stopping's least improvement (defaults 0.001 and 0, the
-# session-1 pilot's; plan.md names the ones the run fixes).
+# session-1 pilot's), PATIENCE and CAP the patience and the epoch cap (defaults 10 and 100; X-long doubles
+# both); plan.md names the values the run fixes. A larger PATIENCE or CAP extends the finished cells exactly.
 # Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace, PYTHON=its python; STOP_AT: a
 #        `date` time after which no new cell starts, e.g. "14:10"; CELLS="net,variant,seed ..." to run only
 #        those; KEEP=DIR to keep the finished cells elsewhere than beside this script). Run it from a git
@@ -67,7 +69,7 @@ SEEDS=${SEEDS:-10}
 export FS WORK HERE STOP_AT RES WEIGHTS
 COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root matched=matched
         --test-root same-rigs=same-rigs --autolabels autolabels --seeds 10
-        --epochs 100 --patience 10 --val-window 3 --min-delta ${MIN_DELTA:-0}
+        --epochs ${CAP:-100} --patience ${PATIENCE:-10} --val-window 3 --min-delta ${MIN_DELTA:-0}
         --lr ${LR:-0.001} --batch-size 2 --no-progress --out $RES"
 export COMMON
 
