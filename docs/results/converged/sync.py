@@ -3,7 +3,9 @@
 ``python sync.py save RES RUN KEEP``: copy the small files of ``RES/runs/RUN`` (config, per-epoch CSV, metrics,
 splits, test-set metrics, the run's manifest) to ``KEEP/runs/RUN``; never ``checkpoints/``, ``generated/`` or
 the lock. ``python sync.py restore KEEP RES``: copy every kept cell that ``RES`` lacks back into it (a cell
-finished on another machine is then skipped, not trained again), under RES's own manifest.
+finished on another machine is then skipped, not trained again), under RES's own manifest. A cell that ``RES``
+holds in any state is left as it is: an extension in progress has no metrics.json, and the kept copy's
+shorter metrics.csv must not replace its own.
 """
 
 from __future__ import annotations
@@ -30,8 +32,8 @@ def save(res: Path, run: str, keep: Path) -> None:
 def restore(keep: Path, res: Path) -> None:
     with claim_folder(res, "reproduce", entries=OUT_ENTRIES, shared=True):
         for cell in sorted(p for p in (keep / "runs").glob("*") if p.is_dir()):
-            if not (res / "runs" / cell.name / "metrics.json").is_file():
-                shutil.copytree(cell, res / "runs" / cell.name, dirs_exist_ok=True)
+            if not (res / "runs" / cell.name).exists():
+                shutil.copytree(cell, res / "runs" / cell.name)
 
 
 if __name__ == "__main__":
