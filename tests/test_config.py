@@ -106,7 +106,7 @@ def _folders(tmp_path: Path) -> dict[str, str]:
 def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) -> None:
     """The recorded-settings check of reproduce passes for a cell written before this version, and the cell
     is written back in the same spellings (the disparity source's key renamed, the old key read too)."""
-    from freespace.experiments.reproduce import _cell_changes
+    from freespace.experiments.reproduce import _check_cell
 
     where = _folders(tmp_path)
     run = Path(where["out"])
@@ -116,11 +116,14 @@ def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) 
                        encoder_name="efficientnet-lite0", encoder_weights="imagenet", augment="homography", epochs=100,
                        batch_size=2, lr=0.01, val_window=3, min_delta=0.001, seed=0)  # image size: the first frame's
     assert cell.image_size == FIRST_FRAME_SIZE
-    assert _cell_changes(cell, run) == []
+    assert _check_cell(cell) is False  # the same cell, nothing grown
     assert TrainConfig.load(run / "config.yaml") == dataclasses.replace(cell, image_size=(192, 256))
-    assert _cell_changes(dataclasses.replace(cell, lr=0.001), run) == ["lr 0.01 → 0.001"]
-    assert _cell_changes(dataclasses.replace(cell, augment="homography,virtual"), run) == \
-        ["augment 'homography' → 'homography,virtual'"]
+    assert _check_cell(dataclasses.replace(cell, patience=20)) is True  # extended
+    for change, message in (({"lr": 0.001}, "(lr 0.01 → 0.001)"),
+                            ({"augment": "homography,virtual"}, "(augment 'homography' → 'homography,virtual')"),
+                            ({"epochs": 50, "patience": 20}, "(epochs 100 → 50)")):
+        with pytest.raises(InvalidOptionError, match=re.escape(message)):
+            _check_cell(dataclasses.replace(cell, **change))
     TrainConfig.load(run / "config.yaml").save(tmp_path / "again.yaml")
     assert (tmp_path / "again.yaml").read_text() == \
         CAMPAIGN_YAML.format(**where).replace("disparity_mode:", "disparity_source:")

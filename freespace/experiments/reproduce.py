@@ -256,18 +256,19 @@ def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, s
 _CELL_FREE = ("out", "workers", "devices", "num_nodes", "strategy", "tensorboard")
 
 
-def _cell_changes(config: TrainConfig, run_dir: Path) -> tuple[list[str], bool]:
-    """The settings of ``config`` that differ from those the cell in ``run_dir`` was started with
-    (``key old → new``, in config.yaml's spelling; ``[]`` when it has no config.yaml yet), but for a larger
-    ``epochs`` or ``patience`` (:data:`~freespace.engine.train.GROWABLE`); and whether one of those grew. The cell's
+def _check_cell(config: TrainConfig) -> bool:
+    """Refuse ``config`` when the cell in ``config.out`` was started with other settings (``key old → new``, in
+    config.yaml's spelling), but for a larger ``epochs`` or ``patience``
+    (:data:`~freespace.engine.train.GROWABLE`); return whether one of those grew. The cell's
     config.yaml may be of any version (its spellings and renamed keys read as the values they were); ``root``
     compares resolved; an ``image_size`` of :data:`~freespace.engine.config.FIRST_FRAME_SIZE` matches the
     size it was resolved to."""
     from freespace.engine.train import GROWABLE
 
+    run_dir = Path(config.out)
     saved_path = run_dir / "config.yaml"
     if not saved_path.is_file():
-        return [], False
+        return False
     recorded = TrainConfig.load(saved_path)
     if config.image_size == FIRST_FRAME_SIZE:
         config = replace(config, image_size=recorded.image_size)
@@ -277,7 +278,10 @@ def _cell_changes(config: TrainConfig, run_dir: Path) -> tuple[list[str], bool]:
     grown = [k for k in GROWABLE if new[k] > saved[k]]
     changes = [f"{k} {saved.get(k)!r} → {v!r}" for k, v in new.items()
                if k not in (*_CELL_FREE, *grown) and saved.get(k) != v]
-    return changes, bool(grown)
+    if changes:
+        raise InvalidOptionError(f"{run_dir} was started with other settings ({'; '.join(changes)}); rerun with its "
+                                 f"settings, or give another {param('out')} for the new ones")
+    return bool(grown)
 
 
 def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool = True) -> str:
@@ -295,10 +299,7 @@ def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool
     from freespace.engine.train import run_training
 
     run_dir = Path(config.out)
-    changes, grown = _cell_changes(config, run_dir)
-    if changes:
-        raise InvalidOptionError(f"{run_dir} was started with other settings ({'; '.join(changes)}); rerun with its "
-                                 f"settings, or give another {param('out')} for the new ones")
+    grown = _check_cell(config)
     finished = (run_dir / "metrics.json").is_file()
     tests = parse_test_roots(test_root)
     if finished and not grown:
@@ -403,10 +404,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
         return {"table": [], "gains": [], "runs": [entry]}
     configs = [_config(dataset, root, out, model, variant, seed, options, autolabels)  # all checked before any work
                for model in chosen_models for variant in chosen for seed in range(seeds)]
-    changed = next(((c, ch) for c in configs if (ch := _cell_changes(c, Path(c.out)))), None)
-    if changed is not None:
-        raise InvalidOptionError(f"{changed[0].out} was started with other settings ({'; '.join(changed[1])}); rerun "
-                                 f"with its settings, or give another {param('out')} for the new ones")
+    for config in configs:
+        _check_cell(config)
     _check_test_roots(dataset, roots, root)
     statuses: dict[str, str] = {}
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
