@@ -305,9 +305,10 @@ def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool
     if finished and not grown:
         status = "done (skipped)"
     else:
-        if finished:  # extended: its test scores were the old end's
-            for name in tests:
-                (run_dir / name / "metrics.json").unlink(missing_ok=True)
+        if finished:  # extended: its test scores were the old end's (under the lock: no other run is in it)
+            with claim_folder(run_dir, "train", entries=[f"{name}/" for name in tests]):
+                for name in tests:
+                    (run_dir / name / "metrics.json").unlink(missing_ok=True)
         resume = (run_dir / "checkpoints" / "last.ckpt").is_file()
         log.info("training %s (%s)", run_dir.name, "extending" if finished and resume else
                  "resuming" if resume else "new")
