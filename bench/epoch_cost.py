@@ -100,5 +100,6 @@ def _commit(tree: Path) -> str:
     done = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
     return done.stdout.strip() if done.returncode == 0 else str(tree)
 
+
 if __name__ == "__main__":
     main()

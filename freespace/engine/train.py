@@ -98,6 +98,9 @@ class _EarlyStopping(EarlyStopping):
 #: the options a resumed run may raise: it goes on exactly as a run started with the larger values would
 GROWABLE = ("epochs", "patience")
 
+#: the options a resumed run may change freely: where its files go and how the work is spread
+WHERE_AND_HOW = ("out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
+
 
 #: what a run writes into its folder, as :mod:`freespace.io.outdir` entries (removed when a plain rerun takes
 #: over a start that never checkpointed)
@@ -244,8 +247,7 @@ def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> TrainConfig
         config = replace(config, image_size=saved.image_size)
     now = config.to_dict()
     changed = [k for k, v in saved.to_dict().items()
-               if k not in ("out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
-               and now[k] != v and not (k in GROWABLE and now[k] > v)]
+               if k not in WHERE_AND_HOW and now[k] != v and not (k in GROWABLE and now[k] > v)]
     if changed:
         raise InvalidOptionError(f"{param('resume')} with other options than the run's ({', '.join(changed)}); "
                                  f"resume with the same options (only {param('epochs')} and {param('patience')} "

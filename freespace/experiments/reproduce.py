@@ -252,10 +252,6 @@ def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, s
     return config
 
 
-#: TrainConfig keys that may differ between two runs of one cell (where its files go, how it is spread)
-_CELL_FREE = ("out", "workers", "devices", "num_nodes", "strategy", "tensorboard")
-
-
 def _check_cell(config: TrainConfig) -> bool:
     """Refuse ``config`` when the cell in ``config.out`` was started with other settings (``key old → new``, in
     config.yaml's spelling), but for a larger ``epochs`` or ``patience``
@@ -263,7 +259,7 @@ def _check_cell(config: TrainConfig) -> bool:
     config.yaml may be of any version (its spellings and renamed keys read as the values they were); ``root``
     compares resolved; an ``image_size`` of :data:`~freespace.engine.config.FIRST_FRAME_SIZE` matches the
     size it was resolved to."""
-    from freespace.engine.train import GROWABLE
+    from freespace.engine.train import GROWABLE, WHERE_AND_HOW
 
     run_dir = Path(config.out)
     saved_path = run_dir / "config.yaml"
@@ -277,7 +273,7 @@ def _check_cell(config: TrainConfig) -> bool:
         d["root"] = str(Path(d["root"]).expanduser().resolve())
     grown = [k for k in GROWABLE if new[k] > saved[k]]
     changes = [f"{k} {saved.get(k)!r} → {v!r}" for k, v in new.items()
-               if k not in (*_CELL_FREE, *grown) and saved.get(k) != v]
+               if k not in (*WHERE_AND_HOW, *grown) and saved.get(k) != v]
     if changes:
         raise InvalidOptionError(f"{run_dir} was started with other settings ({'; '.join(changes)}); rerun with its "
                                  f"settings, or give another {param('out')} for the new ones")
