@@ -63,6 +63,27 @@ def test_run_folder_and_exact_resume(tiny: Path, tmp_path: Path) -> None:
         assert (a / "splits" / f"{split}.txt").is_file()
 
 
+def test_last_checkpoint_is_the_last_epoch(tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """last.ckpt follows every epoch, not only those that improve the best: with a validation F that falls each
+    epoch, best.ckpt stays at epoch 0 and last.ckpt moves to the final one, from which a resume goes on."""
+    from freespace.engine.module import RoadModule
+
+    reduce = RoadModule._reduce
+
+    def falling(self: RoadModule) -> dict[str, float]:
+        return {**reduce(self), "f_score": 0.9 - 0.1 * len(self._val_f)}
+
+    monkeypatch.setattr(RoadModule, "_reduce", falling)
+    run = tmp_path / "run"
+    assert _train(tiny, run, "--epochs", "3", "--image-size", "64x96") == 0
+    epochs = {name: torch.load(run / "checkpoints" / f"{name}.ckpt", weights_only=True)["epoch"]
+              for name in ("best", "last")}
+    assert epochs == {"best": 0, "last": 2}
+    assert _train(tiny, run, "--epochs", "4", "--image-size", "64x96", "--resume") == 0
+    assert torch.load(run / "checkpoints" / "last.ckpt", weights_only=True)["epoch"] == 3
+    assert [int(r["epoch"]) for r in csv.DictReader((run / "metrics.csv").open())] == [0, 1, 2, 3]
+
+
 def test_resume_reads_a_config_yaml_of_older_spellings(tiny: Path, tmp_path: Path) -> None:
     """A run folder whose config.yaml is spelled as before the typed configuration (the key disparity_mode,
     a range as the user typed it) resumes: its recorded settings read as the same values."""

@@ -79,9 +79,14 @@ class EpochCSV(pl.Callback):
 def _callbacks(run_dir: Path, patience: int, monitor: str,
                min_delta: float = 0.0) -> tuple[list[pl.Callback], ModelCheckpoint]:
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor=monitor, mode="max",
-                           save_top_k=1, save_last=True, enable_version_counter=False)
+                           save_top_k=1, enable_version_counter=False)
+    # last.ckpt after every epoch, by a callback of its own: Lightning >= 2.5 writes `save_last`'s file only on
+    # the epochs that write the best one too, so a resume would go back to the best epoch and train the epochs
+    # after it again (listed after `ckpt`, it saves that callback's state of this epoch)
+    last = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="last", save_top_k=1,
+                           enable_version_counter=False)
     stop = _EarlyStopping(monitor=monitor, mode="max", patience=patience, min_delta=min_delta, check_finite=True)
-    return [ckpt, stop, EpochCSV(run_dir)], ckpt
+    return [ckpt, last, stop, EpochCSV(run_dir)], ckpt
 
 
 class _EarlyStopping(EarlyStopping):
