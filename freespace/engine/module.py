@@ -126,6 +126,11 @@ class RoadModule(pl.LightningModule):
         window = self._val_f[-self.hparams.val_window:] or [float(metrics["f_score"])]
         self.log("val_f_window", float(np.mean(window)), sync_dist=True)
 
+    @property
+    def val_f_history(self) -> list[float]:
+        """The validation F-score (a fraction) of each epoch trained so far, resumed ones included."""
+        return list(self._val_f)
+
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         checkpoint["val_f_history"] = list(self._val_f)
 

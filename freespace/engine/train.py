@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import lightning.pytorch as pl
+import numpy as np
 import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.plugins.io import TorchCheckpointIO
@@ -76,8 +77,9 @@ class EpochCSV(pl.Callback):
                      row.get("val_iou", "—"), row["seconds"])
 
 
-def _callbacks(run_dir: Path, patience: int, monitor: str,
+def _callbacks(run_dir: Path, patience: int, val_window: int,
                min_delta: float = 0.0) -> tuple[list[pl.Callback], ModelCheckpoint]:
+    monitor = monitored(val_window)
     ckpt = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="best", monitor=monitor, mode="max",
                            save_top_k=1, enable_version_counter=False)
     # last.ckpt after every epoch, by a callback of its own: Lightning >= 2.5 writes `save_last`'s file only on
@@ -85,19 +87,35 @@ def _callbacks(run_dir: Path, patience: int, monitor: str,
     # after it again (listed after `ckpt`, it saves that callback's state of this epoch)
     last = ModelCheckpoint(dirpath=run_dir / "checkpoints", filename="last", save_top_k=1,
                            enable_version_counter=False)
-    stop = _EarlyStopping(monitor=monitor, mode="max", patience=patience, min_delta=min_delta, check_finite=True)
+    stop = _EarlyStopping(monitor=monitor, mode="max", patience=patience, min_delta=min_delta, check_finite=True,
+                          val_window=val_window)
     return [ckpt, last, stop, EpochCSV(run_dir)], ckpt
 
 
 class _EarlyStopping(EarlyStopping):
-    """Early stopping whose patience is the run's config, not the resumed checkpoint's: a run resumed with a
-    larger patience goes on exactly as a run started with it would (the count of epochs without improvement
-    does not depend on the patience)."""
+    """Early stopping whose state (best score, epochs without improvement) is replayed from the run's validation
+    history when training starts, never read from a resumed checkpoint; the patience is the run's config.
+
+    The state is a function of the history of validation F-scores (which the module keeps in its checkpoint),
+    the window and the least improvement: a run resumed with a larger patience goes on exactly as a run started
+    with it would, and so does a run resumed from a checkpoint that holds no state of this callback (one written
+    before its name changed: Lightning then silently started counting anew, which let three cells of the
+    converged run stop at other epochs than the protocol's)."""
+
+    def __init__(self, *args: Any, val_window: int = 1, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.val_window = val_window
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
-        patience = self.patience
-        super().load_state_dict(state_dict)
-        self.patience = patience
+        """Nothing to read: :meth:`on_train_start` replays the state."""
+
+    def on_train_start(self, trainer: pl.Trainer, module: pl.LightningModule) -> None:
+        self.best_score = -torch.tensor(torch.inf)
+        self.wait_count = 0
+        history = module.val_f_history
+        for i in range(len(history)):  # as the module logged it: the window's mean, a tensor of the default dtype
+            current = float(np.mean(history[max(0, i + 1 - self.val_window):i + 1]))
+            self._evaluate_stopping_criteria(torch.tensor(current, dtype=torch.get_default_dtype()))
 
 
 #: the options a resumed run may raise: it goes on exactly as a run started with the larger values would
@@ -294,7 +312,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         # from the training frames themselves (the first items; views and duplicates follow), so that every
         # variant of the protocol fits it from the same labels
         module.net.prepare(train[i]["label"] for i in range(data["frames"]))
-    callbacks, ckpt = _callbacks(run_dir, config.patience, monitored(config.val_window), config.min_delta)
+    callbacks, ckpt = _callbacks(run_dir, config.patience, config.val_window, config.min_delta)
     trainer = pl.Trainer(
         accelerator="auto" if config.devices == 1 else "cpu" if not torch.cuda.is_available() else "auto",
         devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",
