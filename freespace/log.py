@@ -67,6 +67,9 @@ def quiet_lightning() -> None:
         warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)")
         # on every resume: the run's own checkpoints/ folder holds last.ckpt, as it should
         warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
+        # on resuming a checkpoint of an older version, whose early stopping had another name: its state is
+        # replayed from the validation history (engine.train._EarlyStopping), nothing is missing
+        warnings.filterwarnings("ignore", message=r"Be aware that when using `ckpt_path`, callbacks used to create")
     for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
         logger = logging.getLogger(name)
         logger.handlers = [h for h in logger.handlers if not isinstance(h, logging.StreamHandler)]

@@ -336,21 +336,24 @@ def test_min_delta_lets_early_stopping_fire(tiny: Path, tmp_path: Path) -> None:
     assert _train(tiny, tmp_path / "bad", "--min-delta", "1.5") == 2
 
 
-def test_a_larger_patience_extends_a_stopped_run_exactly(tiny: Path, tmp_path: Path) -> None:
+def test_a_larger_patience_extends_a_stopped_run_exactly(tiny: Path, tmp_path: Path,
+                                                        recwarn: pytest.WarningsRecorder) -> None:
     """Early stopping changes nothing a run computes before it stops: a run that stopped with patience 1 and is
     resumed with patience 3 ends as a run started with 3 (Lightning's checkpoint would restore the old one).
-    The state of early stopping is replayed from the validation history, so a checkpoint without it (one of an
-    older version, whose callback had another name) resumes exactly too."""
+    The state of early stopping is replayed from the validation history, so a checkpoint whose state is under
+    another name (an older version's) or wrong resumes exactly too, without Lightning's warning about it."""
     stopped, fresh = tmp_path / "stopped", tmp_path / "fresh"
     common = ("--epochs", "8", "--min-delta", "0.5", "--image-size", "64x96")
     assert _train(tiny, stopped, *common, "--patience", "1") == 0
     assert json.loads((stopped / "metrics.json").read_text())["epochs_run"] == 2
     last = stopped / "checkpoints" / "last.ckpt"
     ckpt = torch.load(last, weights_only=True)
-    ckpt["callbacks"] = {k: v for k, v in ckpt["callbacks"].items() if "EarlyStopping" not in k}
+    ckpt["callbacks"] = {k.lstrip("_"): {**v, "wait_count": 0, "best_score": torch.tensor(-torch.inf)}
+                         if "EarlyStopping" in k else v for k, v in ckpt["callbacks"].items()}
     torch.save(ckpt, last)
     assert _train(tiny, fresh, *common, "--patience", "3") == 0
     assert _train(tiny, stopped, *common, "--patience", "3", "--resume") == 0
+    assert not [w for w in recwarn if "callbacks used to create the checkpoint" in str(w.message)]
     assert _metrics(stopped) == _metrics(fresh) and _metrics(fresh)["epochs_run"] == 4
     rows = [[{k: v for k, v in r.items() if k != "seconds"} for r in csv.DictReader((run / "metrics.csv").open())]
             for run in (stopped, fresh)]
