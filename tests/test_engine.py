@@ -71,7 +71,7 @@ def test_last_checkpoint_is_the_last_epoch(tiny: Path, tmp_path: Path, monkeypat
     reduce = RoadModule._reduce
 
     def falling(self: RoadModule) -> dict[str, float]:
-        return {**reduce(self), "f_score": 0.9 - 0.1 * len(self._val_f)}
+        return {**reduce(self), "f_score": 0.9 - 0.1 * len(self.val_f_history)}
 
     monkeypatch.setattr(RoadModule, "_reduce", falling)
     run = tmp_path / "run"

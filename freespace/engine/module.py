@@ -132,7 +132,7 @@ class RoadModule(pl.LightningModule):
         return list(self._val_f)
 
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
-        checkpoint["val_f_history"] = list(self._val_f)
+        checkpoint["val_f_history"] = self.val_f_history
 
     def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         history = checkpoint.get("val_f_history", [])
