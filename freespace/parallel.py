@@ -65,6 +65,9 @@ def init_worker(parent: int) -> None:
     die_with_parent(parent)
 
 
+#: how long :func:`worker_pool` waits for the pool's manager thread after ending the workers, in seconds
+_MANAGER_JOIN_SECONDS = 60.0
+
 #: signals blocked while a worker starts (see :class:`_Pool`)
 _STARTUP_BLOCKED = {signal.SIGINT, signal.SIGTERM}
 
@@ -106,16 +109,18 @@ def worker_pool(workers: int, initializer: Callable[..., None], initargs: tuple[
     try:
         yield pool
     except BaseException:
-        processes = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown forgets them
+        processes = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown forgets them,
+        manager = getattr(pool, "_executor_manager_thread", None)  # as it forgets its manager thread
         pool.shutdown(wait=False, cancel_futures=True)
         for p in processes:
             p.terminate()
         for p in processes:
             p.join(timeout=5)
         # the pool's manager thread closes its wake-up pipe when it sees the workers gone; the interpreter's exit
-        # hook writes to that pipe, and when both happen at once the write fails with a traceback on stderr
-        manager = getattr(pool, "_executor_manager_thread", None)
+        # hook writes to that pipe unless it is closed already, and when both happen at once the write fails
+        # with a traceback on stderr (EBADF). So the manager must be gone before the exit (milliseconds on an
+        # idle machine, possibly seconds on a loaded one)
         if manager is not None:
-            manager.join(timeout=5)
+            manager.join(timeout=_MANAGER_JOIN_SECONDS)
         raise
     pool.shutdown(wait=True)
