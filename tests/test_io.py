@@ -51,6 +51,17 @@ def test_kitti_disparity_png_encoding(tmp_path: Path) -> None:
     assert np.isnan(d[0, 0]) and d[0, 1] == 1.0 and d[0, 2] == 2.5
 
 
+def test_disparity_png_never_clips(tmp_path: Path) -> None:
+    """A disparity beyond KITTI's 16-bit range (255.996 px: a near object seen with a wide baseline) is written
+    as invalid, with a warning that names the way out, never as a clipped, wrong value."""
+    d = np.array([[255.99, 256.5, 300.0, 0.001, np.nan]], np.float32)
+    with pytest.warns(UserWarning, match=r"2 disparities above 255\.996 px .* \.npy or \.pfm"):
+        back = read_disparity(write_disparity(tmp_path / "d.png", d))
+    assert back[0, 0] == pytest.approx(255.99, abs=1 / 512)
+    assert np.isnan(back[0, 1:3]).all() and back[0, 3] == 1 / 256 and np.isnan(back[0, 4])
+    np.testing.assert_array_equal(read_disparity(write_disparity(tmp_path / "d.npy", d))[0, :3], d[0, :3])
+
+
 def test_real_kitti_disparity() -> None:
     d = read_disparity(shared_path("kitti_stereo_2015", "disp_occ_0", "000000_10.png"))
     assert d.shape == (375, 1242)

@@ -122,6 +122,25 @@ def test_synth_writes_a_kitti_road_tree(tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["generate", "--dataset", "kitti", "--root", str(out), "--out", str(tmp_path / "gen")]) == 0
 
 
+def test_synth_stores_disparities_beyond_the_png_range_as_invalid(tmp_path: Path,
+                                                                  caplog: pytest.LogCaptureFixture) -> None:
+    """A wide baseline at a large width gives near disparities above KITTI's 255.996 px: they are stored as
+    invalid (never clipped), and synth says so in one line, not in one warning per frame."""
+    out = tmp_path / "syn"
+    config = SynthConfig(width=640, height=240, baselines=(4.0, 4.0))
+    with caplog.at_level("WARNING", logger="freespace"):
+        write_dataset(out, 2, seed=0, config=config, progress=False)
+    lines = [r.getMessage() for r in caplog.records if "exceed the 255.996 px" in r.getMessage()]
+    assert len(lines) == 1 and " of 2 frames" in lines[0], [r.getMessage() for r in caplog.records]
+    for f in KittiRoad(out).frames:
+        exact = render_sample(int(f.name[-6:]), 0, config).disparity
+        stored = read_disparity(f.disparity)
+        assert (exact > 256).any()
+        assert np.isnan(stored[exact > 256]).all() and np.nanmax(stored) < 256
+        kept = exact < 255
+        np.testing.assert_allclose(stored[kept], exact[kept], atol=1 / 512)
+
+
 def test_synth_user_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     for args, message in ((["--num", "0"], "--num"), (["--num", "2", "--width", "8"], "--width"),
                           (["--num", "2", "--weather", "snow"], "weather"), (["--num", "2", "--baseline", "-1"], "baseline")):

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io as _io
 import math
+import warnings
 import zlib
 from pathlib import Path
 
@@ -26,7 +27,8 @@ from freespace.io.files import PathLike, atomic_write_bytes, read_bytes
 from freespace.labels import RoadLabel
 
 __all__ = ["DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "read_raw",
-           "write_image", "encode_image", "read_disparity", "write_disparity", "read_depth", "read_road_label",
+           "write_image", "encode_image", "read_disparity", "write_disparity", "png_disparity_overflow",
+           "read_depth", "read_road_label",
            "road_label_from_image", "road_label_to_kitti"]
 
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
@@ -38,6 +40,7 @@ MAX_IMAGE_SIDE = 8192
 
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_PNG_DISPARITY_MAX = 65535  # the largest value of a KITTI disparity PNG: 255.996 px
 
 
 def _png_damage(data: bytes) -> str | None:
@@ -206,11 +209,19 @@ def read_disparity(path: PathLike) -> np.ndarray:
                              f"{', '.join(DISPARITY_SUFFIXES)}")
 
 
+def png_disparity_overflow(disparity: np.ndarray) -> int:
+    """How many disparities of a ``float H×W`` map (px) exceed what a KITTI 16-bit PNG holds (255.996 px):
+    :func:`write_disparity` writes them to a PNG as invalid."""
+    disp = np.asarray(disparity, dtype=np.float32)
+    return int(np.count_nonzero(np.round(np.where(np.isfinite(disp), disp, 0.0) * 256.0) > _PNG_DISPARITY_MAX))
+
+
 def write_disparity(path: PathLike, disparity: np.ndarray) -> Path:
     """Write a ``float H×W`` disparity map (NaN = invalid) atomically, format by suffix.
 
-    PNG is KITTI's 16-bit format (values clipped to [0, 255.996], invalid → 0); ``.npy`` and ``.pfm``
-    keep float32 with NaN for invalid.
+    PNG is KITTI's 16-bit format (``value = round(256 d)``, invalid → 0); it holds disparities up to
+    255.996 px, and larger ones (near objects with a wide baseline) are written as invalid with a warning, never
+    clipped to a wrong value; ``.npy`` and ``.pfm`` keep float32 with NaN for invalid and have no such limit.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -218,9 +229,15 @@ def write_disparity(path: PathLike, disparity: np.ndarray) -> Path:
     if disp.ndim != 2:
         raise InvalidOptionError(f"disparity must be 2-D (H×W), got shape {disp.shape}")
     if suffix == ".png":
-        valid = np.isfinite(disp) & (disp > 0)
+        scaled = np.round(np.where(np.isfinite(disp), disp, 0.0) * 256.0)
+        beyond = scaled > _PNG_DISPARITY_MAX
+        if beyond.any():
+            warnings.warn(f"{int(beyond.sum())} disparities above {_PNG_DISPARITY_MAX / 256:.3f} px do not fit "
+                          f"KITTI's 16-bit PNG and are written as invalid to {path.name}; write .npy or .pfm to "
+                          f"keep them", stacklevel=2)
+        valid = np.isfinite(disp) & (disp > 0) & ~beyond
         raw = np.zeros(disp.shape, np.uint16)
-        raw[valid] = np.clip(np.round(disp[valid] * 256.0), 1, 65535).astype(np.uint16)
+        raw[valid] = np.maximum(scaled[valid], 1).astype(np.uint16)
         return atomic_write_bytes(path, encode_image(raw, ".png"))
     if suffix == ".npy":
         buf = _io.BytesIO()

@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import os
+import warnings
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -29,11 +31,13 @@ import numpy as np
 from freespace.data.synthetic.render import StereoSample, render_sample
 from freespace.data.synthetic.scene import SynthConfig
 from freespace.errors import InvalidOptionError, check_seed, param
-from freespace.io.codecs import road_label_to_kitti, write_disparity, write_image
+from freespace.io.codecs import png_disparity_overflow, road_label_to_kitti, write_disparity, write_image
 from freespace.io.files import PathLike, atomic_write_text, check_writable, write_csv, write_json
 from freespace.io.outdir import check_settings, claim_folder
 
 __all__ = ["write_dataset", "write_sample", "format_kitti_calib", "INDEX_FIELDS"]
+
+log = logging.getLogger(__name__)
 
 #: the sign of ``pitch_deg`` and ``pitches_deg``, recorded in ``synth.json``: a folder written when positive
 #: meant looking up is refused (its index.csv would mix the two signs)
@@ -52,16 +56,24 @@ def format_kitti_calib(calib: dict[str, np.ndarray]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_sample(sample: StereoSample, out: PathLike, split: str = "training") -> None:
-    """Write one rendered frame into a KITTI road tree at ``out`` (atomic writes)."""
+def write_sample(sample: StereoSample, out: PathLike, split: str = "training") -> int:
+    """Write one rendered frame into a KITTI road tree at ``out`` (atomic writes).
+
+    Returns:
+        How many of its disparities exceed the KITTI PNG's 255.996 px (written as invalid; the caller reports
+        them, and the PNG writer's own warning is silenced).
+    """
     out = Path(out)
     base = out / "data_road" / split
     cat, idx = sample.name.split("_")
     write_image(base / "image_2" / f"{sample.name}.png", sample.left)
     write_image(base / "gt_image_2" / f"{cat}_road_{idx}.png", road_label_to_kitti(sample.label))
     atomic_write_text(base / "calib" / f"{sample.name}.txt", format_kitti_calib(sample.kitti_calib))
-    write_disparity(base / "disparity" / f"{sample.name}.png", sample.disparity)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        write_disparity(base / "disparity" / f"{sample.name}.png", sample.disparity)
     write_image(out / "data_road_right" / split / "image_3" / f"{sample.name}.png", sample.right)
+    return png_disparity_overflow(sample.disparity)
 
 
 def _index_row(sample: StereoSample) -> dict[str, Any]:
@@ -72,11 +84,11 @@ def _index_row(sample: StereoSample) -> dict[str, Any]:
             "camera_height_m": f"{m['camera_height_m']:.6f}", "lanes": m["lanes"], "planar": int(m["planar"])}
 
 
-def _render_and_write(job: tuple[int, int, SynthConfig, str]) -> dict[str, Any]:
+def _render_and_write(job: tuple[int, int, SynthConfig, str]) -> tuple[dict[str, Any], int]:
+    """Render and write one frame; its ``index.csv`` row and its disparities beyond the PNG's range."""
     index, seed, config, out = job
     sample = render_sample(index, seed, config)
-    write_sample(sample, out)
-    return _index_row(sample)
+    return _index_row(sample), write_sample(sample, out)
 
 
 def _init_worker(parent: int) -> None:
@@ -143,18 +155,28 @@ def _render_frames(out: Path, num: int, seed: int, config: SynthConfig, settings
     jobs = ((i, seed, config, str(out)) for i in range(num))
     bar = progress_bar(None, total=num, desc="synth", unit="frame", enabled=progress)
     rows: list[dict[str, Any]] = []
+    beyond: dict[str, int] = {}  # frame → disparities beyond the PNG's range
+
+    def done(result: tuple[dict[str, Any], int]) -> None:
+        rows.append(result[0])
+        if result[1]:
+            beyond[result[0]["frame"]] = result[1]
+        bar.update()
+
     if workers == 1:
         for job in jobs:
-            rows.append(_render_and_write(job))
-            bar.update()
+            done(_render_and_write(job))
     else:
         from freespace.parallel import worker_pool
 
         with worker_pool(workers, _init_worker, (os.getpid(),)) as pool:  # ends at once on Ctrl-C
-            for row in pool.map(_render_and_write, jobs, chunksize=max(1, min(64, num // (4 * workers)))):
-                rows.append(row)
-                bar.update()
+            for result in pool.map(_render_and_write, jobs, chunksize=max(1, min(64, num // (4 * workers)))):
+                done(result)
     bar.close()
+    if beyond:
+        log.warning("%d disparities in %d of %d frames (first %s) exceed the 255.996 px of KITTI's disparity PNG "
+                    "and are stored as invalid; a smaller baseline range or image width keeps them",
+                    sum(beyond.values()), len(beyond), len(rows), min(beyond))
     rows = _merge_index(out, rows)
     write_csv(out / "index.csv", INDEX_FIELDS, rows)
     write_json(out / "synth.json", {**settings, "num": len(rows)})
