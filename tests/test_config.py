@@ -138,7 +138,7 @@ def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:
                               splits_dir=f"{where['root']}/lists", max_frames=12, labels=f"{where['root']}/auto",
                               human_share=0.2, disparity_source="sgbm", virtual_shift=(0.5, 0.2, 0.0),
                               virtual_rotate=(1.0, 2.5, 0.0))
-    assert old.image_size == FIRST_FRAME_SIZE and old.virtual_shift == (0.5, 0.2, 0.0)
+    assert old.image_size == FIRST_FRAME_SIZE and old.virtual_shift == ((-0.5, 0.5), (-0.2, 0.2), (0.0, 0.0))
     old.save(tmp_path / "new.yaml")
     written, before = yaml.safe_load((tmp_path / "new.yaml").read_text()), yaml.safe_load(OLDER_YAML.format(**where))
     assert written == {**{k if k != "disparity_mode" else "disparity_source": v for k, v in before.items()},
@@ -151,9 +151,10 @@ def test_values_are_parsed_once_into_types(tmp_path: Path, monkeypatch: pytest.M
     import freespace.data.base
 
     c = TrainConfig(dataset="synth", root=str(tmp_path / "data"), out=str(tmp_path / "run"),
-                    augment="virtual, homography", virtual_shift="0.5,0.25,0", image_size="64x96")
+                    augment="virtual, homography", virtual_shift="0.5,-3:0.25,0", image_size="64x96")
     assert (c.augment, c.virtual_shift, c.virtual_rotate, c.image_size) == \
-        (("homography", "virtual"), (0.5, 0.25, 0.0), (3.0, 3.0, 3.0), (64, 96))
+        (("homography", "virtual"), ((-0.5, 0.5), (-3.0, 0.25), (0.0, 0.0)), ((-3.0, 3.0),) * 3, (64, 96))
+    assert c.to_dict()["virtual_shift"] == "0.5,-3:0.25,0"  # a symmetric range keeps its old spelling
     assert TrainConfig(dataset="synth", root=str(tmp_path), out="o", augment="none").augment == ()
     for auto in (None, "auto", FIRST_FRAME_SIZE):
         assert TrainConfig(dataset="synth", root=str(tmp_path), out="o", image_size=auto).image_size == FIRST_FRAME_SIZE
@@ -182,7 +183,9 @@ def test_values_are_parsed_once_into_types(tmp_path: Path, monkeypatch: pytest.M
     ({"augment": "homography,duplicate"}, "augment must be one of none, homography, virtual, homography,virtual, "
                                           "duplicate, got 'homography,duplicate'"),
     ({"augment": "virtual,duplicate"}, "augment must be one of"),
-    ({"virtual_shift": "0.5,-1,0"}, "virtual_shift must be three numbers ≥ 0 separated by commas, got '0.5,-1,0'"),
+    ({"virtual_shift": "0.5,-1,0"}, "virtual_shift must be three ranges, each a half-range h ≥ 0 (±h) or LO:HI with "
+                                    "LO ≤ HI, got '0.5,-1,0'"),
+    ({"virtual_rotate": "3,3:-3,3"}, "virtual_rotate must be three ranges"),
     ({"image_size": "12x5"}, "image_size must be HxW with both in 32…"),
     ({"strategy": "fsdp"}, "strategy must be one of auto, ddp, got 'fsdp'"),
     ({"disparity_source": "laser"}, "disparity_source must be one of"),
@@ -219,7 +222,7 @@ def test_the_command_line_names_the_flags(tmp_path: Path, capsys: pytest.Capture
     root = tmp_path / "syn"
     write_dataset(root, 4, seed=0, config=SynthConfig(width=96, height=64, frames_per_scenario=2), progress=False)
     for option, value, message in [("--virtual-prob", "2", "--virtual-prob must be in [0, 1], got 2.0"),
-                                   ("--virtual-rotate", "1,2", "--virtual-rotate must be three numbers"),
+                                   ("--virtual-rotate", "1,2", "--virtual-rotate must be three ranges"),
                                    ("--human-share", "0.5", "--human-share keeps the dataset's labels on a share of "
                                                             "the training drives and takes the label tree of --labels "
                                                             "on the others; give --labels too")]:

@@ -927,7 +927,7 @@ def test_issue20_virtual_shift_is_checked_against_the_road_before_work(trained: 
                            "--augment", "homography,virtual", "--virtual-shift", "0,5,0", "--epochs", "1",
                            "--image-size", "64x64", "--no-progress", "--out", str(run)], match="--virtual-shift 0,5,0")
     assert time.perf_counter() - t0 < 30
-    assert "through the road" in err and "a DY of at most" in err and "--shift " not in err
+    assert "through the road" in err and "a DY that moves it down by at most" in err and "--shift " not in err
     assert not (run / "checkpoints").exists() and not (run / "generated").exists()
 
 

@@ -296,6 +296,23 @@ def test_x_long_budget_and_convergence_in_the_index(data: Path, tmp_path: Path) 
     assert "| unet | X-long | 1 | 20.0 (20–20) | 20.0 (20–20) | 0 | 1 |" in lines
 
 
+def test_virtual_pose_ranges_reach_only_the_virtual_variants(data: Path, tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture) -> None:
+    """``reproduce --virtual-shift`` (e.g. HV-X covering a shifted test set's camera heights) sets the pose ranges
+    of HV-X and HAV-X; X's cells keep the defaults, so a campaign's finished X cells are not refused as changed."""
+    from freespace.engine.config import TrainConfig
+    from freespace.experiments.reproduce import _config
+
+    options = dict(epochs=2, patience=1, virtual_shift="0,-3.1:1.25,0", virtual_rotate="12,6,0")
+    hv, x = (_config("synth", data, tmp_path, "unet", v, 0, options) for v in ("HV-X", "X"))
+    assert hv.to_dict()["virtual_shift"] == "0,-3.1:1.25,0" and hv.virtual_rotate == ((-12, 12), (-6, 6), (0, 0))
+    defaults = TrainConfig(dataset="synth", root=str(data), out="o")
+    assert (x.virtual_shift, x.virtual_rotate) == (defaults.virtual_shift, defaults.virtual_rotate)
+    assert main(["reproduce", "--dataset", "synth", "--root", str(data), "--out", str(tmp_path / "r"), "--models",
+                 "unet", "--variants", "HV-X", "--virtual-shift", "0,-3:0.9,9:8", "--epochs", "1"]) == 2
+    assert "--virtual-shift must be three ranges" in capsys.readouterr().err
+
+
 def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
     from freespace.experiments.reproduce import ALL_NETWORKS, _gains, _primary_lines
 

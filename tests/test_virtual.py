@@ -394,6 +394,43 @@ def test_augment_virtual_is_deterministic_and_needs_no_right_image(frames, tmp_p
     TrainConfig(dataset="kitti", root=str(root), out="x", augment="homography,virtual").check()
 
 
+def test_virtual_pose_ranges_may_be_asymmetric(frames, tmp_path: Path) -> None:
+    """``virtual_shift``/``virtual_rotate`` take LO:HI ranges beside ±h: a camera raised by up to 3 m and lowered
+    by up to 0.9 m (so that HV-X can reach heights a symmetric range cannot: ±3 m would put it under the road).
+    A symmetric range draws exactly what it drew before (``uniform(-1, 1) · h``), so resumed runs stay exact; the
+    check against the road takes the range's own lowest point."""
+    import dataclasses
+
+    from freespace.data.synthetic import write_sample
+    from freespace.data.torch_dataset import VirtualAugment
+    from freespace.engine.config import TrainConfig
+    from freespace.engine.data import prepare_data
+
+    sym = VirtualAugment({}, shift=(0.5, 0.2, 0.0), rotate=(1.0, 2.5, 0.0), prob=1.0)
+    for epoch in range(20):
+        rng = np.random.default_rng([7, epoch, 3, 29])
+        rng.random()
+        s, r = rng.uniform(-1, 1, 3) * [0.5, 0.2, 0.0], rng.uniform(-1, 1, 3) * [1.0, 2.5, 0.0]
+        pose = sym.pose(7, epoch, 3)
+        assert pose.shift == tuple(s) and (pose.roll, pose.pitch, pose.yaw) == tuple(r)  # bit for bit
+    wide = VirtualAugment({}, shift=(0.0, (-3.0, 0.9), 0.0), rotate=((0.0, 8.0), 0.0, 0.0), prob=1.0)
+    poses = [wide.pose(0, e, 0) for e in range(400)]
+    dy, roll = np.array([p.shift[1] for p in poses]), np.array([p.roll for p in poses])
+    assert -3.0 <= dy.min() < -2.9 and 0.8 < dy.max() <= 0.9 and 0 <= roll.min() < 0.1 and 7.9 < roll.max() <= 8
+    # against the road planes of the training frames (renderer rigs, cameras 1.4–1.7 m up)
+    root = tmp_path / "kitti"
+    for _, sample in frames:
+        write_sample(sample, root)
+    config = TrainConfig(dataset="kitti", root=str(root), out=str(tmp_path / "run"), augment="virtual",
+                         image_size=(96, 128), virtual_shift="0,-3:0.9,0", disparity_source="none")
+    virtual = prepare_data(config, tmp_path / "run")["virtual"]
+    assert virtual.shift == ((0.0, 0.0), (-3.0, 0.9), (0.0, 0.0))
+    assert min(plane.clearance(virtual.shift) for _, plane in virtual.planes.values()) >= 0.1
+    with pytest.raises(InvalidOptionError, match=r"virtual_shift 0,-3:2,0 can move the camera through the road.* "
+                                                 r"or LO:1\.\d\d \(raised by up to -LO m\)$"):
+        prepare_data(dataclasses.replace(config, virtual_shift="0,-3:2,0"), tmp_path / "run2")
+
+
 def test_resized_intrinsics_keep_the_geometry() -> None:
     pytest.importorskip("torch")
     import cv2

@@ -53,20 +53,29 @@ class Item:
     image: str | None = None
 
 
+def _centre_and_half(ranges: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """The centres and half-widths of three pose ranges (:func:`freespace.geometry.pose_ranges`); a symmetric
+    range ±h has centre 0 and half-width h exactly, so its draws are those of ``uniform(-1, 1) · h``."""
+    from freespace.geometry import pose_ranges
+
+    lo, hi = np.array(pose_ranges(ranges)).T
+    return (lo + hi) / 2, (hi - lo) / 2
+
+
 @dataclass(frozen=True)
 class VirtualAugment:
     """The road-plane virtual views (``augment="virtual"``): each sample, each epoch, with probability
     ``prob``, becomes its road-plane virtual view (:func:`freespace.geometry.virtual_view`) from a pose drawn
-    uniformly in ±``shift`` (dx, dy, dz metres) and ±``rotate`` (roll, pitch, yaw degrees), from (seed,
-    epoch, i) only.
+    uniformly in the ranges ``shift`` (dx, dy, dz metres) and ``rotate`` (roll, pitch, yaw degrees), from
+    (seed, epoch, i) only. A range is ``h`` for ±h or ``(low, high)`` (:func:`freespace.geometry.pose_ranges`).
 
     ``planes`` maps a dataset frame index to its intrinsics (3×3, pixels of the frame's own size) and
     road plane (:class:`freespace.geometry.RoadPlane`); frames without one are never warped.
     """
 
     planes: dict[int, tuple[np.ndarray, Any]]
-    shift: tuple[float, float, float] = (0.5, 0.2, 0.0)
-    rotate: tuple[float, float, float] = (3.0, 3.0, 3.0)
+    shift: Sequence[Any] = (0.5, 0.2, 0.0)
+    rotate: Sequence[Any] = (3.0, 3.0, 3.0)
     prob: float = 0.5
 
     def pose(self, seed: int, epoch: int, i: int):  # -> VirtualPose | None
@@ -76,8 +85,9 @@ class VirtualAugment:
         rng = np.random.default_rng([seed, epoch, i, 29])
         if rng.random() >= self.prob:
             return None
-        s = rng.uniform(-1, 1, 3) * np.asarray(self.shift)
-        r = rng.uniform(-1, 1, 3) * np.asarray(self.rotate)
+        (cs, hs), (cr, hr) = _centre_and_half(self.shift), _centre_and_half(self.rotate)
+        s = cs + rng.uniform(-1, 1, 3) * hs
+        r = cr + rng.uniform(-1, 1, 3) * hr
         return VirtualPose(shift=(float(s[0]), float(s[1]), float(s[2])), roll=float(r[0]), pitch=float(r[1]),
                            yaw=float(r[2]))
 

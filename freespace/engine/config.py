@@ -3,7 +3,7 @@ bounds, default, help text and choices.
 
 A :class:`TrainConfig` holds typed values, parsed and checked once, when it is made (from Python values, the
 text an interface passes on, or a YAML file such as a run's config.yaml: :func:`read_config_yaml`):
-``augment`` is a tuple of augmentation names, ``virtual_shift`` and ``virtual_rotate`` three floats,
+``augment`` is a tuple of augmentation names, ``virtual_shift`` and ``virtual_rotate`` three ``(low, high)`` ranges,
 ``image_size`` (H, W) or :data:`FIRST_FRAME_SIZE`. A value of the wrong type, out of bounds or not among the
 choices is refused there, the message naming the parameter (:func:`freespace.errors.param`).
 :meth:`TrainConfig.check` then checks, once, what the values need of the machine (the dataset folder, the
@@ -34,7 +34,7 @@ from freespace.errors import MAX_SEED, CorruptFileError, InputFileError, Invalid
 from freespace.io.codecs import MAX_IMAGE_SIDE
 from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable
 
-__all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "parse_augment", "augment_text", "parse_size",
+__all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "parse_augment", "augment_text", "ranges_text", "parse_size",
            "AUGMENTS", "AUGMENT_NAMES", "FIRST_FRAME_SIZE", "PRESETS", "STRATEGIES"]
 
 #: the augmentations ``augment`` combines, in their one order (duplicate: the step-count control of homography)
@@ -97,24 +97,26 @@ def _number(x: float) -> str:
     return short if float(short) == x else repr(x)
 
 
-def _ranges(value: Any) -> tuple[float, float, float]:
-    """Three half-ranges ``≥ 0``, from ``"0.5,0.2,0"`` or a sequence of three numbers."""
-    values: tuple[float, ...] = ()
+def _ranges(value: Any) -> tuple[tuple[float, float], tuple[float, float], tuple[float, float]]:
+    """Three pose ranges as ``(low, high)`` intervals (:func:`freespace.geometry.pose_ranges`), from
+    ``"0.5,-3:0.9,0"`` (``h`` is ±h, ``LO:HI`` an interval) or a sequence of three numbers or pairs."""
+    from freespace.geometry.plane import pose_ranges
+
     if isinstance(value, str):
-        try:
-            values = tuple(float(x) for x in value.split(","))
-        except ValueError:
-            pass
-    elif isinstance(value, (list, tuple)) and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                  for x in value):
-        values = tuple(float(x) for x in value)
-    if len(values) != 3 or not all(0 <= v < 1e6 for v in values):
-        raise ValueError("must be three numbers ≥ 0 separated by commas")
-    return values  # type: ignore[return-value]
+        items: list[Any] = []
+        for part in value.split(","):
+            try:
+                items.append(tuple(float(x) for x in part.split(":")) if ":" in part else float(part))
+            except ValueError:
+                items.append(None)
+        value = [v if not isinstance(v, tuple) or len(v) == 2 else None for v in items]
+    return pose_ranges(value)
 
 
-def _ranges_text(values: tuple[float, float, float]) -> str:
-    return ",".join(_number(v) for v in values)
+def ranges_text(values: tuple[tuple[float, float], ...]) -> str:
+    """How config.yaml and messages spell pose ranges (``(low, high)`` intervals, e.g. ``virtual_shift``):
+    ``"0.5,-3:0.9,0"``, a symmetric range as its half-range, any other as ``LO:HI``."""
+    return ",".join(_number(hi) if lo == -hi else f"{_number(lo)}:{_number(hi)}" for lo, hi in values)
 
 
 def _size(value: Any) -> tuple[int, int] | str:
@@ -155,7 +157,8 @@ def _path_text(value: Any) -> Any:
 
 
 Augment = Annotated[tuple[str, ...], BeforeValidator(_augment), PlainSerializer(augment_text)]
-Ranges = Annotated[tuple[float, float, float], BeforeValidator(_ranges), PlainSerializer(_ranges_text)]
+Ranges = Annotated[tuple[tuple[float, float], tuple[float, float], tuple[float, float]], BeforeValidator(_ranges),
+                   PlainSerializer(ranges_text)]
 ImageSize = Annotated[tuple[int, int] | Literal["first-frame"], BeforeValidator(_size),
                       PlainSerializer(_size_plain)]
 PathText = Annotated[str, BeforeValidator(_path_text)]
@@ -186,6 +189,9 @@ def _option(help: str, default: Any = MISSING, *,
     ``metavar``."""
     meta = {"help": help, "choices": choices, "metavar": metavar}
     return field(metadata=meta) if default is MISSING else field(default=default, metadata=meta)
+
+
+_VIRTUAL = f"virtual views ({param('augment')} virtual; reproduce's HV-X, HAV-X): "
 
 
 @dataclass(frozen=True)
@@ -256,12 +262,13 @@ class TrainConfig:
                                     "SGBM", "auto", choices=_disparity_sources)
     cache_dir: PathText | None = _option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
     tensorboard: bool = _option("also write TensorBoard logs (needs tensorboard)", False)
-    # augment virtual: half-ranges of the random pose (dx, dy, dz metres; roll, pitch, yaw degrees), probability
-    virtual_shift: Ranges = _option(f"{param('augment')} virtual: camera moves drawn in ± these metres (x right, "
-                                    f"y down, z forward)", (0.5, 0.2, 0.0), metavar="DX,DY,DZ")
-    virtual_rotate: Ranges = _option(f"{param('augment')} virtual: rotations drawn in ± these degrees",
+    # augment virtual (reproduce's HV-X, HAV-X): ranges of the random pose (dx, dy, dz metres; roll, pitch, yaw degrees), probability
+    virtual_shift: Ranges = _option(f"{_VIRTUAL}camera moves drawn in ± these metres (x right, "
+                                    f"y down, z forward), or in LO:HI (e.g. 0.5,-3:0.9,0: raised by up to 3 m, "
+                                    f"lowered by up to 0.9 m)", (0.5, 0.2, 0.0), metavar="DX,DY,DZ")
+    virtual_rotate: Ranges = _option(f"{_VIRTUAL}rotations drawn in ± these degrees, or in LO:HI",
                                      (3.0, 3.0, 3.0), metavar="ROLL,PITCH,YAW")
-    virtual_prob: Annotated[float, Field(ge=0, le=1)] = _option(f"{param('augment')} virtual: share of samples warped, "
+    virtual_prob: Annotated[float, Field(ge=0, le=1)] = _option(f"{_VIRTUAL}share of samples warped, "
                                                                 f"each epoch", 0.5, metavar="P")
 
     def __post_init__(self) -> None:

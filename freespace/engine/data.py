@@ -17,7 +17,7 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import make_splits, read_splits, write_splits
 from freespace.data.torch_dataset import Item, VirtualAugment
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, ranges_text
 from freespace.errors import DatasetError, param
 
 log = logging.getLogger(__name__)
@@ -133,8 +133,7 @@ def _human_drives(frames: list[Any], train: list[str], share: float, seed: int) 
     return {n for n in train if scenario[n] in keep}
 
 
-def _road_planes(ds: StereoRoadDataset, indices: list[int],
-                 shift: tuple[float, float, float]) -> dict[int, tuple[np.ndarray, Any]]:
+def _road_planes(ds: StereoRoadDataset, indices: list[int], shift: Any) -> dict[int, tuple[np.ndarray, Any]]:
     """Intrinsics and road plane of each frame, for the virtual views: the calibration's plane (KITTI
     ``Tr_cam_to_road``, or the camera height and pitch of ``freespace.yaml``), else the road fit of the
     frame's disparity (file, depth, LiDAR or SGBM, as ``disparity_source`` allows) with the rig's focal
@@ -142,12 +141,12 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int],
     leaves its frame without views.
 
     Raises:
-        InvalidOptionError: a camera move within ±``shift`` (``virtual_shift``, metres) can take a frame's
+        InvalidOptionError: a camera move within ``shift`` (``virtual_shift``, metres) can take a frame's
             camera closer than :data:`~freespace.geometry.road_model.CAMERA_HEIGHT_RANGE_M`'s lowest height
             to its road plane (or through it), checked here, before any training.
     """
     from freespace.errors import FreespaceError, InvalidOptionError
-    from freespace.geometry import RoadPlane, fit_road_model
+    from freespace.geometry import RoadPlane, fit_road_model, pose_ranges
     from freespace.geometry.road_model import CAMERA_HEIGHT_RANGE_M
 
     planes: dict[int, tuple[np.ndarray, Any]] = {}
@@ -179,13 +178,14 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int],
     lowest = min(planes, key=lambda i: planes[i][1].clearance(shift))
     plane, least = planes[lowest][1], CAMERA_HEIGHT_RANGE_M[0]
     if plane.clearance(shift) < least:
-        # the largest DY half-range that keeps every frame's camera `least` above its road (DX, DZ kept)
+        # the largest move down (DY) that keeps every frame's camera `least` above its road (DX, DZ kept)
         dy = min((p.clearance((shift[0], 0.0, shift[2])) - least) / max(abs(p.n[1]), 1e-9) for _, p in planes.values())
-        fix = f"a DY of at most {dy:.2f}" if dy > 0 else "smaller DX and DZ"
+        fix = (f"a DY that moves it down by at most {dy:.2f} m: {dy:.2f} (±), or LO:{dy:.2f} (raised by up to -LO m)"
+               if dy > 0 else "smaller DX and DZ")
         raise InvalidOptionError(
-            f"{param('virtual_shift')} {','.join(f'{x:g}' for x in shift)} can move the camera through the road: frame "
-            f"{ds.frames[lowest].name}'s camera is {plane.height:.2f} m above its road, and a move within ± those "
-            f"metres brings it {plane.height - plane.clearance(shift):.2f} m closer; to keep it ≥ {least:g} m above "
+            f"{param('virtual_shift')} {ranges_text(pose_ranges(shift))} can move the camera through the road: frame "
+            f"{ds.frames[lowest].name}'s camera is {plane.height:.2f} m above its road, and a move within those "
+            f"ranges brings it {plane.height - plane.clearance(shift):.2f} m closer; to keep it ≥ {least:g} m above "
             f"the road give {fix}")
     if reasons:
         log.warning("%d of %d training frames have no road plane and get no virtual views: %s", len(reasons),

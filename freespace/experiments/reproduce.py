@@ -238,9 +238,12 @@ def _check_test_roots(dataset: str, roots: dict[str, Path], train_root: PathLike
 def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, seed: int,
             options: dict[str, Any], autolabels: PathLike | None = None) -> TrainConfig:
     """The training configuration of one cell (``variant``: a table name; its budget scales the epoch cap
-    and the patience; X-auto and X-mix read ``autolabels``)."""
+    and the patience; X-auto and X-mix read ``autolabels``; the ``virtual_*`` options go to the variants with
+    virtual views only, so that the others' cells keep their settings whatever pose ranges are asked for)."""
     spec = VARIANTS[variant]
     options = {**options, "epochs": options["epochs"] * spec.budget, "patience": options["patience"] * spec.budget}
+    if "virtual" not in spec.augment:
+        options = {k: v for k, v in options.items() if not k.startswith("virtual_")}
     if spec.labels != "human":
         if autolabels is None:
             raise InvalidOptionError(f"{variant} trains on labels nobody drew: give {param('autolabels')} DIR, the "
@@ -361,7 +364,7 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
               lr: float = 0.001, batch_size: int = 4, workers: int = 0, max_frames: int | None = None, figures: int = 3,
               progress: bool = True, variants: str | tuple[str, ...] | None = None, test_root: TestRoots = None,
               only: str | None = None, encoder_name: str | None = None, encoder_weights: str | None = None,
-              autolabels: PathLike | None = None) -> dict[str, Any]:
+              autolabels: PathLike | None = None, **virtual: Any) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
     "runs": index}``.
 
@@ -373,6 +376,8 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
     ``image_size``: (H, W), or :data:`~freespace.engine.config.FIRST_FRAME_SIZE`.
     ``encoder_name``, ``encoder_weights``: every run's encoder and its initial weights (``"imagenet"`` or a
     state-dict file; see :mod:`freespace.models.weights`), for the networks that take them.
+    ``virtual``: ``virtual_shift``, ``virtual_rotate`` and ``virtual_prob`` of the variants with virtual views
+    (HV-X, HAV-X; as :class:`~freespace.engine.config.TrainConfig` takes them, e.g. ``virtual_shift="0,-3:1,0"``).
     ``only``: ``"NETWORK,VARIANT,SEED"`` runs that one cell and writes only its run folder; ``models`` and
     ``variants``, when given, must include it (a cluster job's command line stays consistent). The returned
     table and gains are then empty (collect the cells with :func:`write_tables`).
@@ -382,6 +387,10 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
     options = dict(epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window,
                    min_delta=min_delta, lr=lr, image_size=image_size, workers=workers, max_frames=max_frames,
                    encoder_name=encoder_name, encoder_weights=encoder_weights)
+    unknown = sorted(set(virtual) - {"virtual_shift", "virtual_rotate", "virtual_prob"})
+    if unknown:
+        raise TypeError(f"reproduce() got unexpected keyword arguments {', '.join(unknown)}")
+    options.update(virtual)
     out = check_writable(out, folder=True)
     roots = parse_test_roots(test_root)
     chosen_models = parse_models(models)

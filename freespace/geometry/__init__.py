@@ -8,7 +8,7 @@ RGB; disparity maps are ``float32 H×W`` with NaN for "no value"; the road plane
 """
 
 from freespace.geometry.homography import StereoCalibration, homography_from_pose
-from freespace.geometry.plane import RoadPlane, rotation_from_angles
+from freespace.geometry.plane import RoadPlane, pose_ranges, rotation_from_angles
 from freespace.geometry.road_model import (
     RoadModel,
     fit_road_model,
@@ -31,6 +31,7 @@ __all__ = [
     "fit_road_model_closed_form",
     "generate_view",
     "homography_from_pose",
+    "pose_ranges",
     "road_energy",
     "road_pixels",
     "rotation_from_angles",

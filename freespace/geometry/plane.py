@@ -26,7 +26,38 @@ import numpy as np
 from freespace.errors import InvalidOptionError
 from freespace.geometry.road_model import RoadModel
 
-__all__ = ["RoadPlane", "rotation_from_angles"]
+__all__ = ["RoadPlane", "pose_ranges", "rotation_from_angles"]
+
+#: a range of one pose parameter: ``(low, high)``, ``low ≤ high``
+Interval = tuple[float, float]
+
+
+def pose_ranges(values: object) -> tuple[Interval, Interval, Interval]:
+    """Three ranges of pose parameters (camera moves in metres, or angles in degrees) as ``(low, high)``
+    intervals: a number ``h ≥ 0`` is the symmetric range ``(−h, h)``, a pair ``(low, high)`` with ``low ≤ high``
+    is itself (e.g. a camera raised by up to 3 m and lowered by up to 0.9 m: ``dy`` in ``(-3.0, 0.9)``, y down).
+
+    Raises:
+        ValueError: not three such ranges (a negative half-range, ``low > high``, or not finite).
+
+    Example:
+        >>> pose_ranges((0.5, (-3.0, 0.9), 2))
+        ((-0.5, 0.5), (-3.0, 0.9), (-2.0, 2.0))
+    """
+    items = list(values) if isinstance(values, (list, tuple)) else []
+    out: list[Interval] = []
+    for v in items:
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 1e6:
+            out.append((-float(v), float(v)))
+        elif (isinstance(v, (list, tuple)) and len(v) == 2
+              and all(isinstance(x, (int, float)) and not isinstance(x, bool) and abs(x) < 1e6 for x in v)
+              and v[0] <= v[1]):
+            out.append((float(v[0]), float(v[1])))
+        else:
+            break
+    if len(out) != 3 or len(items) != 3:
+        raise ValueError("must be three ranges, each a half-range h ≥ 0 (±h) or LO:HI with LO ≤ HI")
+    return out[0], out[1], out[2]
 
 
 def rotation_from_angles(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
@@ -110,13 +141,17 @@ class RoadPlane:
         R = rotation_from_angles(roll_deg, 0.0, 0.0) @ rotation_from_angles(0.0, pitch_deg, 0.0)
         return cls(tuple(float(x) for x in R @ np.array([0.0, 1.0, 0.0])), float(height))  # type: ignore[arg-type]
 
-    def clearance(self, shift: tuple[float, float, float]) -> float:
-        """The lowest height above this plane (metres) of a camera centre moved anywhere within ±``shift``
-        (half-ranges ``(dx, dy, dz) ≥ 0`` in metres, reference frame): ``h − Σ |nᵢ|·shiftᵢ``. Negative when
-        such a move can take the camera through the road.
+    def clearance(self, shift: object) -> float:
+        """The lowest height above this plane (metres) of a camera centre moved anywhere within ``shift``
+        (the ranges of ``(dx, dy, dz)`` in metres, reference frame, as :func:`pose_ranges` takes them: ``h`` for
+        ±h or ``(low, high)``): ``h − Σ max(nᵢ·lowᵢ, nᵢ·highᵢ)`` (``h − Σ |nᵢ|·hᵢ`` for half-ranges). Negative
+        when such a move can take the camera through the road.
 
         Example:
             >>> RoadPlane((0, 1, 0), 1.65).clearance((0.5, 0.2, 0.0))  # a level camera: only dy counts
             1.45
+            >>> round(RoadPlane((0, 1, 0), 1.65).clearance((0.5, (-3.0, 0.9), 0.0)), 6)  # lowered ≤ 0.9 m
+            0.75
         """
-        return self.height - float(np.abs(self.n) @ np.abs(np.asarray(shift, dtype=np.float64)))
+        low, high = np.asarray(pose_ranges(shift), dtype=np.float64).T
+        return self.height - float(np.maximum(self.n * low, self.n * high).sum())
