@@ -48,20 +48,11 @@ mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
 # labels nobody drew (issue 22: X-auto, X-mix), from SGBM on the rendered pairs: what a user without exact
 # disparities has (against the human labels: precision 98.7 %, recall 99.0 %, 68.6 % of the pixels covered)
 [ -d autolabels ] || $FS autolabel --dataset synth --root syn --disparity-source sgbm --out autolabels
-# the data are made anew on a new machine: they must be byte for byte those of the cells already finished
-# (data.sha256 beside this script, from session 2; the images, disparities, labels, calibrations and rig
-# tables, not the reports, which hold timings and absolute paths), or the run would mix two datasets
-SUMS=$(cd "$(dirname "$0")" && pwd)/data.sha256
-find syn same-rigs shifted matched autolabels -type f \( -name "*.png" -o -name "*.txt" -o -name "*.csv" \) \
-    ! -path "*/.freespace/*" ! -path "*/reports/*" ! -name "report*.csv" | LC_ALL=C sort | xargs sha256sum \
-    > logs/data.sha256
-if [ -f "$SUMS" ]; then
-  cmp -s "$SUMS" logs/data.sha256 || { echo "the data in $WORK differ from the run's ($SUMS; diff it with" \
-    "$WORK/logs/data.sha256): the renderer or autolabel changed; make the data with a commit of plan.md's" \
-    "progress table"; exit 1; }
-else
-  cp logs/data.sha256 "$SUMS"
-fi
+# the data are made anew on a new machine: they must be those of the cells already finished (datacheck.py beside
+# this script: labels, disparities, calibrations and rig tables byte for byte, as session 2 made them; images
+# and autolabels within a CPU's float rounding), or the run would mix two datasets
+PY=${PYTHON:-$(dirname "$(command -v "$FS")")/python}
+$PY "$(cd "$(dirname "$0")" && pwd)/datacheck.py" . "$(cd "$(dirname "$0")" && pwd)" || exit 1
 
 NETS=${NETS:-"unet dupsampling segnet denseaspp deeplabv3plus"}
 VARIANTS=${VARIANTS:-"X HA-X X-dup X-long"}
@@ -73,7 +64,6 @@ COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root match
         --lr ${LR:-0.001} --batch-size 2 --no-progress --out $RES"
 export COMMON
 
-PY=${PYTHON:-$(dirname "$(command -v "$FS")")/python}
 SYNC=$(cd "$(dirname "$0")" && pwd)/sync.py
 export PY SYNC
 # restore the cells finished on another machine (their small files; a finished cell is never trained again)
