@@ -82,8 +82,8 @@ cell() {  # net,variant,seed
   log="logs/$RES-$(echo "$1" | tr , _).log"
   if OMP_NUM_THREADS=1 $FS reproduce $COMMON $opts --only "$1" > "$log" 2>&1; then
     run=$(grep -o 'runs/[^:]*' "$log" | tail -1)
-    $PY "$SYNC" save "$RES" "${run#runs/}" "$HERE"
-    echo "$(date +%T) done $1"
+    if $PY "$SYNC" save "$RES" "${run#runs/}" "$HERE"; then echo "$(date +%T) done $1"
+    else echo "$(date +%T) FAILED to keep $1 (see $WORK/$log)"; fi
   else
     echo "$(date +%T) FAILED $1 (see $WORK/$log)"
   fi

@@ -22,6 +22,8 @@ SKIP = {"checkpoints", "generated", "tensorboard"}
 
 def save(res: Path, run: str, keep: Path) -> None:
     src, dst = res / "runs" / run, keep / "runs" / run
+    if not (src / "metrics.json").is_file():  # a wrong name would copy nothing, silently
+        raise SystemExit(f"{src} is not a finished cell (no metrics.json): nothing saved")
     for path in sorted(src.rglob("*")):
         rel = path.relative_to(src)
         if path.is_file() and rel.parts[0] not in SKIP and not path.name.endswith((".tmp", "lock")):
