@@ -1547,6 +1547,23 @@ def test_issue20b_a_crafted_manifest_deletes_nothing_outside(command: str, train
     assert snapshot(out, victim) == before
 
 
+def test_a_restarted_run_keeps_its_files_in_the_manifest(trained: dict[str, Path], tmp_path: Path) -> None:
+    """A run folder left without a checkpoint (a session cut off before the first epoch ended) is started
+    again; the files the new run writes are the command's own, so the run can be claimed again afterwards
+    (resumed, extended, tested by reproduce) instead of being refused for its own config.yaml."""
+    out = tmp_path / "out"
+    shutil.copytree(trained["run"], out)
+    shutil.rmtree(out / "checkpoints")
+    (out / "metrics.json").unlink()
+    train = ["train", "--dataset", "synth", "--root", str(trained["data"]), "--model", "segnet", "--image-size",
+             "64x64", "--no-progress", "--out", str(out)]
+    assert main([*train, "--epochs", "1"]) == 0
+    entries = set(json.loads((out / ".freespace" / "manifest.json").read_text())["entries"])
+    assert {"config.yaml", "metrics.json", "checkpoints/"} <= entries
+    assert main([*train, "--epochs", "2", "--resume"]) == 0
+    assert json.loads((out / "metrics.json").read_text())["epochs_run"] == 2
+
+
 def test_issue20b_names_with_newlines_are_shown_on_one_line(trained: dict[str, Path], tmp_path: Path,
                                                            capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "out\nü put"

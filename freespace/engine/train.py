@@ -246,6 +246,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                                          f"choose another {param('out')}")
             log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
             folder.forget(RUN_ENTRIES)
+            folder.record(RUN_ENTRIES)  # the new run writes them again: still this command's files
         try:
             return _train(config, resume, progress)
         except FreespaceError as exc:  # a user's mistake (a corrupt frame) before the first checkpoint: no output
