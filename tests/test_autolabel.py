@@ -226,6 +226,26 @@ def test_dataset_tree_resumes_refuses_other_settings_and_shards(rendered: Path, 
                     "output of freespace generate")
 
 
+def test_a_tree_labelled_with_the_old_matcher_is_not_resumed(rendered: Path, tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture) -> None:
+    # SGBM version 2 pads the pair (freespace.geometry.stereo); a tree from version 1 recorded no version
+    out = tmp_path / "labels"
+    args = ["autolabel", "--dataset", "synth", "--root", str(rendered), "--out", str(out), "--disparity-source",
+            "sgbm", "--max-disparity", "64", "--cache-dir", str(tmp_path / "cache")]
+    assert main(args) == 0
+    settings = json.loads((out / "settings.json").read_text())
+    assert settings["sgbm_version"] == 2
+    del settings["sgbm_version"]
+    (out / "settings.json").write_text(json.dumps(settings))
+    _one_line_error(args, capsys, "sgbm_version")
+    assert main(args + ["--overwrite"]) == 0
+    # a tree whose disparities cannot come from SGBM records no matcher version
+    exact = tmp_path / "exact"
+    assert main(["autolabel", "--dataset", "synth", "--root", str(rendered), "--out", str(exact),
+                 "--disparity-source", "file"]) == 0
+    assert "sgbm_version" not in json.loads((exact / "settings.json").read_text())
+
+
 def test_train_labels_view_reads_the_tree_for_the_named_frames(rendered: Path, tmp_path: Path) -> None:
     out = tmp_path / "labels"
     assert main(["autolabel", "--dataset", "synth", "--root", str(rendered), "--out", str(out)]) == 0

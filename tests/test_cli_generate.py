@@ -54,7 +54,9 @@ def test_one_pair_with_sgbm(pair_files: dict[str, Path], tmp_path: Path) -> None
     assert main(_pair_args(pair_files, tmp_path / "G.png", "--model-json", str(js))) == 0
     model = json.loads(js.read_text())
     assert model["disparity_source"] == "sgbm"
-    assert model["roll_deg"] == pytest.approx(1.0, abs=0.1)
+    # SGBM's sub-pixel noise on this 320×160 pair: over 24 pairs (12 textures, roll 1° and −2°) the fitted
+    # roll is off by 0.09° on average and 0.26° at most (0.14° and 0.32° before the matcher padded the pair)
+    assert model["roll_deg"] == pytest.approx(1.0, abs=0.3)
 
 
 def _run(args: list[str]) -> subprocess.CompletedProcess:

@@ -29,6 +29,19 @@ def test_constant_shift() -> None:
     assert np.isnan(disp[:, :8]).all()  # no match possible at the left margin
 
 
+def test_right_margin_covered_left_margin_left_empty() -> None:
+    # OpenCV leaves the first max_disparity columns empty, and the left-right check used to empty the last
+    # ones (the right image's own empty margin); the matcher pads the pair on the right, so every column from
+    # max_disparity on gets a disparity, and the left margin, where a match may lie outside the right
+    # image, stays empty
+    left = _noise_texture((120, 240), 0)
+    right = np.roll(left, -12, axis=1)
+    disp = compute_disparity(left, right, max_disparity=96)
+    assert np.isnan(disp[:, :96]).all()
+    assert np.isfinite(disp[10:-10, 96:-4]).mean() > 0.95
+    assert np.nanmedian(np.abs(disp[10:-10, 160:-4] - 12)) < 0.1
+
+
 def test_slanted_road_plane_recovered() -> None:
     shape = (200, 400)
     model = RoadModel.from_affine(0.005, 0.25, -10.0)  # roll −1.15°, d = 40 at the bottom row

@@ -25,18 +25,21 @@ import numpy as np
 
 from freespace.errors import DatasetError, InvalidOptionError, param
 from freespace.geometry import StereoCalibration, compute_disparity
+from freespace.geometry.stereo import SGBM_VERSION
 from freespace.geometry.depth import depth_to_disparity
 from freespace.io.codecs import read_disparity
 from freespace.io.files import PathLike, atomic_write_bytes
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DISPARITY_SOURCES", "check_disparity_source", "DisparityCache", "resolve_disparity"]
+__all__ = ["DISPARITY_SOURCES", "SGBM_SOURCES", "check_disparity_source", "DisparityCache", "resolve_disparity"]
 
 DISPARITY_SOURCES = ("auto", "file", "depth", "lidar", "sgbm", "none")
 """``auto``: file, else depth + camera, else cached SGBM; ``file``: file, else depth + camera; ``depth``:
 depth + camera only; ``lidar``: the frame's Velodyne scan projected with its calibration only; ``sgbm``:
 always SGBM; ``none``: no disparity."""
+SGBM_SOURCES = ("auto", "sgbm")
+"""The disparity sources under which a frame's disparity may come from SGBM."""
 
 
 class FrameFiles(Protocol):
@@ -58,8 +61,8 @@ def check_disparity_source(mode: str) -> str:
 
 
 class DisparityCache:
-    """SGBM disparities on disk, keyed by the frame's image files (path, size, mtime) and the matcher
-    settings, so a second run costs one ``.npy`` read. Default folder: ``$XDG_CACHE_HOME/freespace/sgbm``
+    """SGBM disparities on disk, keyed by the frame's image files (path, size, mtime), the matcher
+    settings and its version (:data:`~freespace.geometry.stereo.SGBM_VERSION`), so a second run costs one ``.npy`` read. Default folder: ``$XDG_CACHE_HOME/freespace/sgbm``
     (``~/.cache/freespace/sgbm``)."""
 
     def __init__(self, folder: PathLike | None = None, **settings: Any) -> None:
@@ -72,7 +75,7 @@ class DisparityCache:
 
     def path(self, frame: FrameFiles) -> Path:
         """Cache file of ``frame`` under the current settings."""
-        parts = [self.settings]
+        parts = [self.settings, SGBM_VERSION]
         for p in (frame.left, frame.right):
             st = Path(p).stat()  # type: ignore[arg-type]
             parts.append([str(Path(p).resolve()), st.st_size, st.st_mtime_ns])  # type: ignore[arg-type]

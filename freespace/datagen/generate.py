@@ -42,7 +42,8 @@ from freespace.geometry import (
     virtual_homography,
     virtual_view,
 )
-from freespace.geometry.stereo import check_search_range
+from freespace.data.disparity import SGBM_SOURCES
+from freespace.geometry.stereo import SGBM_VERSION, check_search_range
 from freespace.io.codecs import (IMAGE_SUFFIXES, encode_image, read_disparity, read_image, read_road_label,
     road_label_to_kitti)
 from freespace.io.files import (PathLike, check_outputs, check_writable, check_writable_files, encode_json,
@@ -394,12 +395,18 @@ def dataset_settings(dataset: Any) -> dict[str, Any]:
                 "layout": json.loads(json.dumps(asdict(spec), default=str)) if is_dataclass(spec) else None}
     if dataset.disparity_source == "lidar":
         settings["lidar_densify"] = getattr(dataset, "lidar_densify", 0.0)
+    if dataset.disparity_source in SGBM_SOURCES:
+        settings["sgbm_version"] = SGBM_VERSION
     return settings
 
 
 def recorded_settings(recorded: dict[str, Any]) -> dict[str, Any]:
-    """Settings recorded by an earlier version under the names of today's (``disparity``: ``disparity_source``)."""
-    return {("disparity_source" if k == "disparity" else k): v for k, v in recorded.items()}
+    """Settings recorded by an earlier version under the names of today's (``disparity``: ``disparity_source``;
+    a folder whose frames may come from SGBM and that records no ``sgbm_version`` was made with version 1)."""
+    settings = {("disparity_source" if k == "disparity" else k): v for k, v in recorded.items()}
+    if settings.get("disparity_source") in SGBM_SOURCES:
+        settings.setdefault("sgbm_version", 1)
+    return settings
 
 
 def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
