@@ -239,10 +239,10 @@ def test_a_tree_labelled_with_the_old_matcher_is_not_resumed(rendered: Path, tmp
     (out / "settings.json").write_text(json.dumps(settings))
     _one_line_error(args, capsys, "sgbm_version")
     assert main(args + ["--overwrite"]) == 0
-    # a tree whose disparities cannot come from SGBM records no matcher version
+    # a tree whose disparities cannot come from SGBM records no matcher version: with source auto every
+    # rendered frame has its disparity file
     exact = tmp_path / "exact"
-    assert main(["autolabel", "--dataset", "synth", "--root", str(rendered), "--out", str(exact),
-                 "--disparity-source", "file"]) == 0
+    assert main(["autolabel", "--dataset", "synth", "--root", str(rendered), "--out", str(exact)]) == 0
     assert "sgbm_version" not in json.loads((exact / "settings.json").read_text())
 
 

@@ -395,18 +395,23 @@ def dataset_settings(dataset: Any) -> dict[str, Any]:
                 "layout": json.loads(json.dumps(asdict(spec), default=str)) if is_dataclass(spec) else None}
     if dataset.disparity_source == "lidar":
         settings["lidar_densify"] = getattr(dataset, "lidar_densify", 0.0)
-    if dataset.disparity_source in SGBM_SOURCES:
+    if _may_use_sgbm(dataset):
         settings["sgbm_version"] = SGBM_VERSION
     return settings
 
 
+def _may_use_sgbm(dataset: Any) -> bool:
+    """Whether a frame's disparity may come from SGBM: always with source ``sgbm``; with ``auto`` when a
+    frame with a right image has neither a disparity file nor a depth map."""
+    if dataset.disparity_source not in SGBM_SOURCES:
+        return False
+    return dataset.disparity_source == "sgbm" or any(
+        f.disparity is None and f.depth is None and f.right is not None for f in dataset.frames)
+
+
 def recorded_settings(recorded: dict[str, Any]) -> dict[str, Any]:
-    """Settings recorded by an earlier version under the names of today's (``disparity``: ``disparity_source``;
-    a folder whose frames may come from SGBM and that records no ``sgbm_version`` was made with version 1)."""
-    settings = {("disparity_source" if k == "disparity" else k): v for k, v in recorded.items()}
-    if settings.get("disparity_source") in SGBM_SOURCES:
-        settings.setdefault("sgbm_version", 1)
-    return settings
+    """Settings recorded by an earlier version under the names of today's (``disparity``: ``disparity_source``)."""
+    return {("disparity_source" if k == "disparity" else k): v for k, v in recorded.items()}
 
 
 def _settings(dataset: Any, options: FitOptions) -> dict[str, Any]:
