@@ -16,6 +16,9 @@
 # rebuilt there; on a new machine the copied cells are restored into WORK first, so they are not run again.
 #
 # Training on labels nobody drew (issue 22 §3): NETS="unet dupsampling" VARIANTS="X-auto X-mix" bash run.sh WORK
+# The same on autolabels from the padded matcher (SGBM version 2, made beforehand with a freespace at ca4bddf or
+# later: freespace autolabel --dataset synth --root syn --disparity-source sgbm --out autolabels2):
+#   RES=res-auto2 AUTOLABELS=autolabels2 CELLS="unet,X-auto,0 ..." bash run.sh WORK
 # The control of pretraining (X with the Lite encoders from scratch, kept in res-scratch/ beside this script):
 #   RES=res-scratch WEIGHTS= NETS="unet dupsampling" VARIANTS=X bash run.sh WORK
 # LR and MIN_DELTA set the learning rate and early stopping's least improvement (defaults 0.001 and 0, the
@@ -59,7 +62,7 @@ VARIANTS=${VARIANTS:-"X HA-X X-dup X-long"}
 SEEDS=${SEEDS:-10}
 export FS WORK HERE STOP_AT RES WEIGHTS
 COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root matched=matched
-        --test-root same-rigs=same-rigs --autolabels autolabels --seeds 10
+        --test-root same-rigs=same-rigs --autolabels ${AUTOLABELS:-autolabels} --seeds 10
         --epochs ${CAP:-100} --patience ${PATIENCE:-10} --val-window 3 --min-delta ${MIN_DELTA:-0}
         --lr ${LR:-0.001} --batch-size 2 --no-progress --out $RES"
 export COMMON
