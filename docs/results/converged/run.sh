@@ -30,8 +30,9 @@
 #        worktree pinned at one commit (git worktree add --detach DIR COMMIT), so that other work does not
 #        change the code under the cells; the commit of each session's cells is in plan.md.
 set -euo pipefail
+DIR=$(cd "$(dirname "$0")" && pwd)  # this script's folder, taken before the cd into WORK below
 FS=${FREESPACE:-freespace}
-HERE=${KEEP:-$(cd "$(dirname "$0")" && pwd)}  # where finished cells are kept (default: beside this script)
+HERE=${KEEP:-$DIR}  # where finished cells are kept (default: beside this script)
 RES=${RES:-res-final}                # the reproduce folder in WORK, and its copy in KEEP/RES
 WEIGHTS=${WEIGHTS-imagenet}          # the Lite encoders' initial weights; WEIGHTS= (empty) for from scratch
 HERE="$HERE/$RES"
@@ -55,7 +56,7 @@ mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
 # this script: labels, disparities, calibrations and rig tables byte for byte, as session 2 made them; images
 # and autolabels within a CPU's float rounding), or the run would mix two datasets
 PY=${PYTHON:-$(dirname "$(command -v "$FS")")/python}
-$PY "$(cd "$(dirname "$0")" && pwd)/datacheck.py" . "$(cd "$(dirname "$0")" && pwd)" || exit 1
+$PY "$DIR/datacheck.py" . "$DIR" || exit 1
 
 NETS=${NETS:-"unet dupsampling segnet denseaspp deeplabv3plus"}
 VARIANTS=${VARIANTS:-"X HA-X X-dup X-long"}
@@ -67,7 +68,7 @@ COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root match
         --lr ${LR:-0.001} --batch-size 2 --no-progress --out $RES"
 export COMMON
 
-SYNC=$(cd "$(dirname "$0")" && pwd)/sync.py
+SYNC=$DIR/sync.py
 export PY SYNC
 # restore the cells finished on another machine (their small files; a finished cell is never trained again)
 $PY "$SYNC" restore "$HERE" "$RES"
