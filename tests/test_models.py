@@ -300,6 +300,17 @@ def test_denseaspp_rates_transition4_and_output_stride() -> None:
     assert feats.shape[-3:] == (512, 8, 12)  # output stride 8
 
 
+def test_denseaspp_on_another_encoder() -> None:
+    model = create_model("denseaspp", encoder_name="efficientnet-lite0")  # random weights: no extra needed
+    assert model.encoder.output_stride == 8 and model.encoder.out_channels[-1] == 320
+    assert isinstance(model.features, torch.nn.BatchNorm2d) and model.features.num_features == 320  # as norm5
+    assert model.units[0][1].in_channels == 320 and model.units[0][1].out_channels == 128  # DenseNet-121's 128/64
+    assert model.units[1][2].in_channels == 320 + 64 and model.classifier[-1].in_channels == 320 + 5 * 64
+    assert not any(k.startswith("encoder.") for k in create_model("denseaspp").state_dict())  # old checkpoints load
+    with pytest.raises(InvalidOptionError, match="or an encoder_name"):
+        create_model("denseaspp", encoder_weights="imagenet")
+
+
 def test_dupsampling_reconstruction_from_labels() -> None:
     model = create_model("dupsampling", compressed_dim=16)
     labels = [_target(2, 64, 96) for _ in range(2)]
