@@ -2,8 +2,8 @@
 # The converged run (issue 23; plan and costs in plan.md beside this file): the claim in the paper's regime.
 # DeepLabv3+ (EfficientNet-Lite0, ImageNet weights, output stride 16) at 320x416, DenseASPP at 224x288 (their
 # intact sizes), U-Net and DUpsampling (Lite0, ImageNet) and SegNet (no offline weights for VGG) at 192x256;
-# variants X, HA-X, X-dup, X-long; 10 seeds; each run to early stopping (patience 20 on the 3-epoch mean of
-# the validation F-score, cap 200 epochs; X-long 40 and 400; lr and least improvement from the pilot in
+# variants X, HA-X, X-dup, X-long; 10 seeds (SEEDS=N for N, and for CELLS past seed 9); each run to early
+# stopping (patience 20 on the 3-epoch mean of the validation F-score, cap 200 epochs; X-long 40 and 400; lr and least improvement from the pilot in
 # plan.md: LR=0.01 MIN_DELTA=0.001 PATIENCE=20 CAP=200; sessions 1-3 ran patience 10, cap 100); test sets:
 # test, shifted (rigs the training set never had, much wider than the evidence run's), matched (shifted's
 # scenes with the training rigs), same-rigs (200 frames of new drives with the training rigs; the primary
@@ -63,7 +63,7 @@ VARIANTS=${VARIANTS:-"X HA-X X-dup X-long"}
 SEEDS=${SEEDS:-10}
 export FS WORK HERE STOP_AT RES WEIGHTS
 COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root matched=matched
-        --test-root same-rigs=same-rigs --autolabels ${AUTOLABELS:-autolabels} --seeds 10
+        --test-root same-rigs=same-rigs --autolabels ${AUTOLABELS:-autolabels} --seeds $SEEDS
         --epochs ${CAP:-100} --patience ${PATIENCE:-10} --val-window 3 --min-delta ${MIN_DELTA:-0}
         --lr ${LR:-0.001} --batch-size 2 --no-progress --out $RES"
 export COMMON
