@@ -5,10 +5,9 @@
 # variants X, HA-X, X-dup, X-long; 10 seeds (SEEDS=N for N, and for CELLS past seed 9); each run to early
 # stopping (patience 20 on the 3-epoch mean of the validation F-score, cap 200 epochs; X-long 40 and 400; lr
 # and least improvement from the pilot in plan.md: LR=0.01 MIN_DELTA=0.001 PATIENCE=20 CAP=200; sessions 1-3
-# ran patience 10, cap 100); test sets:
-# test, shifted (rigs the training set never had, much wider than the evidence run's), matched (shifted's
-# scenes with the training rigs), same-rigs (200 frames of new drives with the training rigs; the primary
-# endpoint's set).
+# ran patience 10, cap 100); test sets: test, shifted (rigs the training set never had, much wider than the
+# evidence run's), matched (shifted's scenes with the training rigs), same-rigs (200 frames of new drives with
+# the training rigs; the primary endpoint's set).
 #
 # Cells run seed-major (every network and variant of seed 0 first, ...), two at a time with one thread each,
 # as `reproduce --only` cells in WORK/res. A cell interrupted by the end of a session resumes from its
