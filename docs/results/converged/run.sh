@@ -25,10 +25,11 @@
 # session-1 pilot's), PATIENCE and CAP the patience and the epoch cap (defaults 10 and 100; X-long doubles
 # both); plan.md names the values the run fixes. A larger PATIENCE or CAP extends the finished cells exactly.
 # Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace, PYTHON=its python; STOP_AT: a
-#        `date` time after which no new cell starts, e.g. "14:10"; CELLS="net,variant,seed ..." to run only
-#        those; KEEP=DIR to keep the finished cells elsewhere than beside this script). Run it from a git
-#        worktree pinned at one commit (git worktree add --detach DIR COMMIT), so that other work does not
-#        change the code under the cells; the commit of each session's cells is in plan.md.
+#        `date` time after which no new cell starts, e.g. "14:10", or "2026-11-26 00:50" past midnight;
+#        CELLS="net,variant,seed ..." to run only those; KEEP=DIR to keep the finished cells elsewhere than
+#        beside this script). Run it from a git worktree pinned at one commit (git worktree add --detach DIR
+#        COMMIT), so that other work does not change the code under the cells; the commit of each session's
+#        cells is in plan.md.
 set -euo pipefail
 DIR=$(cd "$(dirname "$0")" && pwd)  # this script's folder, taken before the cd into WORK below
 FS=${FREESPACE:-freespace}
@@ -38,6 +39,9 @@ WEIGHTS=${WEIGHTS-imagenet}          # the Lite encoders' initial weights; WEIGH
 HERE="$HERE/$RES"
 WORK=$1
 STOP_AT=$(date -d "${2:-tomorrow}" +%s)
+# a bare "00:50" given at 22:40 is today's, already past: every cell would be skipped without a word
+[ "$STOP_AT" -gt "$(date +%s)" ] || { echo "STOP_AT '$2' is already past; give a later time, or a date too" \
+    "(e.g. \"$(date -d tomorrow +%F) ${2}\") when it is past midnight" >&2; exit 2; }
 mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
 [ -d syn ] || $FS synth --out syn --num 100 --width 416 --height 320 --frames-per-scenario 5 --seed 0 --workers 2
 [ -d same-rigs ] || $FS synth --out same-rigs --num 200 --width 416 --height 320 --frames-per-scenario 5 --seed 2 \
