@@ -45,10 +45,15 @@ def machine() -> str:
             f"{platform.python_version()}, NumPy {numpy.__version__}, OpenCV {cv2.__version__}")
 
 
+def section_text(name: str, body: str) -> str:
+    """The section ``## name`` with ``body``, as BENCHMARKS.md holds it."""
+    return f"## {name}\n\n{body.strip()}\n"
+
+
 def write_section(name: str, body: str) -> None:
     """Replace (or append) the section ``## name`` of BENCHMARKS.md with ``body``."""
     text = BENCHMARKS.read_text() if BENCHMARKS.exists() else "# Benchmarks\n\nFigures written by `bench/*.py`.\n"
-    section = f"## {name}\n\n{body.strip()}\n"
+    section = section_text(name, body)
     pattern = re.compile(rf"^## {re.escape(name)}\n.*?(?=^## |\Z)", re.S | re.M)
     text = pattern.sub(lambda _: section + "\n", text) if pattern.search(text) else text.rstrip() + "\n\n" + section
     BENCHMARKS.write_text(text.rstrip() + "\n")

@@ -599,8 +599,8 @@ def cmd_kitti_submit(args: argparse.Namespace) -> int:
 # --- reproduce, demo -----------------------------------------------------------------------------------
 
 REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "val_window", "min_delta", "lr", "batch_size",
-                     "image_size", "workers", "max_frames", "encoder_name", "encoder_weights", "virtual_shift",
-                     "virtual_rotate", "virtual_prob")
+                     "image_size", "workers", "max_frames", "preset", "encoder_name", "encoder_weights",
+                     "virtual_shift", "virtual_rotate", "virtual_prob")
 
 
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:

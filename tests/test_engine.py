@@ -359,3 +359,14 @@ def test_a_larger_patience_extends_a_stopped_run_exactly(tiny: Path, tmp_path: P
             for run in (stopped, fresh)]
     assert rows[0] == rows[1]
     assert _train(tiny, stopped, *common, "--patience", "2", "--resume") == 2  # patience may only grow
+
+
+def test_deterministic_mode_warns_only_on_a_gpu(monkeypatch: pytest.MonkeyPatch) -> None:
+    """On a CPU every operation has a deterministic kernel (an error otherwise); on a GPU bilinear upsampling's
+    backward has none, so deterministic mode there warns for those and stays deterministic for the others."""
+    from freespace.engine.train import deterministic_mode
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    assert deterministic_mode() is True
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    assert deterministic_mode() == "warn"

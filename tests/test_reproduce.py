@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ import torch
 
 from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
+from freespace.errors import InvalidOptionError
 from freespace.experiments.stats import paired_gain
 from freespace.io.codecs import read_image
 
@@ -311,6 +313,22 @@ def test_virtual_pose_ranges_reach_only_the_virtual_variants(data: Path, tmp_pat
     assert main(["reproduce", "--dataset", "synth", "--root", str(data), "--out", str(tmp_path / "r"), "--models",
                  "unet", "--variants", "HV-X", "--virtual-shift", "0,-3:0.9,9:8", "--epochs", "1"]) == 2
     assert "--virtual-shift must be three ranges" in capsys.readouterr().err
+
+
+def test_preset_reaches_the_cells(data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``reproduce --preset paper`` (the paper's backbones, for a GPU) reaches every cell's configuration, and a
+    cell started with another preset is refused, not mixed in."""
+    import freespace.experiments.reproduce as rep
+
+    seen = []
+    monkeypatch.setattr(rep, "run_cell", lambda config, **_: seen.append(config) or "done")
+    args = ["reproduce", "--dataset", "synth", "--root", str(data), "--out", str(tmp_path / "r"), "--only",
+            "segnet,HA-X,0", "--epochs", "1"]
+    assert main(args + ["--preset", "paper"]) == 0
+    assert [(c.preset, c.model_options()) for c in seen] == [("paper", {"preset": "paper"})]
+    seen[0].save(Path(seen[0].out, "config.yaml"))  # as a started cell holds it
+    with pytest.raises(InvalidOptionError, match="preset 'paper' → 'light'"):
+        rep._check_cell(replace(seen[0], preset="light"))
 
 
 def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:

@@ -319,7 +319,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         devices=config.devices, num_nodes=config.num_nodes, strategy="ddp" if config.strategy == "ddp" else "auto",
         max_epochs=config.epochs, callbacks=callbacks, plugins=[RunCheckpointIO(run_dir, module)],
         logger=_logger(config, run_dir),
-        default_root_dir=str(run_dir), num_sanity_val_steps=0, deterministic=True,
+        default_root_dir=str(run_dir), num_sanity_val_steps=0, deterministic=deterministic_mode(),
         enable_progress_bar=progress and on_terminal(), enable_model_summary=False, use_distributed_sampler=False,
         log_every_n_steps=1)
     _interruptible(trainer.fit, module, loader(train, True), loader(val, False),
@@ -334,6 +334,15 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     if trainer.is_global_zero:
         write_json(run_dir / "metrics.json", metrics)
     return metrics
+
+
+def deterministic_mode() -> bool | str:
+    """Lightning's ``deterministic`` for this process's run: ``True`` (every operation's deterministic
+    kernel, or an error) without a GPU; ``"warn"`` with one, where some backward kernels have no
+    deterministic version (bilinear upsampling's, which DeepLabv3+, DUpsampling, DenseASPP and GSCNN use):
+    those warn and run, the others (cuBLAS too: Lightning sets ``CUBLAS_WORKSPACE_CONFIG``) stay
+    deterministic."""
+    return "warn" if torch.cuda.is_available() else True
 
 
 def _interruptible(step: Any, *args: Any, **kwargs: Any) -> Any:

@@ -363,8 +363,9 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
               min_delta: float = 0.0,
               lr: float = 0.001, batch_size: int = 4, workers: int = 0, max_frames: int | None = None, figures: int = 3,
               progress: bool = True, variants: str | tuple[str, ...] | None = None, test_root: TestRoots = None,
-              only: str | None = None, encoder_name: str | None = None, encoder_weights: str | None = None,
-              autolabels: PathLike | None = None, **virtual: Any) -> dict[str, Any]:
+              only: str | None = None, preset: str = "light", encoder_name: str | None = None,
+              encoder_weights: str | None = None, autolabels: PathLike | None = None,
+              **virtual: Any) -> dict[str, Any]:
     """Run the protocol (see the module docstring) and return ``{"table": results rows, "gains": gain rows,
     "runs": index}``.
 
@@ -374,6 +375,7 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
     ``test_root``: further test sets (:func:`parse_test_roots`). ``autolabels``: the label tree of ``root``
     that X-auto and X-mix train on (made by ``freespace autolabel``).
     ``image_size``: (H, W), or :data:`~freespace.engine.config.FIRST_FRAME_SIZE`.
+    ``preset``: every network's size (``"light"`` for a CPU, ``"paper"``: the paper's backbones).
     ``encoder_name``, ``encoder_weights``: every run's encoder and its initial weights (``"imagenet"`` or a
     state-dict file; see :mod:`freespace.models.weights`), for the networks that take them.
     ``virtual``: ``virtual_shift``, ``virtual_rotate`` and ``virtual_prob`` of the variants with virtual views
@@ -386,7 +388,7 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
         raise InvalidOptionError(f"{param('seeds')} must be in 1…{MAX_SEEDS}, got {seeds}")
     options = dict(epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window,
                    min_delta=min_delta, lr=lr, image_size=image_size, workers=workers, max_frames=max_frames,
-                   encoder_name=encoder_name, encoder_weights=encoder_weights)
+                   preset=preset, encoder_name=encoder_name, encoder_weights=encoder_weights)
     unknown = sorted(set(virtual) - {"virtual_shift", "virtual_rotate", "virtual_prob"})
     if unknown:
         raise TypeError(f"reproduce() got unexpected keyword arguments {', '.join(unknown)}")

@@ -164,7 +164,8 @@ def _fixed(dim: Any) -> int | None:
 
 
 class Predictor:
-    """Road probabilities from a training checkpoint (PyTorch) or an exported ONNX model (onnxruntime).
+    """Road probabilities from a training checkpoint (PyTorch; on the GPU when this machine has one) or an
+    exported ONNX model (onnxruntime, on the CPU).
 
     Images are resized to ``resize_to``, the model's training size (H, W) kept in the checkpoint / the ONNX
     metadata, and the probabilities back to each image's own size; a model that states none has ``resize_to``
@@ -178,7 +179,11 @@ class Predictor:
             raise InvalidOptionError(f"give exactly one of {param('checkpoint')} and {param('onnx')}")
         self.resize_to: tuple[int, int] | None = None
         if checkpoint is not None:
+            import torch
+
             self.model, hp = load_checkpoint(checkpoint)
+            self.device = "cuda" if torch.cuda.is_available() else "cpu"
+            self.model.to(self.device)
             self.resize_to = _image_size(hp.get("image_size"), checkpoint)
             self.name = hp["model"]
             self.session, self.batch = None, None
@@ -217,7 +222,7 @@ class Predictor:
             import torch
 
             with torch.no_grad():
-                return torch.softmax(self.model(torch.from_numpy(batch)), 1)[:, 1].numpy()
+                return torch.softmax(self.model(torch.from_numpy(batch).to(self.device)), 1)[:, 1].cpu().numpy()
         n = len(batch)
         if self.batch is not None and n != self.batch:  # a fixed batch size: chunks of it, the last padded
             chunks = [batch[i:i + self.batch] for i in range(0, n, self.batch)]
