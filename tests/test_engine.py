@@ -362,8 +362,9 @@ def test_a_larger_patience_extends_a_stopped_run_exactly(tiny: Path, tmp_path: P
 
 
 def test_deterministic_mode_warns_only_on_a_gpu(monkeypatch: pytest.MonkeyPatch) -> None:
-    """On a CPU every operation has a deterministic kernel (an error otherwise); on a GPU bilinear upsampling's
-    backward has none, so deterministic mode there warns for those and stays deterministic for the others."""
+    """On a CPU every operation has a deterministic kernel (an error otherwise); on a GPU the cross-entropy
+    loss's forward (nll_loss2d) has none (seen on an H200, PyTorch 2.11), so deterministic mode there warns
+    for it and stays deterministic for the others."""
     from freespace.engine.train import deterministic_mode
 
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)

@@ -338,10 +338,10 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
 
 def deterministic_mode() -> bool | str:
     """Lightning's ``deterministic`` for this process's run: ``True`` (every operation's deterministic
-    kernel, or an error) without a GPU; ``"warn"`` with one, where some backward kernels have no
-    deterministic version (bilinear upsampling's, which DeepLabv3+, DUpsampling, DenseASPP and GSCNN use):
-    those warn and run, the others (cuBLAS too: Lightning sets ``CUBLAS_WORKSPACE_CONFIG``) stay
-    deterministic."""
+    kernel, or an error) without a GPU; ``"warn"`` with one, where some kernels have no deterministic CUDA
+    version (the 2-D cross-entropy loss's forward, ``nll_loss2d``, which every network trains with): those
+    warn and run, the others (cuBLAS too: Lightning sets ``CUBLAS_WORKSPACE_CONFIG``) stay deterministic.
+    With ``True`` a GPU run would stop at its first step."""
     return "warn" if torch.cuda.is_available() else True
 
 
