@@ -10,10 +10,12 @@
 #
 # Usage, in the repository root of the GPU machine: OUT=DIR BUDGET=SECONDS bash docs/results/gpu/run.sh
 #   OUT: where the results go (log.txt, infer_*.md, datacheck.txt, cells.tgz: every run folder's small files,
-#   never checkpoints); BUDGET: seconds from the start to the end of the script (default 540). Optional: WHEELS
-#   (default .whl: wheels of the packages the machine lacks, installed into /tmp/site; empty: none), WORK (default gpuwork: the data, made
-#   there when missing, and the run folders), PYTHON (default python3), CELLS (the queue, "net,variant,seed ..."),
-#   PRESET (default paper), CAP, PATIENCE, MIN_LEFT (default 120), PARALLEL (default 3).
+#   never checkpoints); BUDGET: seconds from the start to the end of the script (default 540). Optional:
+#   WHEELS (default .whl: wheels of the packages the machine lacks, installed into /tmp/site; empty: none),
+#   WORK (default gpuwork: the data, made there when missing, and the run folders), PYTHON (default python3),
+#   FS (default: $PYTHON -m freespace.cli), CELLS (the queue, "net,variant,seed ..."), PRESET (default paper),
+#   CAP, PATIENCE, MIN_LEFT (default 120), PARALLEL (default 3).
+# Do it all in one call: files the script leaves in WORK were not all there in the next call (session 17).
 set -uo pipefail
 T0=$(date +%s)
 OUT=${OUT:?give OUT=DIR}
@@ -80,7 +82,9 @@ declare -A PIDS=()
 reap() { local c; for c in "${!PIDS[@]}"; do kill -0 "${PIDS[$c]}" 2>/dev/null && continue
   wait "${PIDS[$c]}"; say "$c ended, exit $?: $(tail -1 "logs/$c.log")"; unset "PIDS[$c]"; done; }
 for c in $CELLS; do
-  while [ ${#PIDS[@]} -ge "${PARALLEL:-3}" ]; do sleep 2; reap; [ "$(date +%s)" -lt $((DEADLINE - 25)) ] || break 2; done
+  while [ ${#PIDS[@]} -ge "${PARALLEL:-3}" ]; do
+    sleep 2; reap; [ "$(date +%s)" -lt $((DEADLINE - 25)) ] || break 2
+  done
   if [ $((DEADLINE - $(date +%s))) -le "${MIN_LEFT:-120}" ]; then say "not started (time): $c"; continue; fi
   OMP_NUM_THREADS=2 $FS reproduce $COMMON --only "$c" --out res > "logs/$c.log" 2>&1 &
   PIDS[$c]=$!
