@@ -52,7 +52,7 @@ def cpu_rows(x: torch.Tensor, preset: str, repeat: int) -> list[str]:
 
 
 def gpu_rows(x: torch.Tensor, preset: str, repeat: int) -> list[str]:
-    """``| model | float32 s | float16-autocast s | max abs difference |`` per network, on the GPU (each
+    """``| model | float32 ms | float16-autocast ms | max abs difference |`` per network, on the GPU (each
     call ends with ``torch.cuda.synchronize()``, so a time is the whole frame's; 5 warm-up calls)."""
     x = x.cuda()
     rows = []
