@@ -46,6 +46,12 @@ def forecast(gains_csv: Path, versus: str, target: float) -> list[dict[str, str]
     return rows
 
 
+def markdown(rows: list[dict[str, str]]) -> str:
+    """``rows`` (the same keys in each) as a Markdown table, the keys as its header."""
+    lines = ["| " + " | ".join(rows[0]) + " |", "|" + "---|" * len(rows[0])]
+    return "\n".join(lines + ["| " + " | ".join(r.values()) + " |" for r in rows])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("res", type=Path, help="a reproduce folder (holds gains.csv)")
@@ -57,10 +63,7 @@ def main() -> None:
     rows = forecast(args.res / "gains.csv", args.versus, args.target)
     if not rows:
         raise SystemExit(f"no '{args.versus}' F-score gain with 2 or more seeds in {args.res / 'gains.csv'}")
-    print("| " + " | ".join(rows[0]) + " |")
-    print("|" + "---|" * len(rows[0]))
-    for r in rows:
-        print("| " + " | ".join(r.values()) + " |")
+    print(markdown(rows))
 
 
 if __name__ == "__main__":

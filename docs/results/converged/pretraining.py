@@ -14,10 +14,14 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
 from freespace.experiments.stats import paired_gain
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from forecast import markdown  # noqa: E402  (the table printer of the script beside this one)
 
 TEST_SETS = ("test", "same-rigs", "shifted")
 BESIDE = ("HA-X - X-dup", "HA-X - X")
@@ -80,10 +84,7 @@ def main() -> None:
     rows = pretraining_table(args.res, args.scratch)
     if not rows:
         raise SystemExit(f"no network has finished X runs of the same seed in {args.res} and {args.scratch}")
-    print("| " + " | ".join(rows[0]) + " |")
-    print("|" + "---|" * len(rows[0]))
-    for r in rows:
-        print("| " + " | ".join(r.values()) + " |")
+    print(markdown(rows))
     if args.csv:
         tmp = args.csv.with_name(args.csv.name + ".tmp")
         with tmp.open("w", newline="") as f:
