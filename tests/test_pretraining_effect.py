@@ -75,3 +75,13 @@ def test_the_table_is_printed_and_written(tmp_path: Path, csv_out: bool) -> None
     assert out.stdout.splitlines()[0].startswith("| network | test set | seeds |")
     assert "| unet | test | 0,1 | 90.50 | 88.00 | +2.50 [" in out.stdout
     assert (tmp_path / "t.csv").is_file() == csv_out
+
+
+def test_the_table_never_overwrites_an_input(tmp_path: Path) -> None:
+    res = _folder(tmp_path / "res", [_entry("unet", "X", s, 90.0 + s, 85.0) for s in range(2)], [])
+    scratch = _folder(tmp_path / "scr", [_entry("unet", "X", s, 88.0, 84.0 + s) for s in range(2)])
+    before = (res / "gains.csv").read_bytes()
+    out = subprocess.run([sys.executable, str(SCRIPT), str(res), str(scratch), "--csv", str(res / "gains.csv")],
+                         capture_output=True, text=True)
+    assert out.returncode != 0 and "is one of the inputs" in out.stderr
+    assert (res / "gains.csv").read_bytes() == before

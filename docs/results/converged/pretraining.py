@@ -81,6 +81,9 @@ def main() -> None:
     for folder, name in ((args.res, "index.json"), (args.res, "gains.csv"), (args.scratch, "index.json")):
         if not (folder / name).is_file():
             raise SystemExit(f"{folder} holds no {name}: give a reproduce folder whose tables are built")
+    inputs = {(f / n).resolve() for f in (args.res, args.scratch) for n in ("index.json", "gains.csv")}
+    if args.csv and args.csv.resolve() in inputs:
+        raise SystemExit(f"--csv {args.csv} is one of the inputs: give another file")
     rows = pretraining_table(args.res, args.scratch)
     if not rows:
         raise SystemExit(f"no network has finished X runs of the same seed in {args.res} and {args.scratch}")
