@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from freespace.experiments.stats import paired_gain
+from freespace.io.files import write_csv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from forecast import markdown  # noqa: E402  (the table printer of the script beside this one)
@@ -89,12 +90,7 @@ def main() -> None:
         raise SystemExit(f"no network has finished X runs of the same seed in {args.res} and {args.scratch}")
     print(markdown(rows))
     if args.csv:
-        tmp = args.csv.with_name(args.csv.name + ".tmp")
-        with tmp.open("w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
-        tmp.replace(args.csv)
+        write_csv(args.csv, list(rows[0]), rows)
 
 
 if __name__ == "__main__":
