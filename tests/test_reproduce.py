@@ -339,7 +339,8 @@ def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
     for model in ("unet", "segnet"):
         for seed in range(6):
             base = 0.8 + 0.02 * rng.standard_normal()
-            for variant, shift in (("X", 0.0), ("HA-X", 0.02), ("X-dup", 0.02 + 0.002 * rng.standard_normal())):
+            dup = 0.02 + 0.002 * rng.standard_normal()
+            for variant, shift in (("X", 0.0), ("HA-X", 0.02), ("X-dup", dup), ("X-long", 0.015)):
                 m = {k: base + shift for k in METRICS}
                 entries.append({"model": model, "variant": variant, "seed": seed, "metrics": m,
                                 "test_sets": {"same-rigs": m}})
@@ -357,3 +358,10 @@ def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
     ha_x = [g for g in gains if g["network"] == ALL_NETWORKS and g["versus"] == "HA-X - X" and g["metric"] == "f_score"
             and g["test_set"] == "test"]
     assert ha_x[0]["mean"] == pytest.approx(2.0) and ha_x[0]["excludes_zero"]
+    # the second augmentation draw at equal steps (X-dup − X-long), per network and averaged over them
+    dup_long = {g["network"]: g for g in gains if g["versus"] == "X-dup - X-long" and g["metric"] == "f_score"
+                and g["test_set"] == "test"}
+    assert sorted(dup_long) == [ALL_NETWORKS, "segnet", "unet"] and dup_long["unet"]["n"] == 6
+    assert dup_long["unet"]["mean"] == pytest.approx(
+        100 * np.mean([e["metrics"]["f_score"] for e in entries if e["model"] == "unet" and e["variant"] == "X-dup"])
+        - 100 * np.mean([e["metrics"]["f_score"] for e in entries if e["model"] == "unet" and e["variant"] == "X-long"]))
