@@ -94,8 +94,8 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in (
 #: the share of the training drives that keep the dataset's labels in X-mix
 MIX_HUMAN_SHARE = 0.2
 DEFAULT_VARIANTS = ("X", "HA-X", "X-dup")
-#: the paired gains reported (variant, versus), when both were run
-#: (X-dup − X-long: the second draw of the conventional augmentation at equal optimiser steps)
+#: the paired gains reported (variant, versus), when both were run (X-dup − X-long: the second draw of the
+#: conventional augmentation at equal optimiser steps)
 GAINS = (("HA-X", "X"), ("HA-X", "X-dup"), ("HA-X", "X-long"), ("X-dup", "X"), ("X-long", "X"), ("X-dup", "X-long"),
          ("HV-X", "X"), ("HAV-X", "X"), ("X-auto", "X"), ("X-mix", "X"), ("X-mix", "X-auto"))
 #: the primary endpoint, named before the converged run: HA-X − X-dup in F-score points on ``same-rigs``,
