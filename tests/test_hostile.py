@@ -1453,6 +1453,12 @@ def test_ignored_options_are_refused(trained: dict[str, Path], tmp_path: Path, c
 
 
 # ------------------------------------------------------------------------------- Ctrl-C and SIGTERM
+#: ``freespace`` with Ctrl-C delivered as from a terminal: a test suite started in the background by a shell
+#: without job control inherits SIGINT ignored, and Python then keeps it ignored (rightly, for the command)
+_AS_FROM_A_TERMINAL = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+                       "sys.argv[0] = 'freespace'; runpy.run_module('freespace.cli', run_name='__main__')")
+
+
 def _signalled(args: list[str], sig: int, *, ready: str | None = None, children: int = 0,
                timeout: float = 120) -> tuple[int, str, float, list[int]]:
     """Start ``freespace ARGS``, wait until stderr shows ``ready`` (or ``children`` child processes run),
@@ -1460,7 +1466,7 @@ def _signalled(args: list[str], sig: int, *, ready: str | None = None, children:
     ``kill`` does) and return the exit code, stderr, the seconds from the signal to the exit, and the
     child processes seen."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "freespace.cli", *args], stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen([sys.executable, "-c", _AS_FROM_A_TERMINAL, *args], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
     lines: list[str] = []
     seen: list[int] = []
