@@ -232,7 +232,7 @@ class KittiRaw(StereoRoadDataset):
                                          f"{width}×{height} ({len(wrong)} image{'s' if len(wrong) > 1 else ''} of "
                                          f"drive {name}); give the rectified images of the _sync zip (not _extract) "
                                          f"and the calibration of their day", ShapeMismatchError))
-        if self.disparity_source == "lidar" or not self.strict:
+        if self.disparity_source == "lidar" and self.strict:  # datasets info (not strict) reads every scan itself
             for stem, path in scans.items():
                 size = path.stat().st_size
                 if size == 0 or size % VELODYNE_POINT_BYTES:
@@ -240,7 +240,9 @@ class KittiRaw(StereoRoadDataset):
                                                  f"non-empty multiple of {VELODYNE_POINT_BYTES} (float32 x, y, z, "
                                                  f"reflectance per point): a truncated copy? copy it again or "
                                                  f"delete it", CorruptFileError))
-                elif stem not in lefts:
+        if not self.strict:
+            for stem, path in scans.items():
+                if stem not in lefts:
                     problems.append(_TreeProblem(f"{name}/{stem}", f"Velodyne scan {path} has no left image "
                                                  f"({drive / LEFT_DIR / (stem + '.png')} not found)"))
             unscanned = sorted(set(lefts) - set(scans)) if scans else []
