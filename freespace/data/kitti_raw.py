@@ -26,8 +26,9 @@ The rig of every frame comes from its day's ``P_rect_02`` (focal length, princip
 maps it: ``P_rect_02 · R_rect_00 · [R | T]`` (:mod:`freespace.geometry.lidar`). Images must have the size
 ``S_rect_02`` (1242×375 for 2011_09_26).
 
-A drive without ``image_03`` supports what needs no right image (the ``lidar`` disparity source,
-training, prediction, virtual views); the DS-Generator and SGBM refuse it up front. The tree's problems —
+A drive without ``image_03`` supports what needs no right image (the ``lidar`` disparity source and
+autolabel from it; loading for training, prediction and virtual views); the DS-Generator and SGBM refuse it up
+front (:meth:`KittiRaw.require_right`). The tree's problems —
 a missing calibration file, an empty drive folder, left and right frame lists that differ, images of
 another size than ``S_rect_02``, and (with ``disparity_source="lidar"``) a scan whose size is not a
 multiple of 16 bytes — stop the dataset from opening with one line naming the file;
