@@ -31,10 +31,10 @@ from pydantic import BeforeValidator, ConfigDict, Field, PlainSerializer, TypeAd
 from pydantic.fields import FieldInfo
 
 from freespace.errors import MAX_SEED, CorruptFileError, InputFileError, InvalidOptionError, param
-from freespace.io.codecs import MAX_IMAGE_SIDE
+from freespace.io.codecs import MAX_IMAGE_SIDE, load_yaml
 from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable
 
-__all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "parse_augment", "augment_text", "ranges_text", "parse_size",
+__all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "weights_path", "resolved_path", "parse_augment", "augment_text", "ranges_text", "parse_size",
            "AUGMENTS", "AUGMENT_NAMES", "FIRST_FRAME_SIZE", "PRESETS", "STRATEGIES"]
 
 #: the augmentations ``augment`` combines, in their one order (duplicate: the step-count control of homography)
@@ -47,11 +47,32 @@ STRATEGIES = ("auto", "ddp")
 #: config.yaml spells it ``null``, and ``auto`` is read as it too)
 FIRST_FRAME_SIZE: Final = "first-frame"
 
-#: the options that name files or folders (config.yaml keeps them resolved)
-PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir")
+#: the options that name files or folders (config.yaml keeps them resolved); ``encoder_weights`` is one when it
+#: is a path, not a name of weights (:func:`weights_path`)
+PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir", "labels", "encoder_weights")
 
 # config.yaml keys of runs made before the names said which split and which disparity source they mean
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_source", "disparity_mode": "disparity_source"}
+
+#: names of encoder weights that are no file (segmentation-models-pytorch's, and the Lite encoders' imagenet)
+_WEIGHT_NAME = re.compile(r"[A-Za-z0-9_+-]+")
+
+
+def weights_path(value: str | None) -> bool:
+    """Whether ``encoder_weights`` ``value`` names a file (then config.yaml keeps it resolved and the run
+    records its content hash) rather than weights by name (``imagenet``, smp's ``ssl``, ``swsl``, ...): a
+    value with a ``/``, a ``.`` or a leading ``~``, or the name of an existing file that is not ``imagenet``."""
+    if not value:
+        return False
+    if not _WEIGHT_NAME.fullmatch(value):
+        return True
+    return value != "imagenet" and os.path.isfile(value)
+
+
+def resolved_path(value: str) -> str:
+    """``value`` absolute, ``~`` expanded and symbolic links followed (two spellings of one file compare
+    equal; the text works from any folder)."""
+    return os.path.realpath(os.path.expanduser(value))
 
 
 # --- the value types: each parses the spellings it accepts and writes its one spelling ------------------
@@ -327,8 +348,8 @@ class TrainConfig:
         compare equal."""
         d = {f.name: _adapters()[f.name].dump_python(getattr(self, f.name)) for f in fields(self)}
         for k in PATH_OPTIONS:
-            if d[k] is not None:
-                d[k] = os.path.realpath(os.path.expanduser(d[k]))
+            if d[k] is not None and (k != "encoder_weights" or weights_path(d[k])):
+                d[k] = resolved_path(d[k])
         return d
 
     def save(self, path: PathLike) -> None:
@@ -457,25 +478,29 @@ def _choices(name: str) -> tuple[str, ...] | None:
 
 def read_config_yaml(path: PathLike) -> dict[str, Any]:
     """The options in a YAML file of :class:`TrainConfig` fields (e.g. a run's config.yaml) as typed values,
-    checked as :class:`TrainConfig` checks them (``yaml.safe_load``: runs no code). Fields may be missing;
-    keys of older runs (``splits``, ``disparity``, ``disparity_mode``) are read as the fields' names now.
+    checked as :class:`TrainConfig` checks them (:func:`load_yaml`, a ``yaml.SafeLoader``: runs no code). Fields
+    may be missing; keys of older runs (``splits``, ``disparity``, ``disparity_mode``) are read as the fields'
+    names now.
 
     Raises:
-        InputFileError: no file. CorruptFileError: not YAML, or not a mapping. InvalidOptionError: an
-        unknown key or a bad value (the message names the file and the key).
+        InputFileError: no file. CorruptFileError: not YAML, not a mapping, or a key given twice.
+        InvalidOptionError: an unknown key, a bad value, or an option given in two spellings (``disparity_mode``
+        and ``disparity_source``; the message names the file and the keys).
     """
-    import yaml
-
     if Path(path).is_dir():
         raise InputFileError(f"{path} is a folder; name a YAML file, e.g. {Path(path) / 'config.yaml'}")
     if not Path(path).is_file():
         raise InputFileError(f"config file not found: {path}")
-    try:
-        data = yaml.safe_load(Path(path).read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise CorruptFileError(f"cannot read {path}: {str(exc).splitlines()[0]}") from None
+    data = load_yaml(path)
     if not isinstance(data, dict):
         raise CorruptFileError(f"{path} is not a freespace training config (a mapping of options)")
+    spelled: dict[str, str] = {}
+    for key in data:
+        name = _RENAMED.get(key, key)
+        if name in spelled:
+            raise InvalidOptionError(f"{path}: {spelled[name]} and {key} both give {name} (an older name and the "
+                                     f"current one); keep one of them")
+        spelled[name] = str(key)
     data = {_RENAMED.get(k, k): v for k, v in data.items()}
     names = [f.name for f in fields(TrainConfig)]
     unknown = sorted(str(k) for k in data if k not in names)

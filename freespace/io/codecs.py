@@ -8,16 +8,18 @@ Conventions (the same in the whole package):
 * a road label is a :class:`freespace.labels.RoadLabel` in memory;
 * writers are atomic (:mod:`freespace.io.files`).
 
-Only NumPy and OpenCV are imported here.
+Only NumPy and OpenCV are imported here (and PyYAML by :func:`load_yaml`).
 """
 
 from __future__ import annotations
 
+import functools
 import io as _io
 import math
 import warnings
 import zlib
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -26,7 +28,7 @@ from freespace.errors import CorruptFileError, InvalidOptionError, ShapeMismatch
 from freespace.io.files import PathLike, atomic_write_bytes, read_bytes
 from freespace.labels import RoadLabel
 
-__all__ = ["DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "read_raw",
+__all__ = ["load_yaml", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "read_raw",
            "write_image", "encode_image", "read_disparity", "write_disparity", "png_disparity_overflow",
            "read_depth", "read_road_label",
            "road_label_from_image", "road_label_to_kitti"]
@@ -348,3 +350,61 @@ def road_label_to_kitti(label: RoadLabel) -> np.ndarray:
     out[label.valid, 0] = 255
     out[label.valid & label.road, 2] = 255
     return out
+
+
+# YAML
+
+
+def _unique_keys_loader() -> type:
+    """``yaml.SafeLoader`` (no code runs, no object but plain data is made) that refuses a mapping with a key
+    twice, which PyYAML would otherwise read as its last value without a word."""
+    import yaml
+
+    class UniqueKeyLoader(yaml.SafeLoader):
+        def construct_mapping(self, node: Any, deep: bool = False) -> dict[Any, Any]:
+            if isinstance(node, yaml.MappingNode):
+                seen: set[Any] = set()
+                for key_node, _ in node.value:  # the keys written in this mapping (a merged `<<` one may be
+                    if key_node.tag == "tag:yaml.org,2002:merge":  # overridden here, as YAML means)
+                        continue
+                    key = self.construct_object(key_node, deep=True)
+                    try:
+                        repeated = key in seen
+                        seen.add(key)
+                    except TypeError:  # an unhashable key: the base class refuses it
+                        continue
+                    if repeated:
+                        raise _DuplicateKey(key, key_node.start_mark.line + 1)
+            return super().construct_mapping(node, deep=deep)
+
+    return UniqueKeyLoader
+
+
+class _DuplicateKey(Exception):
+    def __init__(self, key: Any, line: int) -> None:
+        super().__init__(key, line)
+        self.key, self.line = key, line
+
+
+def load_yaml(path: PathLike) -> Any:
+    """The data of the YAML file ``path``, read as ``yaml.safe_load`` reads it (no code runs), but a mapping
+    that gives a key twice is refused: PyYAML keeps the last value silently, so the file's order would decide.
+
+    Raises:
+        CorruptFileError: not readable, not YAML, or a key given twice (the message names the key, its line
+        and the file).
+    """
+    import yaml
+
+    try:
+        text = Path(path).read_text()
+        return yaml.load(text, Loader=_loader())  # noqa: S506 (a SafeLoader)
+    except _DuplicateKey as exc:
+        raise CorruptFileError(f"{path}: {exc.key} is given twice (line {exc.line}, and before); keep one") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise CorruptFileError(f"cannot read {path}: {str(exc).splitlines()[0]}") from None
+
+
+@functools.cache
+def _loader() -> type:
+    return _unique_keys_loader()
