@@ -1,7 +1,8 @@
 """A training run: ``freespace train``.
 
 The run folder holds ``config.yaml`` (resolved options), ``splits/`` (train/val/test lists),
-``generated/`` (DS-Generator views, with ``augment="homography"``), ``metrics.csv`` (one row per epoch),
+``generated/`` (DS-Generator views, with ``augment="homography"``), ``metrics.csv`` (one row per epoch,
+numbered from 1 as ``best_epoch`` in metrics.json),
 ``checkpoints/best.ckpt`` and ``checkpoints/last.ckpt`` (written atomically) and, at the end,
 ``metrics.json`` (test split: accuracy, precision, recall, f_score, iou, max_f, ap as fractions, seconds
 per frame). ``resume=True`` continues from ``last.ckpt``; with the same seed on a CPU the result is the
@@ -49,9 +50,24 @@ def monitored(val_window: int) -> str:
     return "val_f_score" if val_window == 1 else "val_f_window"
 
 
+#: the number of a run's first epoch in its record (metrics.csv's ``epoch``, metrics.json's ``best_epoch``,
+#: index.json, results.md): epochs are counted as people count them. metrics.json says so (``first_epoch``);
+#: files written before hold 0-based numbers and are read right (:func:`read_epoch_rows`, and reproduce's tables)
+FIRST_EPOCH = 1
+
+
+def read_epoch_rows(path: Path) -> list[dict[str, str]]:
+    """The rows of a run's ``metrics.csv``, ``epoch`` numbered from :data:`FIRST_EPOCH`: a file of an older
+    version numbered them from 0 (its first row says which: the rows start at the run's first epoch)."""
+    rows = list(csv.DictReader(path.open()))
+    if rows and rows[0].get("epoch") == "0":
+        rows = [{**r, "epoch": str(int(r["epoch"]) + FIRST_EPOCH)} for r in rows]
+    return rows
+
+
 class EpochCSV(pl.Callback):
-    """``metrics.csv`` of the run folder ``run_dir``: one row per finished epoch, rewritten atomically (kept
-    across resumes)."""
+    """``metrics.csv`` of the run folder ``run_dir``: one row per finished epoch (``epoch`` numbered from
+    :data:`FIRST_EPOCH`), rewritten atomically (kept across resumes)."""
 
     def __init__(self, run_dir: Path) -> None:
         self.path = run_dir / "metrics.csv"
@@ -65,14 +81,15 @@ class EpochCSV(pl.Callback):
             return
         m = trainer.callback_metrics
         rows = []
+        number = trainer.current_epoch + FIRST_EPOCH  # Lightning counts from 0
         if self.path.is_file():
-            rows = [r for r in csv.DictReader(self.path.open()) if int(r["epoch"]) < trainer.current_epoch]
-        row = {"epoch": trainer.current_epoch, "lr": trainer.optimizers[0].param_groups[0]["lr"],
+            rows = [r for r in read_epoch_rows(self.path) if int(r["epoch"]) < number]
+        row = {"epoch": number, "lr": trainer.optimizers[0].param_groups[0]["lr"],
                "seconds": round(time.perf_counter() - self.t0, 3)}
         row.update({k: f"{float(m[k]):.6f}" for k in CSV_FIELDS if k in m})
         write_csv(self.path, CSV_FIELDS, rows + [row])
         if not on_terminal() or not trainer.progress_bar_callback:  # a log gets one line per epoch
-            log.info("epoch %d/%d  loss %s  val F %s  IoU %s  (%.1f s)", trainer.current_epoch + 1,
+            log.info("epoch %d/%d  loss %s  val F %s  IoU %s  (%.1f s)", number,
                      trainer.max_epochs, row.get("train_loss", "—"), row.get("val_f_score", "—"),
                      row.get("val_iou", "—"), row["seconds"])
 
@@ -328,7 +345,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     best = best if best.is_file() else last
     _interruptible(trainer.test, module, loader(test, False), ckpt_path=str(best), verbose=False)
     metrics = {**module.test_metrics, "best_epoch": _best_epoch(run_dir, monitored(config.val_window)),
-               "epochs_run": trainer.current_epoch,
+               "first_epoch": FIRST_EPOCH, "epochs_run": trainer.current_epoch,
                "frames": {k: len(data[k]) for k in ("train", "val", "test")}, "image_size": list(size),
                "checkpoint": best.relative_to(run_dir).as_posix()}
     if trainer.is_global_zero:
@@ -378,10 +395,11 @@ def _logger(config: TrainConfig, run_dir: Path):
 
 
 def _best_epoch(run_dir: Path, monitor: str) -> int | None:
-    """The (0-based) epoch whose ``monitor`` in ``metrics.csv`` is highest (the first of equals)."""
+    """The epoch (numbered from :data:`FIRST_EPOCH`) whose ``monitor`` in ``metrics.csv`` is highest (the first
+    of equals)."""
     path = run_dir / "metrics.csv"
     if not path.is_file():
         return None
-    rows = list(csv.DictReader(path.open()))
+    rows = read_epoch_rows(path)
     scored = [r for r in rows if r.get(monitor)]
     return int(max(scored, key=lambda r: float(r[monitor]))["epoch"]) if scored else None

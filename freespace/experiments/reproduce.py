@@ -493,9 +493,12 @@ _PER_NETWORK = ("image_size", "preset", "encoder_name", "encoder_weights")
 
 def _convergence(metrics: dict[str, Any], config: dict[str, Any]) -> dict[str, Any]:
     """``best_epoch`` and ``epochs_run`` of a finished run (1-based, as counted by a person) and how it
-    stopped: ``"patience"`` (early stopping fired) or ``"cap"`` (it ran the most epochs, ``config``'s)."""
+    stopped: ``"patience"`` (early stopping fired) or ``"cap"`` (it ran the most epochs, ``config``'s).
+    metrics.json counts from 1 when it says ``first_epoch: 1``; one of an older version, without it, from 0."""
     best, run, cap = metrics.get("best_epoch"), metrics.get("epochs_run"), config.get("epochs")
-    found: dict[str, Any] = {"best_epoch": best + 1 if isinstance(best, int) else None,
+    shift = 1 - metrics.get("first_epoch", 0) if metrics.get("first_epoch") in (None, 0, 1) else None
+    best = best if isinstance(best, int) and not isinstance(best, bool) and shift is not None else None
+    found: dict[str, Any] = {"best_epoch": best + shift if best is not None else None,
                              "epochs_run": run if isinstance(run, int) else None}
     found["stopped_by"] = None if found["epochs_run"] is None or not isinstance(cap, int) else \
         "cap" if found["epochs_run"] >= cap else "patience"
