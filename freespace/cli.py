@@ -58,6 +58,9 @@ def _open_dataset(args: argparse.Namespace):  # -> StereoRoadDataset (import kep
         if args.dataset not in ("kitti", "synth"):
             raise InvalidOptionError("--disparity-dir is for KITTI road trees; other layouts name their "
                                      "disparity folder in freespace.yaml")
+        if args.disparity_source not in ("auto", "file"):
+            raise InvalidOptionError(f"--disparity-dir is read with --disparity-source auto or file; with "
+                                     f"{args.disparity_source} it would be ignored: leave one of them out")
         options["disparity_dir"] = args.disparity_dir
     if args.lidar_densify is not None:
         if args.disparity_source != "lidar":
@@ -227,7 +230,8 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
-    g.add_argument("--disparity-source", dest="disparity_source", choices=DISPARITY_SOURCES, default="auto",
+    g.add_argument("--disparity-source", dest="disparity_source", default="auto",
+                   choices=[s for s in DISPARITY_SOURCES if s != "none"],  # a label needs a disparity
                    help="auto: file, else depth + camera, else cached SGBM (default); depth, lidar, sgbm: only that")
     g.add_argument("--lidar-densify", type=float, metavar="PX", help="--disparity-source lidar: fill holes within "
                                                                       "PX pixels of a point")

@@ -27,9 +27,9 @@ from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from freespace.data.torch_dataset import RoadSegmentationDataset
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, changed_inputs, content_hashes
 from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
-from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, param
+from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, TrainingError, param
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
 from freespace.io.outdir import claim_folder
@@ -94,6 +94,30 @@ class EpochCSV(pl.Callback):
                      row.get("val_iou", "—"), row["seconds"])
 
 
+class LabelledPixels(pl.Callback):
+    """Fails the run at the end of a training epoch in which no sample had a labelled pixel (every pixel don't
+    care): its loss is exactly 0 and the network learns nothing, which must not end as a finished run. Counted
+    over all processes."""
+
+    def __init__(self) -> None:
+        self.count = 0
+
+    def on_train_epoch_start(self, trainer, module) -> None:
+        self.count = 0
+
+    def on_train_batch_start(self, trainer, module, batch, batch_idx) -> None:
+        from freespace.labels import IGNORE_INDEX
+
+        self.count += int((batch["label"] != IGNORE_INDEX).sum())
+
+    def on_train_epoch_end(self, trainer, module) -> None:
+        total = trainer.strategy.reduce(torch.tensor(float(self.count), device=module.device), reduce_op="sum")
+        if float(total) == 0:
+            raise TrainingError(f"no training sample of epoch {trainer.current_epoch + FIRST_EPOCH} has a labelled "
+                                f"pixel (every pixel is don't care), so the loss is 0 and nothing is learnt; check "
+                                f"the training labels (the dataset's, or {param('labels')})")
+
+
 def _callbacks(run_dir: Path, patience: int, val_window: int,
                min_delta: float = 0.0) -> tuple[list[pl.Callback], ModelCheckpoint]:
     monitor = monitored(val_window)
@@ -106,7 +130,7 @@ def _callbacks(run_dir: Path, patience: int, val_window: int,
                            enable_version_counter=False)
     stop = _EarlyStopping(monitor=monitor, mode="max", patience=patience, min_delta=min_delta, check_finite=True,
                           val_window=val_window)
-    return [ckpt, last, stop, EpochCSV(run_dir)], ckpt
+    return [LabelledPixels(), ckpt, last, stop, EpochCSV(run_dir)], ckpt
 
 
 class _EarlyStopping(EarlyStopping):
@@ -144,7 +168,23 @@ WHERE_AND_HOW = ("out", "devices", "num_nodes", "strategy", "workers", "tensorbo
 
 #: what a run writes into its folder, as :mod:`freespace.io.outdir` entries (removed when a plain rerun takes
 #: over a start that never checkpointed)
-RUN_ENTRIES = ("config.yaml", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/", "tensorboard/")
+RUN_ENTRIES = ("config.yaml", "inputs.json", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/",
+               "tensorboard/")
+
+#: the run's record of what it read, by content (:func:`freespace.engine.config.content_hashes`)
+INPUTS = "inputs.json"
+
+
+def read_inputs(run_dir: Path) -> dict[str, Any]:
+    """A run's ``inputs.json`` (what it read, by content hash), or ``{}`` for a run of an older version or a
+    damaged file."""
+    import json
+
+    try:
+        found = json.loads((run_dir / INPUTS).read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return {}
+    return found if isinstance(found, dict) else {}
 
 
 class RunCheckpointIO(TorchCheckpointIO):
@@ -254,8 +294,14 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         return _train(config, resume, progress)
     with claim_folder(run_dir, "train", entries=RUN_ENTRIES) as folder:
         last = run_dir / "checkpoints" / "last.ckpt"
+        inputs = content_hashes(config)  # before any work: a changed weights file or label tree is refused
         if resume:
             config = _check_resume(config, run_dir, last)
+            changed = changed_inputs(read_inputs(run_dir), inputs)
+            if changed:
+                raise InvalidOptionError(f"{run_dir} started from other contents of {changed[0]}; resuming would "
+                                         f"train one run on two; restore the files, or start a new run (another "
+                                         f"{param('out')})")
             (run_dir / "metrics.json").unlink(missing_ok=True)  # the run is unfinished again until its new end
         elif (run_dir / "config.yaml").is_file():
             if last.is_file():
@@ -264,6 +310,8 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
             log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
             folder.forget(RUN_ENTRIES)
             folder.record(RUN_ENTRIES)  # the new run writes them again: still this command's files
+        if not resume:  # (a resumed run of an older version records nothing it cannot vouch for)
+            write_json(run_dir / INPUTS, inputs)
         try:
             return _train(config, resume, progress)
         except FreespaceError as exc:  # a user's mistake (a corrupt frame) before the first checkpoint: no output

@@ -28,7 +28,7 @@ from freespace.errors import CorruptFileError, InvalidOptionError, ShapeMismatch
 from freespace.io.files import PathLike, atomic_write_bytes, read_bytes
 from freespace.labels import RoadLabel
 
-__all__ = ["load_yaml", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "read_raw",
+__all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "read_raw",
            "write_image", "encode_image", "read_disparity", "write_disparity", "png_disparity_overflow",
            "read_depth", "read_road_label",
            "road_label_from_image", "road_label_to_kitti"]
@@ -342,6 +342,34 @@ def road_label_from_image(img: np.ndarray) -> RoadLabel:
     grey = img if img.ndim == 2 else img[:, :, 0]
     road = grey > 0
     return RoadLabel(road=road, valid=np.ones_like(road))
+
+
+#: the most distinct colours a colour road label may have (KITTI's: black, red, magenta; a few more for
+#: another tool's palette), and grey levels a single-channel mask (0 and the road value)
+MAX_LABEL_COLOURS = 8
+MAX_MASK_LEVELS = 2
+
+
+def label_image_problem(img: np.ndarray) -> str | None:
+    """Why the image ``img`` (as :func:`read_image` returns it) is no road label that :func:`read_road_label`
+    reads right, or None when it is one: a grey image of more than :data:`MAX_MASK_LEVELS` levels is a
+    confidence map or a prediction (``freespace autolabel``'s ``confidence/``, ``freespace predict``'s maps),
+    which "non-zero = road" would read as road nearly everywhere; a colour image of more than
+    :data:`MAX_LABEL_COLOURS` colours is a photograph or an overlay. The text says what it looks like."""
+    grey = img.ndim == 2 or (np.array_equal(img[:, :, 0], img[:, :, 1]) and np.array_equal(img[:, :, 1], img[:, :, 2]))
+    if grey:
+        levels = np.unique(img if img.ndim == 2 else img[:, :, 0])
+        if levels.size > MAX_MASK_LEVELS:
+            return (f"a grey image of {levels.size} levels, like a confidence map (autolabel's confidence/) or a "
+                    f"prediction (`freespace predict`'s output), not a label (KITTI colours, or a mask of 0 and one "
+                    f"road value)")
+        return None
+    packed = (img[:, :, 0].astype(np.uint32) << 16) | (img[:, :, 1].astype(np.uint32) << 8) | img[:, :, 2]
+    colours = np.unique(packed).size
+    if colours > MAX_LABEL_COLOURS:
+        return (f"a colour image of {colours} colours, like a photograph or an overlay, not a label (KITTI colours: "
+                f"road magenta, non-road red, don't care black)")
+    return None
 
 
 def road_label_to_kitti(label: RoadLabel) -> np.ndarray:
