@@ -373,7 +373,8 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     path = run_dir / name / "metrics.json"
     root = str(Path(test_root).resolve())
     run = _read_metrics(run_dir / "metrics.json")
-    trained = {k: run.get(k) for k in ("best_epoch", "epochs_run")} if isinstance(run, dict) else {}
+    trained = {k: run.get(k) for k in ("best_epoch", "first_epoch", "epochs_run")
+               if k != "first_epoch" or k in run} if isinstance(run, dict) else {}  # (older runs: no first_epoch)
     if path.is_file():
         done = _read_metrics(path)
         if isinstance(done, dict) and done.get("root") == root and done.get("trained", trained) == trained:

@@ -324,8 +324,16 @@ def read_road_label(path: PathLike) -> RoadLabel:
 
     A colour file that is black everywhere is KITTI ground truth with every pixel don't care (no pixel
     is evaluated); a single-channel file of zeros is a mask without road.
+
+    Raises:
+        CorruptFileError: the file is no label image (:func:`label_image_problem`: a confidence map, a
+            prediction, a photograph), which either reading would take for road almost everywhere.
     """
-    return road_label_from_image(read_image(path, what="road label"))
+    img = read_image(path, what="road label")
+    problem = label_image_problem(img)
+    if problem is not None:
+        raise CorruptFileError(f"road label {path} is {problem}")
+    return road_label_from_image(img)
 
 
 def road_label_from_image(img: np.ndarray) -> RoadLabel:
