@@ -480,3 +480,22 @@ def test_a_swapped_pair_is_reported(tiny: Path, tmp_path: Path, capsys: pytest.C
     assert "swapped" in out + caplog.text
     summary = json.loads((tmp_path / "lab" / "summary.json").read_text())
     assert all("swapped" in reason for reason in summary["failed"].values())
+
+
+def test_evaluate_kitti_with_predictions_as_ground_truth_is_refused(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture) -> None:
+    """--gt and --pred swapped: the confidence maps are no ground truth (read as "non-zero = road" they would
+    score a network against its own output)."""
+    from freespace.io.codecs import road_label_to_kitti, write_image
+    from freespace.labels import RoadLabel
+
+    rng = np.random.default_rng(0)
+    gt, pred = tmp_path / "gt", tmp_path / "pred"
+    road = np.zeros((20, 30), bool)
+    road[10:] = True
+    write_image(gt / "um_road_000000.png", road_label_to_kitti(RoadLabel(road, np.ones_like(road))))
+    write_image(pred / "um_road_000000.png", rng.integers(0, 256, (20, 30), dtype=np.uint8))
+    assert main(["-q", "evaluate-kitti", "--gt", str(gt), "--pred", str(pred), "--out", str(tmp_path / "a.json")]) == 0
+    _err(capsys, ["evaluate-kitti", "--gt", str(pred), "--pred", str(gt), "--out", str(tmp_path / "b.json")],
+         "--gt", "grey image")
+    assert not (tmp_path / "b.json").exists()

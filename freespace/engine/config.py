@@ -543,21 +543,21 @@ def check_label_tree(folder: PathLike, dataset: str, root: PathLike, split: str 
             k = other[0]
             raise DatasetError(f"{param(option)} {folder} labels another dataset: `freespace autolabel` made it for "
                                f"{k} {theirs[k]}, not {ours[k]} (frames of the same names are other images); label "
-                               f"this one: freespace autolabel --dataset {dataset} --root {root} --out DIR")
+                               f"this one with `freespace autolabel` ({dataset} at {root}) and give that tree")
     files = label_files(folder)
     if not files:
         dataset_root = resolved_path(os.fspath(folder)) == resolved_path(os.fspath(root)) or any(
             (folder / name).exists() for name in ("freespace.yaml", "training", "data_road"))
         what = "a dataset root, not a label tree" if dataset_root else "no <frame>.png"
-        raise DatasetError(f"{param(option)} {folder} holds {what}; give the folder that `freespace autolabel "
-                           f"--dataset` wrote (<frame>.png in KITTI colours)")
+        raise DatasetError(f"{param(option)} {folder} holds {what}; give the folder that `freespace autolabel` "
+                           f"wrote for the dataset (<frame>.png in KITTI colours)")
     found = _inspect_labels(tuple((n, p, _signature(p)) for n, p in files.items()))
     bad = [(name, problem) for name, (problem, _) in found.items() if problem]
     if bad:
         subfolder = folder.parent if folder.name == "confidence" and (folder.parent / "settings.json").is_file() \
             else None
         fix = (f"give {subfolder}, the label tree above it" if subfolder is not None else
-               "give the label tree that `freespace autolabel --dataset` wrote (<frame>.png in KITTI colours)")
+               "give the label tree that `freespace autolabel` wrote for the dataset (<frame>.png in KITTI colours)")
         raise DatasetError(f"{param(option)} {folder}: {len(bad)} of its {len(files)} files are no labels ({bad[0][0]}"
                            f".png is {bad[0][1]}); {fix}")
     if not any(count for _, count in found.values()):

@@ -353,9 +353,10 @@ def road_label_from_image(img: np.ndarray) -> RoadLabel:
 
 
 #: the most distinct colours a colour road label may have (KITTI's: black, red, magenta; a few more for
-#: another tool's palette), and grey levels a single-channel mask (0 and the road value)
+#: another tool's palette), and grey levels a single-channel mask ("non-zero = road": 0 and a few road values;
+#: a confidence map or a prediction has tens to hundreds)
 MAX_LABEL_COLOURS = 8
-MAX_MASK_LEVELS = 2
+MAX_MASK_LEVELS = 8
 
 
 def label_image_problem(img: np.ndarray) -> str | None:
@@ -369,8 +370,8 @@ def label_image_problem(img: np.ndarray) -> str | None:
         levels = np.unique(img if img.ndim == 2 else img[:, :, 0])
         if levels.size > MAX_MASK_LEVELS:
             return (f"a grey image of {levels.size} levels, like a confidence map (autolabel's confidence/) or a "
-                    f"prediction (`freespace predict`'s output), not a label (KITTI colours, or a mask of 0 and one "
-                    f"road value)")
+                    f"prediction (`freespace predict`'s output), not a label (KITTI colours, or a mask: 0 and a road "
+                    f"value)")
         return None
     packed = (img[:, :, 0].astype(np.uint32) << 16) | (img[:, :, 1].astype(np.uint32) << 8) | img[:, :, 2]
     colours = np.unique(packed).size
@@ -437,7 +438,9 @@ def load_yaml(path: PathLike) -> Any:
         return yaml.load(text, Loader=_loader())  # noqa: S506 (a SafeLoader)
     except _DuplicateKey as exc:
         raise CorruptFileError(f"{path}: {exc.key} is given twice (line {exc.line}, and before); keep one") from None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+    except yaml.YAMLError as exc:
+        raise CorruptFileError(f"cannot parse {path}: {str(exc).splitlines()[0]}") from None
+    except (OSError, UnicodeDecodeError) as exc:
         raise CorruptFileError(f"cannot read {path}: {str(exc).splitlines()[0]}") from None
 
 
