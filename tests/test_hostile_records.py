@@ -433,6 +433,10 @@ def test_disparity_source_none_sgbm_without_right_images_and_an_ignored_disparit
     left_only = _copy_tree(tiny, tmp_path / "left_only")
     shutil.rmtree(left_only / "data_road_right")
     _err(capsys, _autolabel(left_only, out, "--disparity-source", "sgbm"), "right image")
+    no_disparity = _copy_tree(tiny, tmp_path / "no_disparity")
+    shutil.rmtree(no_disparity / "data_road" / "training" / "disparity")
+    _err(capsys, _autolabel(no_disparity, out, "--disparity-source", "file"), "--disparity-source file",
+         "no frame")
     disparities = tiny / "data_road" / "training" / "disparity"
     for command in ("autolabel", "generate"):
         _err(capsys, [command, "--dataset", "synth", "--root", str(tiny), "--out", str(out), "--disparity-dir",
@@ -465,6 +469,8 @@ def test_a_swapped_pair_is_reported(tiny: Path, tmp_path: Path, capsys: pytest.C
     said = capsys.readouterr().err + caplog.text
     assert "swapped" in said and "--reference" in said, said
     assert code != 0 or "implausible" in said
+    _err(capsys, ["autolabel", "--reference", str(frame.left), "--target", str(frame.left), "--out",
+                  str(tmp_path / "S.png")], "same file")
     # a dataset of swapped pairs: one line for the run (and each failed frame says why)
     swapped = _copy_tree(wide, tmp_path / "swapped")
     left, right = swapped / "data_road" / "training" / "image_2", swapped / "data_road_right" / "training" / "image_3"

@@ -489,6 +489,9 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
     if calib is not None:
         baseline = _baseline_from_calib(calib)
     if target is not None:
+        if Path(os.path.realpath(reference)) == Path(os.path.realpath(target)):
+            raise InvalidOptionError(f"{param('reference')} and {param('target')} are the same file; give the left "
+                                     f"and the right image of one rectified stereo pair")
         right = read_image(target, what="target image")
         if right.shape != left.shape:
             raise ShapeMismatchError(f"reference is {_size(left.shape)} but target is {_size(right.shape)}; give the "
@@ -616,7 +619,8 @@ def _check_disparity_inputs(dataset: Any, out_dir: Path, options: AutolabelOptio
     * ``disparity_source`` ``none`` (no frame could be labelled);
     * a folder of disparity files (``disparity_dir``) with a source that never reads them (``sgbm``, ``depth``,
       ``lidar``): it would be ignored;
-    * ``sgbm`` on a tree without right images (``depth`` and ``lidar`` are checked when the dataset opens);
+    * ``sgbm`` on a tree without right images, ``file`` on one without disparity files or depth maps
+      (``depth`` and ``lidar`` are checked when the dataset opens);
     * an SGBM search range (``max_disparity``) not smaller than the images' width;
     * an SGBM cache (``cache_dir``) inside the dataset (its ``.npy`` files would land among the images) or
       that is, holds or lies in ``out_dir`` (its files would lie outside the label tree's manifest).
@@ -635,6 +639,10 @@ def _check_disparity_inputs(dataset: Any, out_dir: Path, options: AutolabelOptio
         raise DatasetError(f"{param('disparity_source')} sgbm matches left and right images, and no frame under "
                            f"{dataset.root} has a right image; give disparities ({param('disparity_source')} file, "
                            f"depth or lidar)")
+    if source == "file" and not any(f.disparity is not None or f.depth is not None for f in dataset.frames):
+        raise DatasetError(f"{param('disparity_source')} file reads disparity files (or depth maps), and no frame "
+                           f"under {dataset.root} has one; give {param('disparity_dir')}, or choose "
+                           f"{param('disparity_source')} sgbm, depth or lidar")
     if not _may_use_sgbm(dataset):
         return
     frame = next((f for f in dataset.frames if f.right is not None
