@@ -112,8 +112,9 @@ def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], o
     failed = summary["failed"]
     print(f"{summary[done]} {done}, {summary['skipped']} already done, {len(failed)} failed of {summary['frames']} "
           f"frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
-    for name, reason in failed.items():
-        print(f"  failed {name}: {reason}")
+    errors, flags = summary.get("errors", {}), _flags(args.parser, [])
+    for name, reason in failed.items():  # this run's failures name flags, not parameters
+        print(f"  failed {name}: {errors[name].render(lambda n: flags.get(n, n)) if name in errors else reason}")
     return 1 if failed else 0
 
 

@@ -514,20 +514,15 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
         why = implausible_pair(matched, None)
         if why is None:
             raise
-        raise RoadFitError(f"{exc.render(lambda n: param(n))} ({why}: {_pair_question()})") from None
+        raise RoadFitError(f"{exc.render(param)} ({why}: {_pair_question()})") from None
     result.stats.update(disparity_source=source, seconds=round(time.perf_counter() - t0, 4))
     why = implausible_pair(matched, result)
     if why is not None:
-        log.warning("the label is implausible: %s; %s", why, _flags(_pair_question()) if source == "sgbm" else
-                    "is the disparity the reference image's (left)?")
+        log.warning("the label is implausible: %s; %s", why, "are the reference and target images swapped? The "
+                    "reference is the left image, the target the right one of one rectified pair" if source == "sgbm"
+                    else "is the disparity the reference (left) image's?")
     write_label_files(result, out, confidence, model_json)
     return result
-
-
-def _flags(text: str) -> str:
-    """``text`` with every :func:`~freespace.errors.param` written as its command-line flag (``--max-disparity``):
-    for text that is logged or recorded rather than raised (the command line writes a raised error's flags)."""
-    return FreespaceError(text).render(lambda name: "--" + name.replace("_", "-"))
 
 
 def _pair_question() -> str:
@@ -570,8 +565,10 @@ def _label_frame(dataset: Any, index: int, out: Path, report: Path, options: Aut
         write_label_files(result, out, out.parent / "confidence" / out.name, report, record)
     except FreespaceError as exc:
         why = implausible_pair(matched, None) if isinstance(exc, RoadFitError) else None
-        record.update(status="failed", reason=exc.render(lambda n: "--" + n.replace("_", "-"))  # flags, not names
-                      + (f" ({why}: are the left and right images swapped?)" if why else ""))
+        text = exc.render(param) + (f" ({why}: are the left and right images swapped?)" if why else "")
+        # the reason as the files record it (parameters by name), and the error, whose parameters the command
+        # line writes as its flags (kept in memory only: no file records it)
+        record.update(status="failed", reason=FreespaceError(text).render(), error=text)
     except Exception as exc:  # a bad frame must not stop the run; the reason is reported
         log.debug("frame %s failed", frame.name, exc_info=True)
         record.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
@@ -591,7 +588,9 @@ def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     ``overwrite``) exactly as :func:`freespace.datagen.generate.generate_dataset`, whose machinery it shares.
 
     Returns:
-        The summary: counts, ``failed`` (frame → reason), mean coverage and road fraction.
+        The summary: counts, ``failed`` (frame → reason), mean coverage and road fraction; and ``errors``
+        (frame → :class:`~freespace.errors.FreespaceError`, this run's failures, whose parameters an interface
+        writes its own way: :meth:`~freespace.errors.FreespaceError.render`).
     """
     from freespace.datagen.generate import frames_folder
     from freespace.shard import select_shard
@@ -687,4 +686,4 @@ def _label_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options
                "mean_road_fraction": float(np.mean([r["road_fraction"] for r in ok])) if ok else None,
                "wall_seconds": round(time.perf_counter() - t0, 3), "workers": workers, "settings": settings}
     write_json(out_dir / _totals_names(shard)[0], summary)
-    return summary
+    return {**summary, "errors": {r["frame"]: FreespaceError(r["error"]) for r in ordered if "error" in r}}
