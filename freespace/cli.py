@@ -442,13 +442,16 @@ def _config_file_options(argv: Sequence[str]) -> dict[str, Any] | None:
     """The options in ``--config YAML`` when ``argv`` has one (read before the real parse, as timm does), as
     typed values (:func:`~freespace.engine.config.read_config_yaml`)."""
     pre = argparse.ArgumentParser(add_help=False)
-    pre.add_argument("--config")
+    pre.add_argument("--config", action="append")
     known, _ = pre.parse_known_args(argv)
     if known.config is None:
         return None
+    if len(known.config) > 1:  # the last would win without a word, as a key given twice in one file would
+        raise InvalidOptionError(f"--config is given {len(known.config)} times ({', '.join(known.config)}); give one "
+                                 f"file (flags given as well override it)")
     from freespace.engine.config import read_config_yaml
 
-    return read_config_yaml(known.config)
+    return read_config_yaml(known.config[0])
 
 
 def cmd_train(args: argparse.Namespace) -> int:

@@ -253,6 +253,10 @@ def test_a_yaml_key_given_twice_or_in_two_spellings_is_refused(tiny: Path, tmp_p
     both.write_text("disparity_source: auto\ndisparity: sgbm\n")  # whatever the order
     with pytest.raises(InvalidOptionError, match="disparity"):
         read_config_yaml(both)
+    single = tmp_path / "single.yaml"
+    single.write_text("epochs: 1\n")
+    _err(capsys, ["train", "--config", str(single), "--config", str(both), "--out", str(tmp_path / "r")],
+         "--config is given 2 times")
     nested = tmp_path / "nested.yaml"
     nested.write_text("a: {k: 1, k: 2}\n")
     with pytest.raises(CorruptFileError, match="k is given twice"):

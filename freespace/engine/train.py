@@ -100,7 +100,7 @@ class LabelledPixels(pl.Callback):
     over all processes."""
 
     def __init__(self) -> None:
-        self.count = 0
+        self.count: torch.Tensor | int = 0
 
     def on_train_epoch_start(self, trainer, module) -> None:
         self.count = 0
@@ -108,10 +108,11 @@ class LabelledPixels(pl.Callback):
     def on_train_batch_start(self, trainer, module, batch, batch_idx) -> None:
         from freespace.labels import IGNORE_INDEX
 
-        self.count += int((batch["label"] != IGNORE_INDEX).sum())
+        self.count = self.count + (batch["label"] != IGNORE_INDEX).sum()  # on the device: no sync per step
 
     def on_train_epoch_end(self, trainer, module) -> None:
-        total = trainer.strategy.reduce(torch.tensor(float(self.count), device=module.device), reduce_op="sum")
+        count = torch.as_tensor(self.count, device=module.device).float()  # only compared with 0
+        total = trainer.strategy.reduce(count, reduce_op="sum")
         if float(total) == 0:
             raise TrainingError(f"no training sample of epoch {trainer.current_epoch + FIRST_EPOCH} has a labelled "
                                 f"pixel (every pixel is don't care), so the loss is 0 and nothing is learnt; check "
