@@ -300,6 +300,9 @@ class TrainConfig:
                 value = _typed(f.name, getattr(self, f.name))
             except ValueError as exc:
                 raise InvalidOptionError(f"{param(f.name)} {exc}") from None
+            if f.name in PATH_OPTIONS and isinstance(value, str) and value.startswith("~") and \
+                    (f.name != "encoder_weights" or weights_path(value)):
+                value = os.path.expanduser(value)  # as a shell would (a YAML file's ~/data too)
             object.__setattr__(self, f.name, value)
         if self.human_share > 0 and self.labels is None:
             raise InvalidOptionError(f"{param('human_share')} keeps the dataset's labels on a share of the training "
