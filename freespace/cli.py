@@ -61,6 +61,9 @@ def _open_dataset(args: argparse.Namespace, needs_right: str | None = None):  # 
         if args.dataset not in ("kitti", "synth"):
             raise InvalidOptionError("--disparity-dir is for KITTI road trees; other layouts name their "
                                      "disparity folder in freespace.yaml")
+        if args.disparity_source not in ("auto", "file"):
+            raise InvalidOptionError(f"--disparity-dir is read with --disparity-source auto or file; with "
+                                     f"{args.disparity_source} it would be ignored: leave one of them out")
         options["disparity_dir"] = args.disparity_dir
     if args.lidar_densify is not None:
         if args.disparity_source != "lidar":
@@ -117,8 +120,9 @@ def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], o
     failed = summary["failed"]
     print(f"{summary[done]} {done}, {summary['skipped']} already done, {len(failed)} failed of {summary['frames']} "
           f"frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
-    for name, reason in failed.items():
-        print(f"  failed {name}: {reason}")
+    errors, flags = summary.get("errors", {}), _flags(args.parser, [])
+    for name, reason in failed.items():  # this run's failures name flags, not parameters
+        print(f"  failed {name}: {errors[name].render(lambda n: flags.get(n, n)) if name in errors else reason}")
     return 1 if failed else 0
 
 
@@ -236,7 +240,8 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
-    g.add_argument("--disparity-source", dest="disparity_source", choices=DISPARITY_SOURCES, default="auto",
+    g.add_argument("--disparity-source", dest="disparity_source", default="auto",
+                   choices=[s for s in DISPARITY_SOURCES if s != "none"],  # a label needs a disparity
                    help="auto: file, else depth + camera, else cached SGBM (default); depth, lidar, sgbm: only that")
     g.add_argument("--lidar-densify", type=float, metavar="PX", help="--disparity-source lidar: fill holes within "
                                                                       "PX pixels of a point")
@@ -465,13 +470,16 @@ def _config_file_options(argv: Sequence[str]) -> dict[str, Any] | None:
     """The options in ``--config YAML`` when ``argv`` has one (read before the real parse, as timm does), as
     typed values (:func:`~freespace.engine.config.read_config_yaml`)."""
     pre = argparse.ArgumentParser(add_help=False)
-    pre.add_argument("--config")
+    pre.add_argument("--config", action="append")
     known, _ = pre.parse_known_args(argv)
     if known.config is None:
         return None
+    if len(known.config) > 1:  # the last would win without a word, as a key given twice in one file would
+        raise InvalidOptionError(f"--config is given {len(known.config)} times ({', '.join(known.config)}); give one "
+                                 f"file (flags given as well override it)")
     from freespace.engine.config import read_config_yaml
 
-    return read_config_yaml(known.config)
+    return read_config_yaml(known.config[0])
 
 
 def cmd_train(args: argparse.Namespace) -> int:

@@ -81,7 +81,7 @@ def test_last_checkpoint_is_the_last_epoch(tiny: Path, tmp_path: Path, monkeypat
     assert epochs == {"best": 0, "last": 2}
     assert _train(tiny, run, "--epochs", "4", "--image-size", "64x96", "--resume") == 0
     assert torch.load(run / "checkpoints" / "last.ckpt", weights_only=True)["epoch"] == 3
-    assert [int(r["epoch"]) for r in csv.DictReader((run / "metrics.csv").open())] == [0, 1, 2, 3]
+    assert [int(r["epoch"]) for r in csv.DictReader((run / "metrics.csv").open())] == [1, 2, 3, 4]  # from 1
 
 
 def test_resume_reads_a_config_yaml_of_older_spellings(tiny: Path, tmp_path: Path) -> None:
@@ -323,8 +323,8 @@ def test_the_monitored_validation_score(tmp_path: Path) -> None:
             for e, (f, w) in enumerate([(0.70, 0.70), (0.90, 0.80), (0.72, 0.773), (0.85, 0.823), (0.86, 0.81)])]
     write_csv(tmp_path / "metrics.csv", CSV_FIELDS, rows)
     assert monitored(1) == "val_f_score" and monitored(3) == "val_f_window"
-    assert _best_epoch(tmp_path, monitored(1)) == 1      # a lucky epoch
-    assert _best_epoch(tmp_path, monitored(3)) == 3      # the best smoothed one
+    assert _best_epoch(tmp_path, monitored(1)) == 2      # a lucky epoch (numbered from 1; the file from 0)
+    assert _best_epoch(tmp_path, monitored(3)) == 4      # the best smoothed one
 
 
 def test_min_delta_lets_early_stopping_fire(tiny: Path, tmp_path: Path) -> None:
@@ -332,7 +332,7 @@ def test_min_delta_lets_early_stopping_fire(tiny: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
     assert _train(tiny, run, "--epochs", "6", "--patience", "1", "--min-delta", "0.5", "--image-size", "64x96") == 0
     metrics = json.loads((run / "metrics.json").read_text())
-    assert metrics["epochs_run"] == 2 and metrics["best_epoch"] == 0
+    assert metrics["epochs_run"] == 2 and metrics["best_epoch"] == 1 and metrics["first_epoch"] == 1
     assert _train(tiny, tmp_path / "bad", "--min-delta", "1.5") == 2
 
 

@@ -219,7 +219,8 @@ def test_a_larger_cap_or_patience_extends_a_finished_cell(data: Path, same_rigs:
     extended, fresh = tmp_path / "extended", tmp_path / "fresh"
     assert main(cell(extended, "1")) == 0
     run = extended / "runs/segnet-orig-s0"
-    assert json.loads((run / "same/metrics.json").read_text())["trained"] == {"best_epoch": 0, "epochs_run": 1}
+    assert json.loads((run / "same/metrics.json").read_text())["trained"] == \
+        {"best_epoch": 1, "first_epoch": 1, "epochs_run": 1}
     assert main(cell(extended, "2")) == 0
     assert main(cell(fresh, "2")) == 0
     ours, theirs = (json.loads((r / "runs/segnet-orig-s0/metrics.json").read_text()) for r in (extended, fresh))

@@ -66,12 +66,9 @@ class FolderSpec:
         """This spec with the keys of the YAML file at ``path`` (if it exists) applied."""
         if not path.is_file():
             return self
-        import yaml
+        from freespace.io.codecs import load_yaml
 
-        try:
-            data = yaml.safe_load(path.read_text()) or {}
-        except (yaml.YAMLError, UnicodeDecodeError) as exc:
-            raise CorruptFileError(f"cannot parse {path}: {str(exc).splitlines()[0]}") from None
+        data = load_yaml(path) or {}  # a key given twice is refused
         if not isinstance(data, dict):
             raise CorruptFileError(f"{path} must hold a mapping of options")
         known = {f.name for f in fields(self)}
@@ -388,12 +385,9 @@ class CarlaStereo(SequenceDataset):
 
     @staticmethod
     def _camera_file(path: Path) -> dict[str, Any]:
-        import yaml
+        from freespace.io.codecs import load_yaml
 
-        try:
-            cam = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as exc:
-            raise CorruptFileError(f"cannot parse {path}: {str(exc).splitlines()[0]}") from None
+        cam = load_yaml(path)  # a key given twice is refused
         if not isinstance(cam, dict) or not {"fx", "cx", "cy", "baseline"} <= set(cam):
             raise CorruptFileError(f"{path} must give fx, cx, cy (pixels) and baseline (metres)")
         return cam

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -391,6 +392,33 @@ def autolabel(disparity: np.ndarray, *, baseline: float | None = None,
 # files: one pair, or a whole dataset
 
 
+#: a rectified stereo pair's left image matches on far more of its pixels than this share (SGBM); a swapped
+#: pair (the right image as reference) or two unrelated images match on a few per cent
+MIN_MATCHED = 0.15
+#: a road label with less road than this share of the image comes from a pair or disparity that is wrong more
+#: often than from a frame without road in its lower centre (which autolabel assumes)
+MIN_ROAD = 0.01
+
+
+def implausible_pair(matched: float | None, result: AutolabelResult | None) -> str | None:
+    """Why a stereo pair (or its disparity) looks wrong for a road label, or None: SGBM matched less than
+    :data:`MIN_MATCHED` of the pixels (``matched``: the share of valid disparities, None when no SGBM ran), or
+    the label has less than :data:`MIN_ROAD` road (``result``)."""
+    if matched is not None and matched < MIN_MATCHED:
+        return f"SGBM matched only {100 * matched:.1f} % of the pixels"
+    if result is not None and result.stats["road_fraction"] < MIN_ROAD:
+        return f"only {100 * result.stats['road_fraction']:.1f} % of the image is road"
+    return None
+
+
+def _matched(disparity: np.ndarray) -> float:
+    with np.errstate(invalid="ignore"):
+        return float((np.isfinite(disparity) & (disparity > 0)).mean())
+
+
+_SWAPPED = "are the left and right images swapped, or not one rectified pair?"
+
+
 def _size(shape: tuple[int, ...]) -> str:
     return f"{shape[1]}×{shape[0]}"
 
@@ -461,6 +489,9 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
     if calib is not None:
         baseline = _baseline_from_calib(calib)
     if target is not None:
+        if Path(os.path.realpath(reference)) == Path(os.path.realpath(target)):
+            raise InvalidOptionError(f"{param('reference')} and {param('target')} are the same file; give the left "
+                                     f"and the right image of one rectified stereo pair")
         right = read_image(target, what="target image")
         if right.shape != left.shape:
             raise ShapeMismatchError(f"reference is {_size(left.shape)} but target is {_size(right.shape)}; give the "
@@ -476,10 +507,27 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
     if not np.isfinite(disp).any():
         raise RoadFitError("the disparity map has no valid value (all 0, NaN or inf); check the "
                            + ("stereo pair" if source == "sgbm" else "disparity file"))
-    result = autolabel(disp, baseline=baseline, options=options)
+    matched = _matched(disp) if source == "sgbm" else None
+    try:
+        result = autolabel(disp, baseline=baseline, options=options)
+    except RoadFitError as exc:
+        why = implausible_pair(matched, None)
+        if why is None:
+            raise
+        raise RoadFitError(f"{exc.render(param)} ({why}: {_pair_question()})") from None
     result.stats.update(disparity_source=source, seconds=round(time.perf_counter() - t0, 4))
+    why = implausible_pair(matched, result)
+    if why is not None:
+        log.warning("the label is implausible: %s; %s", why, "are the reference and target images swapped? The "
+                    "reference is the left image, the target the right one of one rectified pair" if source == "sgbm"
+                    else "is the disparity the reference (left) image's?")
     write_label_files(result, out, confidence, model_json)
     return result
+
+
+def _pair_question() -> str:
+    return (f"are {param('reference')} and {param('target')} swapped? {param('reference')} is the left image, "
+            f"{param('target')} the right one of one rectified pair")
 
 
 _CSV_FIELDS = ["frame", "status", "coverage", "road_fraction", "noise_px", "roughness_m", "camera_height_m",
@@ -500,18 +548,27 @@ def _label_frame(dataset: Any, index: int, out: Path, report: Path, options: Aut
     t0 = time.perf_counter()
     frame = dataset.frames[index]
     record: dict[str, Any] = {"frame": frame.name}
+    matched = None
     try:
         sample = dataset.load(index, label=False)
         if sample.disparity is None:
-            raise DatasetError("no disparity (no disparity file, depth map or right image for SGBM)")
+            wanted = {"sgbm": "right image for SGBM", "file": "disparity file or depth map"}.get(
+                dataset.disparity_source, "disparity file, depth map or right image for SGBM")
+            raise DatasetError(f"no {wanted} ({param('disparity_source')} {dataset.disparity_source})")
+        matched = _matched(sample.disparity) if sample.disparity_source == "sgbm" else None
         calib = sample.calibration
         baseline = calib.baseline if calib is not None and calib.baseline > 0 else None
         result = autolabel(sample.disparity, baseline=baseline, options=options)
         result.stats.update(disparity_source=sample.disparity_source, seconds={"total": time.perf_counter() - t0})
-        record.update(status="done", **result.report(), settings=settings)
+        why = implausible_pair(matched, result)
+        record.update(status="done", **result.report(), settings=settings, **({"implausible": why} if why else {}))
         write_label_files(result, out, out.parent / "confidence" / out.name, report, record)
     except FreespaceError as exc:
-        record.update(status="failed", reason=str(exc))
+        why = implausible_pair(matched, None) if isinstance(exc, RoadFitError) else None
+        text = exc.render(param) + (f" ({why}: are the left and right images swapped?)" if why else "")
+        # the reason as the files record it (parameters by name), and the error, whose parameters the command
+        # line writes as its flags (kept in memory only: no file records it)
+        record.update(status="failed", reason=FreespaceError(text).render(), error=text)
     except Exception as exc:  # a bad frame must not stop the run; the reason is reported
         log.debug("frame %s failed", frame.name, exc_info=True)
         record.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
@@ -531,7 +588,9 @@ def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     ``overwrite``) exactly as :func:`freespace.datagen.generate.generate_dataset`, whose machinery it shares.
 
     Returns:
-        The summary: counts, ``failed`` (frame → reason), mean coverage and road fraction.
+        The summary: counts, ``failed`` (frame → reason), mean coverage and road fraction; and ``errors``
+        (frame → :class:`~freespace.errors.FreespaceError`, this run's failures, whose parameters an interface
+        writes its own way: :meth:`~freespace.errors.FreespaceError.render`).
     """
     from freespace.datagen.generate import frames_folder
     from freespace.shard import select_shard
@@ -543,12 +602,65 @@ def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     if out_dir.exists() and not out_dir.is_dir():
         raise InvalidOptionError(f"{param('out')} {out_dir} is a file; give a folder for the label tree")
     check_outputs({"out": out_dir}, {"root": dataset.root})
+    _check_disparity_inputs(dataset, out_dir, options)
     settings = _settings(dataset, options)
     if shard is not None:
         dataset = dataset.subset(select_shard((f.name for f in dataset.frames), *shard))
     with frames_folder(out_dir, "autolabel", settings, overwrite, [f.name for f in dataset.frames], shard,
                        extra=("confidence",)):
         return _label_frames(dataset, out_dir, settings, options, workers, progress, shard)
+
+
+def _check_disparity_inputs(dataset: Any, out_dir: Path, options: AutolabelOptions) -> None:
+    """Refuse, before any work, a disparity setting under which frames cannot be labelled or files land where
+    they must not:
+
+    * ``disparity_source`` ``none`` (no frame could be labelled);
+    * a folder of disparity files (``disparity_dir``) with a source that never reads them (``sgbm``, ``depth``,
+      ``lidar``): it would be ignored;
+    * ``sgbm`` on a tree without right images, ``file`` on one without disparity files or depth maps
+      (``depth`` and ``lidar`` are checked when the dataset opens);
+    * an SGBM search range (``max_disparity``) not smaller than the images' width;
+    * an SGBM cache (``cache_dir``) inside the dataset (its ``.npy`` files would land among the images) or
+      that is, holds or lies in ``out_dir`` (its files would lie outside the label tree's manifest).
+    """
+    from freespace.datagen.generate import _may_use_sgbm
+    from freespace.geometry.stereo import check_search_range
+
+    source = dataset.disparity_source
+    if source == "none":
+        raise InvalidOptionError(f"{param('disparity_source')} none gives no disparity, and a label needs one; "
+                                 f"choose auto, file, depth, lidar or sgbm")
+    if getattr(dataset, "disparity_dir", None) is not None and source not in ("auto", "file"):
+        raise InvalidOptionError(f"{param('disparity_dir')} is read with {param('disparity_source')} auto or file; "
+                                 f"with {source} it would be ignored: leave one of them out")
+    if source == "sgbm" and not any(f.right is not None for f in dataset.frames):
+        raise DatasetError(f"{param('disparity_source')} sgbm matches left and right images, and no frame under "
+                           f"{dataset.root} has a right image; give disparities ({param('disparity_source')} file, "
+                           f"depth or lidar)")
+    if source == "file" and not any(f.disparity is not None or f.depth is not None for f in dataset.frames):
+        raise DatasetError(f"{param('disparity_source')} file reads disparity files (or depth maps), and no frame "
+                           f"under {dataset.root} has one; give {param('disparity_dir')}, or choose "
+                           f"{param('disparity_source')} sgbm, depth or lidar")
+    if not _may_use_sgbm(dataset):
+        return
+    frame = next((f for f in dataset.frames if f.right is not None
+                  and (source == "sgbm" or (f.disparity is None and f.depth is None))), None)
+    if frame is not None:
+        try:
+            width = read_image(frame.left, what="left image").shape[1]
+        except FreespaceError:
+            width = None  # the frame fails with its own reason
+        if width is not None:
+            check_search_range(options.max_disparity, width, f"give disparities ({param('disparity_dir')}, or depth "
+                                                             f"maps with {param('disparity_source')} depth)")
+    cache = Path(dataset.cache.folder)
+    check_outputs({"cache_dir": cache}, {"root": dataset.root})
+    real_cache, real_out = Path(os.path.realpath(cache)), Path(os.path.realpath(out_dir))
+    if real_cache.is_relative_to(real_out) or real_out.is_relative_to(real_cache):
+        raise InvalidOptionError(f"{param('cache_dir')} {cache} and {param('out')} {out_dir} overlap: the SGBM cache's "
+                                 f"files would lie in the label tree, outside what it records (or the tree in the "
+                                 f"cache); give them two separate folders")
 
 
 def _label_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options: AutolabelOptions, workers: int,
@@ -560,6 +672,11 @@ def _label_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options
     ordered = run_frames(dataset, out_dir, options, settings, shard, workers, progress, process=_label_frame,
                          desc="autolabel", verb="label", fields=_CSV_FIELDS)
     ok = [r for r in ordered if r["status"] != "failed"]
+    odd = [r for r in ok if r.get("implausible")]
+    if odd:
+        log.warning("%d of %d labelled frames look implausible (e.g. %s: %s); are the left and right images "
+                    "swapped, or the disparities not the left images'?", len(odd), len(ok), odd[0]["frame"],
+                    odd[0]["implausible"])
     summary = {"dataset": dataset.name, "root": str(dataset.root),
                **({"shard": f"{shard[0]}/{shard[1]}"} if shard is not None else {}),
                "frames": len(ordered), "labelled": sum(r["status"] == "done" for r in ordered),
@@ -569,4 +686,4 @@ def _label_frames(dataset: Any, out_dir: Path, settings: dict[str, Any], options
                "mean_road_fraction": float(np.mean([r["road_fraction"] for r in ok])) if ok else None,
                "wall_seconds": round(time.perf_counter() - t0, 3), "workers": workers, "settings": settings}
     write_json(out_dir / _totals_names(shard)[0], summary)
-    return summary
+    return {**summary, "errors": {r["frame"]: FreespaceError(r["error"]) for r in ordered if "error" in r}}

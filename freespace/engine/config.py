@@ -27,14 +27,15 @@ from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin, get_type_hints
 
+import numpy as np
 from pydantic import BeforeValidator, ConfigDict, Field, PlainSerializer, TypeAdapter, ValidationError
 from pydantic.fields import FieldInfo
 
-from freespace.errors import MAX_SEED, CorruptFileError, InputFileError, InvalidOptionError, param
-from freespace.io.codecs import MAX_IMAGE_SIDE
+from freespace.errors import MAX_SEED, CorruptFileError, DatasetError, InputFileError, InvalidOptionError, param
+from freespace.io.codecs import MAX_IMAGE_SIDE, load_yaml
 from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable
 
-__all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "parse_augment", "augment_text", "ranges_text", "parse_size",
+__all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "weights_path", "resolved_path", "parse_augment", "augment_text", "ranges_text", "parse_size",
            "AUGMENTS", "AUGMENT_NAMES", "FIRST_FRAME_SIZE", "PRESETS", "STRATEGIES"]
 
 #: the augmentations ``augment`` combines, in their one order (duplicate: the step-count control of homography)
@@ -47,11 +48,32 @@ STRATEGIES = ("auto", "ddp")
 #: config.yaml spells it ``null``, and ``auto`` is read as it too)
 FIRST_FRAME_SIZE: Final = "first-frame"
 
-#: the options that name files or folders (config.yaml keeps them resolved)
-PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir")
+#: the options that name files or folders (config.yaml keeps them resolved); ``encoder_weights`` is one when it
+#: is a path, not a name of weights (:func:`weights_path`)
+PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir", "labels", "encoder_weights")
 
 # config.yaml keys of runs made before the names said which split and which disparity source they mean
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_source", "disparity_mode": "disparity_source"}
+
+#: names of encoder weights that are no file (segmentation-models-pytorch's, and the Lite encoders' imagenet)
+_WEIGHT_NAME = re.compile(r"[A-Za-z0-9_+-]+")
+
+
+def weights_path(value: str | None) -> bool:
+    """Whether ``encoder_weights`` ``value`` names a file (then config.yaml keeps it resolved and the run
+    records its content hash) rather than weights by name (``imagenet``, smp's ``ssl``, ``swsl``, ...): a
+    value with a ``/``, a ``.`` or a leading ``~``, or the name of an existing file that is not ``imagenet``."""
+    if not value:
+        return False
+    if not _WEIGHT_NAME.fullmatch(value):
+        return True
+    return value != "imagenet" and os.path.isfile(value)
+
+
+def resolved_path(value: str) -> str:
+    """``value`` absolute, ``~`` expanded and symbolic links followed (two spellings of one file compare
+    equal; the text works from any folder)."""
+    return os.path.realpath(os.path.expanduser(value))
 
 
 # --- the value types: each parses the spellings it accepts and writes its one spelling ------------------
@@ -278,6 +300,9 @@ class TrainConfig:
                 value = _typed(f.name, getattr(self, f.name))
             except ValueError as exc:
                 raise InvalidOptionError(f"{param(f.name)} {exc}") from None
+            if f.name in PATH_OPTIONS and isinstance(value, str) and value.startswith("~") and \
+                    (f.name != "encoder_weights" or weights_path(value)):
+                value = os.path.expanduser(value)  # as a shell would (a YAML file's ~/data too)
             object.__setattr__(self, f.name, value)
         if self.human_share > 0 and self.labels is None:
             raise InvalidOptionError(f"{param('human_share')} keeps the dataset's labels on a share of the training "
@@ -309,6 +334,8 @@ class TrainConfig:
         if self.labels is not None and not Path(self.labels).is_dir():
             raise InputFileError(f"{param('labels')} {self.labels} not found; give the folder that `freespace "
                                  f"autolabel` wrote for the dataset")
+        if self.labels is not None:
+            check_label_tree(self.labels, self.dataset, self.root, self.split)
         check_writable(self.out, folder=True)
         weights_file = self.encoder_weights if self.encoder_weights and Path(self.encoder_weights).is_file() else None
         check_outputs({"out": self.out}, {"root": self.root, "splits_dir": self.splits_dir, "labels": self.labels,
@@ -327,8 +354,8 @@ class TrainConfig:
         compare equal."""
         d = {f.name: _adapters()[f.name].dump_python(getattr(self, f.name)) for f in fields(self)}
         for k in PATH_OPTIONS:
-            if d[k] is not None:
-                d[k] = os.path.realpath(os.path.expanduser(d[k]))
+            if d[k] is not None and (k != "encoder_weights" or weights_path(d[k])):
+                d[k] = resolved_path(d[k])
         return d
 
     def save(self, path: PathLike) -> None:
@@ -372,6 +399,173 @@ def _build_once(model: str, preset: str, encoder_name: str | None, encoder_weigh
 
     options = {k: v for k, v in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)) if v is not None}
     create_model(model, preset=preset, **options)
+
+
+# --- what a run read: content hashes, the label tree -------------------------------------------------------
+
+
+def _signature(path: Path) -> tuple[int, int, int]:
+    st = path.stat()
+    return st.st_mtime_ns, st.st_size, st.st_ino
+
+
+def file_sha256(path: PathLike) -> str:
+    """The SHA-256 (hex) of the file ``path``'s bytes; computed once per process for a file unchanged since
+    (its modification time, size and inode key the cache)."""
+    real = Path(resolved_path(os.fspath(path)))
+    return _file_sha256(real, _signature(real))
+
+
+@functools.lru_cache(maxsize=64)
+def _file_sha256(path: Path, signature: tuple[int, int, int]) -> str:
+    import hashlib
+
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def label_files(folder: PathLike) -> dict[str, Path]:
+    """The label files of the label tree ``folder`` that training reads, by frame name: ``<frame>.png`` at its
+    top level (a link is followed; ``confidence/`` and the reports are no labels)."""
+    found = {}
+    for entry in sorted(Path(folder).glob("*.png")):
+        if entry.is_file():
+            found[entry.stem] = entry
+    return found
+
+
+def label_tree_sha256(folder: PathLike) -> tuple[str, int]:
+    """A content hash of the label tree ``folder`` (SHA-256, hex: over its label files' names, sorted, and
+    their bytes; the same files give the same hash wherever the tree lies) and how many label files it has.
+    Computed once per process for a tree whose files are unchanged."""
+    files = label_files(resolved_path(os.fspath(folder)))
+    return _tree_sha256(tuple((name, path, _signature(path)) for name, path in files.items())), len(files)
+
+
+@functools.lru_cache(maxsize=16)
+def _tree_sha256(files: tuple[tuple[str, Path, tuple[int, int, int]], ...]) -> str:
+    import hashlib
+
+    digest = hashlib.sha256()
+    for name, path, _ in files:
+        data = path.read_bytes()
+        digest.update(f"{name}.png\0{len(data)}\0".encode())
+        digest.update(data)
+    return digest.hexdigest()
+
+
+def content_hashes(config: TrainConfig) -> dict[str, Any]:
+    """What a run read, by content: ``{"encoder_weights": {"path", "sha256"}}`` when its weights are a file,
+    ``{"labels": {"path", "sha256", "files"}}`` with a label tree (paths resolved; :func:`label_tree_sha256`).
+    A run records it (``RUN/inputs.json``); a resumed run and the cells of one ``reproduce`` are refused when
+    the files changed in between."""
+    found: dict[str, Any] = {}
+    if weights_path(config.encoder_weights) and Path(config.encoder_weights).is_file():  # type: ignore[arg-type]
+        found["encoder_weights"] = {"path": resolved_path(config.encoder_weights),  # type: ignore[arg-type]
+                                    "sha256": file_sha256(config.encoder_weights)}  # type: ignore[arg-type]
+    if config.labels is not None and Path(config.labels).is_dir():
+        digest, count = label_tree_sha256(config.labels)
+        found["labels"] = {"path": resolved_path(config.labels), "sha256": digest, "files": count}
+    return found
+
+
+def changed_inputs(recorded: Mapping[str, Any], now: Mapping[str, Any]) -> list[str]:
+    """The inputs (``encoder_weights``, ``labels``) whose content hash in ``recorded`` (a run's inputs.json)
+    differs from ``now`` (:func:`content_hashes`), as ``"name (sha256 abc… then, def… now)"``; an input one
+    of them lacks is not compared."""
+    changed = []
+    for key in ("encoder_weights", "labels"):
+        old, new = recorded.get(key), now.get(key)
+        if isinstance(old, dict) and isinstance(new, dict) and old.get("sha256") != new.get("sha256"):
+            changed.append(f"{param(key)} {new.get('path')} (sha256 {str(old.get('sha256'))[:12]}… then, "
+                           f"{str(new.get('sha256'))[:12]}… now)")
+    return changed
+
+
+@functools.lru_cache(maxsize=16)
+def _inspect_labels(files: tuple[tuple[str, Path, tuple[int, int, int]], ...]) -> dict[str, tuple[str | None, int]]:
+    """Each label file's problem (:func:`~freespace.io.codecs.label_image_problem`, None: a label) and its
+    number of labelled (not don't care) pixels."""
+    from freespace.io.codecs import label_image_problem, read_image, road_label_from_image
+
+    found = {}
+    for name, path, _ in files:
+        img = read_image(path, what="road label")
+        problem = label_image_problem(img)
+        found[name] = (problem, 0 if problem else int(np.count_nonzero(road_label_from_image(img).valid)))
+    return found
+
+
+def label_tree_pixels(folder: PathLike) -> dict[str, int]:
+    """The labelled (not don't care) pixels of each label file of the tree ``folder``, by frame name; read
+    once per process for unchanged files. Raises as :func:`check_label_tree`."""
+    files = label_files(folder)
+    found = _inspect_labels(tuple((n, p, _signature(p)) for n, p in files.items()))
+    return {name: count for name, (_, count) in found.items()}
+
+
+def check_label_tree(folder: PathLike, dataset: str, root: PathLike, split: str | None,
+                     option: str = "labels") -> None:
+    """Refuse, in one line naming ``option``, a label tree that does not belong to the frames it would label:
+
+    * made for another dataset: its ``settings.json`` (written by ``freespace autolabel``) names another
+      layout, root (compared resolved) or on-disk split than ``dataset``, ``root`` and ``split`` (None: the
+      layout's first), whose frames may share the names;
+    * no label tree: no ``<frame>.png``, or files that are not label images (confidence maps, predictions,
+      overlays: :func:`~freespace.io.codecs.label_image_problem`);
+    * nothing labelled: every pixel of every label is don't care (training would learn nothing, at loss 0).
+
+    Raises:
+        InputFileError: no folder ``folder``. DatasetError: one of the above.
+    """
+    import json
+
+    from freespace.data.registry import get_dataset_class
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputFileError(f"{param(option)} {folder} not found; give the folder that `freespace autolabel` wrote "
+                             f"for the dataset")
+    settings_path = folder / "settings.json"
+    if settings_path.is_file():
+        try:
+            made = json.loads(settings_path.read_text())
+        except (OSError, UnicodeDecodeError, ValueError):
+            made = None
+        if not isinstance(made, dict):
+            raise DatasetError(f"{param(option)} {folder}: its settings.json is unreadable, so which dataset it "
+                               f"labels is unknown; label the dataset again with `freespace autolabel`")
+        ours = {"dataset": get_dataset_class(dataset).name, "root": resolved_path(os.fspath(root)),
+                "split": split or get_dataset_class(dataset).splits[0]}
+        theirs = {"dataset": made.get("dataset"), "split": made.get("split"),
+                  "root": resolved_path(str(made["root"])) if isinstance(made.get("root"), str) else made.get("root")}
+        other = [k for k in ("root", "dataset", "split") if theirs[k] is not None and theirs[k] != ours[k]]
+        if other:
+            k = other[0]
+            raise DatasetError(f"{param(option)} {folder} labels another dataset: `freespace autolabel` made it for "
+                               f"{k} {theirs[k]}, not {ours[k]} (frames of the same names are other images); label "
+                               f"this one with `freespace autolabel` ({dataset} at {root}) and give that tree")
+    files = label_files(folder)
+    if not files:
+        dataset_root = resolved_path(os.fspath(folder)) == resolved_path(os.fspath(root)) or any(
+            (folder / name).exists() for name in ("freespace.yaml", "training", "data_road"))
+        what = "a dataset root, not a label tree" if dataset_root else "no <frame>.png"
+        raise DatasetError(f"{param(option)} {folder} holds {what}; give the folder that `freespace autolabel` "
+                           f"wrote for the dataset (<frame>.png in KITTI colours)")
+    found = _inspect_labels(tuple((n, p, _signature(p)) for n, p in files.items()))
+    bad = [(name, problem) for name, (problem, _) in found.items() if problem]
+    if bad:
+        subfolder = folder.parent if folder.name == "confidence" and (folder.parent / "settings.json").is_file() \
+            else None
+        fix = (f"give {subfolder}, the label tree above it" if subfolder is not None else
+               "give the label tree that `freespace autolabel` wrote for the dataset (<frame>.png in KITTI colours)")
+        raise DatasetError(f"{param(option)} {folder}: {len(bad)} of its {len(files)} files are no labels ({bad[0][0]}"
+                           f".png is {bad[0][1]}); {fix}")
+    if not any(count for _, count in found.values()):
+        raise DatasetError(f"{param(option)} {folder}: every pixel of its {len(files)} labels is don't care, so "
+                           f"there is nothing to learn from; label the frames again (`freespace autolabel`)")
 
 
 # --- validation ------------------------------------------------------------------------------------------
@@ -457,25 +651,29 @@ def _choices(name: str) -> tuple[str, ...] | None:
 
 def read_config_yaml(path: PathLike) -> dict[str, Any]:
     """The options in a YAML file of :class:`TrainConfig` fields (e.g. a run's config.yaml) as typed values,
-    checked as :class:`TrainConfig` checks them (``yaml.safe_load``: runs no code). Fields may be missing;
-    keys of older runs (``splits``, ``disparity``, ``disparity_mode``) are read as the fields' names now.
+    checked as :class:`TrainConfig` checks them (:func:`load_yaml`, a ``yaml.SafeLoader``: runs no code). Fields
+    may be missing; keys of older runs (``splits``, ``disparity``, ``disparity_mode``) are read as the fields'
+    names now.
 
     Raises:
-        InputFileError: no file. CorruptFileError: not YAML, or not a mapping. InvalidOptionError: an
-        unknown key or a bad value (the message names the file and the key).
+        InputFileError: no file. CorruptFileError: not YAML, not a mapping, or a key given twice.
+        InvalidOptionError: an unknown key, a bad value, or an option given in two spellings (``disparity_mode``
+        and ``disparity_source``; the message names the file and the keys).
     """
-    import yaml
-
     if Path(path).is_dir():
         raise InputFileError(f"{path} is a folder; name a YAML file, e.g. {Path(path) / 'config.yaml'}")
     if not Path(path).is_file():
         raise InputFileError(f"config file not found: {path}")
-    try:
-        data = yaml.safe_load(Path(path).read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise CorruptFileError(f"cannot read {path}: {str(exc).splitlines()[0]}") from None
+    data = load_yaml(path)
     if not isinstance(data, dict):
         raise CorruptFileError(f"{path} is not a freespace training config (a mapping of options)")
+    spelled: dict[str, str] = {}
+    for key in data:
+        name = _RENAMED.get(key, key)
+        if name in spelled:
+            raise InvalidOptionError(f"{path}: {spelled[name]} and {key} both give {name} (an older name and the "
+                                     f"current one); keep one of them")
+        spelled[name] = str(key)
     data = {_RENAMED.get(k, k): v for k, v in data.items()}
     names = [f.name for f in fields(TrainConfig)]
     unknown = sorted(str(k) for k in data if k not in names)

@@ -99,6 +99,7 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
                         len(splits["train"]) - len(train), len(splits["train"]), config.labels)
         ds = ds.with_labels(config.labels, [n for n in train if n not in human])
         splits = {**splits, "train": train}
+    _check_labelled(ds, splits["train"], config.labels)
     index = {f.name: ds.index(f.name) for f in labelled}
     stereo = [n for n in splits["train"] if ds.frames[index[n]].right is not None]
     needs_right = [a for a in ("homography", "duplicate") if a in config.augment]
@@ -122,6 +123,29 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     size = config.image_size if config.image_size != FIRST_FRAME_SIZE else \
         tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
     return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
+
+
+def _check_labelled(ds: StereoRoadDataset, train: list[str], labels: str | None) -> None:
+    """Refuse a training set in which no pixel is labelled (every label all don't care: the loss would be 0 and
+    nothing learnt), before any training. Reads the training labels until one has a labelled pixel (the
+    first, unless something is wrong); a label tree's files are read once per process."""
+    from freespace.engine.config import label_tree_pixels
+    from freespace.io.codecs import read_road_label
+
+    tree = label_tree_pixels(labels) if labels is not None else {}
+    for name in train:
+        path = ds.label_files.get(name)
+        if path is not None and labels is not None and Path(path).parent.resolve() == Path(labels).resolve() \
+                and name in tree:
+            if tree[name]:
+                return
+            continue
+        label = read_road_label(path) if path is not None else ds.read_label(ds.frames[ds.index(name)])
+        if label.valid.any():
+            return
+    where = f"{param('labels')} {labels}" if labels is not None else f"the dataset's labels ({ds.root})"
+    raise DatasetError(f"none of the {len(train)} training frames has a labelled pixel in {where}: every pixel is "
+                       f"don't care, so training would learn nothing (loss 0); give labels with road and non-road")
 
 
 def _human_drives(frames: list[Any], train: list[str], share: float, seed: int) -> set[str]:

@@ -1,7 +1,8 @@
 """A training run: ``freespace train``.
 
 The run folder holds ``config.yaml`` (resolved options), ``splits/`` (train/val/test lists),
-``generated/`` (DS-Generator views, with ``augment="homography"``), ``metrics.csv`` (one row per epoch),
+``generated/`` (DS-Generator views, with ``augment="homography"``), ``metrics.csv`` (one row per epoch,
+numbered from 1 as ``best_epoch`` in metrics.json),
 ``checkpoints/best.ckpt`` and ``checkpoints/last.ckpt`` (written atomically) and, at the end,
 ``metrics.json`` (test split: accuracy, precision, recall, f_score, iou, max_f, ap as fractions, seconds
 per frame). ``resume=True`` continues from ``last.ckpt``; with the same seed on a CPU the result is the
@@ -26,9 +27,9 @@ from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from freespace.data.torch_dataset import RoadSegmentationDataset
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, changed_inputs, content_hashes
 from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
-from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, param
+from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, TrainingError, param
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
 from freespace.io.outdir import claim_folder
@@ -49,9 +50,24 @@ def monitored(val_window: int) -> str:
     return "val_f_score" if val_window == 1 else "val_f_window"
 
 
+#: the number of a run's first epoch in its record (metrics.csv's ``epoch``, metrics.json's ``best_epoch``,
+#: index.json, results.md): epochs are counted as people count them. metrics.json says so (``first_epoch``);
+#: files written before hold 0-based numbers and are read right (:func:`read_epoch_rows`, and reproduce's tables)
+FIRST_EPOCH = 1
+
+
+def read_epoch_rows(path: Path) -> list[dict[str, str]]:
+    """The rows of a run's ``metrics.csv``, ``epoch`` numbered from :data:`FIRST_EPOCH`: a file of an older
+    version numbered them from 0 (its first row says which: the rows start at the run's first epoch)."""
+    rows = list(csv.DictReader(path.open()))
+    if rows and rows[0].get("epoch") == "0":
+        rows = [{**r, "epoch": str(int(r["epoch"]) + FIRST_EPOCH)} for r in rows]
+    return rows
+
+
 class EpochCSV(pl.Callback):
-    """``metrics.csv`` of the run folder ``run_dir``: one row per finished epoch, rewritten atomically (kept
-    across resumes)."""
+    """``metrics.csv`` of the run folder ``run_dir``: one row per finished epoch (``epoch`` numbered from
+    :data:`FIRST_EPOCH`), rewritten atomically (kept across resumes)."""
 
     def __init__(self, run_dir: Path) -> None:
         self.path = run_dir / "metrics.csv"
@@ -65,16 +81,42 @@ class EpochCSV(pl.Callback):
             return
         m = trainer.callback_metrics
         rows = []
+        number = trainer.current_epoch + FIRST_EPOCH  # Lightning counts from 0
         if self.path.is_file():
-            rows = [r for r in csv.DictReader(self.path.open()) if int(r["epoch"]) < trainer.current_epoch]
-        row = {"epoch": trainer.current_epoch, "lr": trainer.optimizers[0].param_groups[0]["lr"],
+            rows = [r for r in read_epoch_rows(self.path) if int(r["epoch"]) < number]
+        row = {"epoch": number, "lr": trainer.optimizers[0].param_groups[0]["lr"],
                "seconds": round(time.perf_counter() - self.t0, 3)}
         row.update({k: f"{float(m[k]):.6f}" for k in CSV_FIELDS if k in m})
         write_csv(self.path, CSV_FIELDS, rows + [row])
         if not on_terminal() or not trainer.progress_bar_callback:  # a log gets one line per epoch
-            log.info("epoch %d/%d  loss %s  val F %s  IoU %s  (%.1f s)", trainer.current_epoch + 1,
+            log.info("epoch %d/%d  loss %s  val F %s  IoU %s  (%.1f s)", number,
                      trainer.max_epochs, row.get("train_loss", "—"), row.get("val_f_score", "—"),
                      row.get("val_iou", "—"), row["seconds"])
+
+
+class LabelledPixels(pl.Callback):
+    """Fails the run at the end of a training epoch in which no sample had a labelled pixel (every pixel don't
+    care): its loss is exactly 0 and the network learns nothing, which must not end as a finished run. Counted
+    over all processes."""
+
+    def __init__(self) -> None:
+        self.count: torch.Tensor | int = 0
+
+    def on_train_epoch_start(self, trainer, module) -> None:
+        self.count = 0
+
+    def on_train_batch_start(self, trainer, module, batch, batch_idx) -> None:
+        from freespace.labels import IGNORE_INDEX
+
+        self.count = self.count + (batch["label"] != IGNORE_INDEX).sum()  # on the device: no sync per step
+
+    def on_train_epoch_end(self, trainer, module) -> None:
+        count = torch.as_tensor(self.count, device=module.device).float()  # only compared with 0
+        total = trainer.strategy.reduce(count, reduce_op="sum")
+        if float(total) == 0:
+            raise TrainingError(f"no training sample of epoch {trainer.current_epoch + FIRST_EPOCH} has a labelled "
+                                f"pixel (every pixel is don't care), so the loss is 0 and nothing is learnt; check "
+                                f"the training labels (the dataset's, or {param('labels')})")
 
 
 def _callbacks(run_dir: Path, patience: int, val_window: int,
@@ -89,7 +131,7 @@ def _callbacks(run_dir: Path, patience: int, val_window: int,
                            enable_version_counter=False)
     stop = _EarlyStopping(monitor=monitor, mode="max", patience=patience, min_delta=min_delta, check_finite=True,
                           val_window=val_window)
-    return [ckpt, last, stop, EpochCSV(run_dir)], ckpt
+    return [LabelledPixels(), ckpt, last, stop, EpochCSV(run_dir)], ckpt
 
 
 class _EarlyStopping(EarlyStopping):
@@ -127,7 +169,23 @@ WHERE_AND_HOW = ("out", "devices", "num_nodes", "strategy", "workers", "tensorbo
 
 #: what a run writes into its folder, as :mod:`freespace.io.outdir` entries (removed when a plain rerun takes
 #: over a start that never checkpointed)
-RUN_ENTRIES = ("config.yaml", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/", "tensorboard/")
+RUN_ENTRIES = ("config.yaml", "inputs.json", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/",
+               "tensorboard/")
+
+#: the run's record of what it read, by content (:func:`freespace.engine.config.content_hashes`)
+INPUTS = "inputs.json"
+
+
+def read_inputs(run_dir: Path) -> dict[str, Any]:
+    """A run's ``inputs.json`` (what it read, by content hash), or ``{}`` for a run of an older version or a
+    damaged file."""
+    import json
+
+    try:
+        found = json.loads((run_dir / INPUTS).read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return {}
+    return found if isinstance(found, dict) else {}
 
 
 class RunCheckpointIO(TorchCheckpointIO):
@@ -237,8 +295,14 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         return _train(config, resume, progress)
     with claim_folder(run_dir, "train", entries=RUN_ENTRIES) as folder:
         last = run_dir / "checkpoints" / "last.ckpt"
+        inputs = content_hashes(config)  # before any work: a changed weights file or label tree is refused
         if resume:
             config = _check_resume(config, run_dir, last)
+            changed = changed_inputs(read_inputs(run_dir), inputs)
+            if changed:
+                raise InvalidOptionError(f"{run_dir} started from other contents of {changed[0]}; resuming would "
+                                         f"train one run on two; restore the files, or start a new run (another "
+                                         f"{param('out')})")
             (run_dir / "metrics.json").unlink(missing_ok=True)  # the run is unfinished again until its new end
         elif (run_dir / "config.yaml").is_file():
             if last.is_file():
@@ -247,6 +311,8 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
             log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
             folder.forget(RUN_ENTRIES)
             folder.record(RUN_ENTRIES)  # the new run writes them again: still this command's files
+        if not resume:  # (a resumed run of an older version records nothing it cannot vouch for)
+            write_json(run_dir / INPUTS, inputs)
         try:
             return _train(config, resume, progress)
         except FreespaceError as exc:  # a user's mistake (a corrupt frame) before the first checkpoint: no output
@@ -328,7 +394,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     best = best if best.is_file() else last
     _interruptible(trainer.test, module, loader(test, False), ckpt_path=str(best), verbose=False)
     metrics = {**module.test_metrics, "best_epoch": _best_epoch(run_dir, monitored(config.val_window)),
-               "epochs_run": trainer.current_epoch,
+               "first_epoch": FIRST_EPOCH, "epochs_run": trainer.current_epoch,
                "frames": {k: len(data[k]) for k in ("train", "val", "test")}, "image_size": list(size),
                "checkpoint": best.relative_to(run_dir).as_posix()}
     if trainer.is_global_zero:
@@ -378,10 +444,11 @@ def _logger(config: TrainConfig, run_dir: Path):
 
 
 def _best_epoch(run_dir: Path, monitor: str) -> int | None:
-    """The (0-based) epoch whose ``monitor`` in ``metrics.csv`` is highest (the first of equals)."""
+    """The epoch (numbered from :data:`FIRST_EPOCH`) whose ``monitor`` in ``metrics.csv`` is highest (the first
+    of equals)."""
     path = run_dir / "metrics.csv"
     if not path.is_file():
         return None
-    rows = list(csv.DictReader(path.open()))
+    rows = read_epoch_rows(path)
     scored = [r for r in rows if r.get(monitor)]
     return int(max(scored, key=lambda r: float(r[monitor]))["epoch"]) if scored else None

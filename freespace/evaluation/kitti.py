@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import CorruptFileError, DatasetError, InputFileError, ShapeMismatchError
+from freespace.errors import CorruptFileError, DatasetError, InputFileError, ShapeMismatchError, param
 from freespace.evaluation.bev import to_bev
 from freespace.evaluation.metrics import KITTI_CATEGORIES, RoadEvaluator
-from freespace.io.codecs import read_image, road_label_from_image
+from freespace.io.codecs import label_image_problem, read_image, road_label_from_image
 from freespace.io.files import PathLike, missing_input
 from freespace.io.kitti import read_kitti_calib
 
@@ -84,6 +84,10 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLik
     for cat, gt, pred in pairs:
         calib = read_kitti_calib(calib_dir / f"{gt.stem.replace('_road_', '_')}.txt") if calib_dir is not None else None
         gt_image = read_image(gt, what="ground truth")
+        problem = label_image_problem(gt_image)  # e.g. --gt and --pred swapped: a confidence map is no label
+        if problem is not None:
+            raise CorruptFileError(f"ground truth {gt} is {problem}; {param('gt')} is the folder of KITTI road "
+                                   f"ground truth (gt_image_2)")
         conf = read_confidence(pred)
         if conf.shape != gt_image.shape[:2]:
             raise ShapeMismatchError(f"{pred.name} is {conf.shape[1]}×{conf.shape[0]} but its ground truth is "

@@ -251,11 +251,49 @@ def _config(dataset: str, root: PathLike, out: Path, model: str, variant: str, s
         if autolabels is None:
             raise InvalidOptionError(f"{variant} trains on labels nobody drew: give {param('autolabels')} DIR, the "
                                      f"label tree of {root} that `freespace autolabel` wrote")
+        from freespace.engine.config import check_label_tree
+
+        check_label_tree(autolabels, dataset, root, options.get("split"), option="autolabels")  # named as given
         options.update(labels=str(autolabels), human_share=MIX_HUMAN_SHARE if spec.labels == "mix" else 0.0)
     config = TrainConfig(dataset=dataset, root=str(root), out=str(out / "runs" / _name(model, variant, seed)),
                          model=model, augment=spec.augment, seed=seed, **options)
     config.check()
     return config
+
+
+def _check_autolabels_used(autolabels: PathLike | None, variants: list[str] | tuple[str, ...]) -> None:
+    """Refuse ``autolabels`` when none of the cells to run (``variants``) trains on it: the option would have no
+    effect."""
+    if autolabels is not None and not any(VARIANTS[v].labels != "human" for v in variants):
+        takers = ", ".join(v.name for v in VARIANTS.values() if v.labels != "human")
+        raise InvalidOptionError(f"{param('autolabels')} is the label tree of the variants {takers}, and none of the "
+                                 f"cells run here is one; add one to {param('variants')}, or leave "
+                                 f"{param('autolabels')} out")
+
+
+def _check_inputs(out: Path, configs: list[TrainConfig]) -> None:
+    """Refuse, before any work, cells whose weights file or label tree (by content:
+    :func:`~freespace.engine.config.content_hashes`, computed once) differ from what the protocol's other cells
+    in ``OUT/runs`` were trained from: their scores would be averaged as one setting."""
+    from freespace.engine.config import content_hashes
+    from freespace.engine.train import read_inputs
+
+    now: dict[str, dict[str, Any]] = {}
+    for config in configs:
+        for key, value in content_hashes(config).items():
+            now.setdefault(key, value)
+    if not now or not (out / "runs").is_dir():
+        return
+    for run_dir in sorted(p.parent for p in (out / "runs").glob("*/inputs.json")):
+        recorded = read_inputs(run_dir)
+        for key, value in now.items():
+            old = recorded.get(key)
+            if isinstance(old, dict) and old.get("sha256") != value["sha256"]:
+                option = "autolabels" if key == "labels" else key  # reproduce's name of the label tree
+                raise InvalidOptionError(
+                    f"{run_dir} was trained from other contents of {param(option)} than {value['path']} holds now "
+                    f"(sha256 {str(old.get('sha256'))[:12]}… then, {value['sha256'][:12]}… now): the cells would "
+                    f"average two settings; restore the files, or give another {param('out')}")
 
 
 def _check_cell(config: TrainConfig) -> bool:
@@ -335,7 +373,8 @@ def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
     path = run_dir / name / "metrics.json"
     root = str(Path(test_root).resolve())
     run = _read_metrics(run_dir / "metrics.json")
-    trained = {k: run.get(k) for k in ("best_epoch", "epochs_run")} if isinstance(run, dict) else {}
+    trained = {k: run.get(k) for k in ("best_epoch", "first_epoch", "epochs_run")
+               if k != "first_epoch" or k in run} if isinstance(run, dict) else {}  # (older runs: no first_epoch)
     if path.is_file():
         done = _read_metrics(path)
         if isinstance(done, dict) and done.get("root") == root and done.get("trained", trained) == trained:
@@ -406,7 +445,10 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
             what = (f"network {model!r} is not among {param('models')}" if model not in chosen_models
                     else f"variant {variant!r} is not among {param('variants')}")
             raise InvalidOptionError(f"{param('only')} {only}: its {what}; include it there, or leave the option out")
+    _check_autolabels_used(autolabels, [variant] if only is not None else chosen)
+    if only is not None:
         config = _config(dataset, root, out, model, variant, seed, options, autolabels)
+        _check_inputs(out, [config])
         _check_test_roots(dataset, roots, root)
         with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
             status = run_cell(config, test_root=roots, progress=progress)
@@ -417,6 +459,7 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
                for model in chosen_models for variant in chosen for seed in range(seeds)]
     for config in configs:
         _check_cell(config)
+    _check_inputs(out, configs)
     _check_test_roots(dataset, roots, root)
     statuses: dict[str, str] = {}
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
@@ -472,6 +515,8 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
                     continue
                 entry.setdefault("test_sets", {})[name] = {k: extra[k] for k in (*METRICS, "max_f", "ap")}
                 settings.setdefault(f"the root of test set {name}", set()).add(json.dumps(extra.get("root")))
+        for key, value in _input_hashes(run_dir).items():  # runs of older versions recorded none
+            settings.setdefault(f"the content of {key}", set()).add(json.dumps(value))
         for key in ("dataset", "root", "epochs", "patience", "val_window", "min_delta", "lr", "batch_size",
                     "max_frames", *_PER_NETWORK):
             value = config.get(key)
@@ -487,15 +532,25 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
     return entries, differ
 
 
+def _input_hashes(run_dir: Path) -> dict[str, str]:
+    """The content hashes a run recorded (``inputs.json``: ``encoder_weights``, ``labels``), by input."""
+    from freespace.engine.train import read_inputs
+
+    return {k: str(v.get("sha256")) for k, v in read_inputs(run_dir).items() if isinstance(v, dict)}
+
+
 #: settings that may differ between networks (each at its own size and encoder), not within one
 _PER_NETWORK = ("image_size", "preset", "encoder_name", "encoder_weights")
 
 
 def _convergence(metrics: dict[str, Any], config: dict[str, Any]) -> dict[str, Any]:
     """``best_epoch`` and ``epochs_run`` of a finished run (1-based, as counted by a person) and how it
-    stopped: ``"patience"`` (early stopping fired) or ``"cap"`` (it ran the most epochs, ``config``'s)."""
+    stopped: ``"patience"`` (early stopping fired) or ``"cap"`` (it ran the most epochs, ``config``'s).
+    metrics.json counts from 1 when it says ``first_epoch: 1``; one of an older version, without it, from 0."""
     best, run, cap = metrics.get("best_epoch"), metrics.get("epochs_run"), config.get("epochs")
-    found: dict[str, Any] = {"best_epoch": best + 1 if isinstance(best, int) else None,
+    shift = 1 - metrics.get("first_epoch", 0) if metrics.get("first_epoch") in (None, 0, 1) else None
+    best = best if isinstance(best, int) and not isinstance(best, bool) and shift is not None else None
+    found: dict[str, Any] = {"best_epoch": best + shift if best is not None else None,
                              "epochs_run": run if isinstance(run, int) else None}
     found["stopped_by"] = None if found["epochs_run"] is None or not isinstance(cap, int) else \
         "cap" if found["epochs_run"] >= cap else "patience"

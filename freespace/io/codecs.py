@@ -8,16 +8,18 @@ Conventions (the same in the whole package):
 * a road label is a :class:`freespace.labels.RoadLabel` in memory;
 * writers are atomic (:mod:`freespace.io.files`).
 
-Only NumPy and OpenCV are imported here.
+Only NumPy and OpenCV are imported here (and PyYAML by :func:`load_yaml`).
 """
 
 from __future__ import annotations
 
+import functools
 import io as _io
 import math
 import warnings
 import zlib
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -26,7 +28,7 @@ from freespace.errors import CorruptFileError, InvalidOptionError, ShapeMismatch
 from freespace.io.files import PathLike, atomic_write_bytes, read_bytes
 from freespace.labels import RoadLabel
 
-__all__ = ["DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "read_raw",
+__all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "read_raw",
            "write_image", "encode_image", "read_disparity", "write_disparity", "png_disparity_overflow",
            "read_depth", "read_road_label",
            "road_label_from_image", "road_label_to_kitti"]
@@ -322,8 +324,16 @@ def read_road_label(path: PathLike) -> RoadLabel:
 
     A colour file that is black everywhere is KITTI ground truth with every pixel don't care (no pixel
     is evaluated); a single-channel file of zeros is a mask without road.
+
+    Raises:
+        CorruptFileError: the file is no label image (:func:`label_image_problem`: a confidence map, a
+            prediction, a photograph), which either reading would take for road almost everywhere.
     """
-    return road_label_from_image(read_image(path, what="road label"))
+    img = read_image(path, what="road label")
+    problem = label_image_problem(img)
+    if problem is not None:
+        raise CorruptFileError(f"road label {path} is {problem}")
+    return road_label_from_image(img)
 
 
 def road_label_from_image(img: np.ndarray) -> RoadLabel:
@@ -342,9 +352,98 @@ def road_label_from_image(img: np.ndarray) -> RoadLabel:
     return RoadLabel(road=road, valid=np.ones_like(road))
 
 
+#: the most distinct colours a colour road label may have (KITTI's: black, red, magenta; a few more for
+#: another tool's palette), and grey levels a single-channel mask ("non-zero = road": 0 and a few road values;
+#: a confidence map or a prediction has tens to hundreds)
+MAX_LABEL_COLOURS = 8
+MAX_MASK_LEVELS = 8
+
+
+def label_image_problem(img: np.ndarray) -> str | None:
+    """Why the image ``img`` (as :func:`read_image` returns it) is no road label that :func:`read_road_label`
+    reads right, or None when it is one: a grey image of more than :data:`MAX_MASK_LEVELS` levels is a
+    confidence map or a prediction (``freespace autolabel``'s ``confidence/``, ``freespace predict``'s maps),
+    which "non-zero = road" would read as road nearly everywhere; a colour image of more than
+    :data:`MAX_LABEL_COLOURS` colours is a photograph or an overlay. The text says what it looks like."""
+    grey = img.ndim == 2 or (np.array_equal(img[:, :, 0], img[:, :, 1]) and np.array_equal(img[:, :, 1], img[:, :, 2]))
+    if grey:
+        levels = np.unique(img if img.ndim == 2 else img[:, :, 0])
+        if levels.size > MAX_MASK_LEVELS:
+            return (f"a grey image of {levels.size} levels, like a confidence map (autolabel's confidence/) or a "
+                    f"prediction (`freespace predict`'s output), not a label (KITTI colours, or a mask: 0 and a road "
+                    f"value)")
+        return None
+    packed = (img[:, :, 0].astype(np.uint32) << 16) | (img[:, :, 1].astype(np.uint32) << 8) | img[:, :, 2]
+    colours = np.unique(packed).size
+    if colours > MAX_LABEL_COLOURS:
+        return (f"a colour image of {colours} colours, like a photograph or an overlay, not a label (KITTI colours: "
+                f"road magenta, non-road red, don't care black)")
+    return None
+
+
 def road_label_to_kitti(label: RoadLabel) -> np.ndarray:
     """Encode a :class:`RoadLabel` as a KITTI colour ground truth image (``H×W×3 uint8`` RGB)."""
     out = np.zeros(label.road.shape + (3,), np.uint8)
     out[label.valid, 0] = 255
     out[label.valid & label.road, 2] = 255
     return out
+
+
+# YAML
+
+
+def _unique_keys_loader() -> type:
+    """``yaml.SafeLoader`` (no code runs, no object but plain data is made) that refuses a mapping with a key
+    twice, which PyYAML would otherwise read as its last value without a word."""
+    import yaml
+
+    class UniqueKeyLoader(yaml.SafeLoader):
+        def construct_mapping(self, node: Any, deep: bool = False) -> dict[Any, Any]:
+            if isinstance(node, yaml.MappingNode):
+                seen: set[Any] = set()
+                for key_node, _ in node.value:  # the keys written in this mapping (a merged `<<` one may be
+                    if key_node.tag == "tag:yaml.org,2002:merge":  # overridden here, as YAML means)
+                        continue
+                    key = self.construct_object(key_node, deep=True)
+                    try:
+                        repeated = key in seen
+                        seen.add(key)
+                    except TypeError:  # an unhashable key: the base class refuses it
+                        continue
+                    if repeated:
+                        raise _DuplicateKey(key, key_node.start_mark.line + 1)
+            return super().construct_mapping(node, deep=deep)
+
+    return UniqueKeyLoader
+
+
+class _DuplicateKey(Exception):
+    def __init__(self, key: Any, line: int) -> None:
+        super().__init__(key, line)
+        self.key, self.line = key, line
+
+
+def load_yaml(path: PathLike) -> Any:
+    """The data of the YAML file ``path``, read as ``yaml.safe_load`` reads it (no code runs), but a mapping
+    that gives a key twice is refused: PyYAML keeps the last value silently, so the file's order would decide.
+
+    Raises:
+        CorruptFileError: not readable, not YAML, or a key given twice (the message names the key, its line
+        and the file).
+    """
+    import yaml
+
+    try:
+        text = Path(path).read_text()
+        return yaml.load(text, Loader=_loader())  # noqa: S506 (a SafeLoader)
+    except _DuplicateKey as exc:
+        raise CorruptFileError(f"{path}: {exc.key} is given twice (line {exc.line}, and before); keep one") from None
+    except yaml.YAMLError as exc:
+        raise CorruptFileError(f"cannot parse {path}: {str(exc).splitlines()[0]}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CorruptFileError(f"cannot read {path}: {str(exc).splitlines()[0]}") from None
+
+
+@functools.cache
+def _loader() -> type:
+    return _unique_keys_loader()
