@@ -43,13 +43,16 @@ def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, requ
     from freespace.data.registry import list_datasets
 
     p.add_argument("--dataset", choices=list_datasets(), required=required,
-                   help="layout: kitti (KITTI road; synth = the renderer's output), synthia, carla/syn-stereo, generic")
+                   help="layout: kitti (KITTI road; synth = the renderer's output), kitti-raw (KITTI raw drives), "
+                        "synthia, carla/syn-stereo, generic")
     p.add_argument("--root", metavar="DIR", required=required, help="dataset folder")
     if split:
         p.add_argument("--split", help="on-disk split (KITTI: training or testing; default: the first)")
 
 
-def _open_dataset(args: argparse.Namespace):  # -> StereoRoadDataset (import kept lazy)
+def _open_dataset(args: argparse.Namespace, needs_right: str | None = None):  # -> StereoRoadDataset (lazy import)
+    """The dataset the options name; ``needs_right`` (what needs right images) refuses up front a layout that
+    knows some of its drives have none (KITTI raw's ``require_right``)."""
     from freespace.data.registry import get_dataset
 
     options = {"disparity_source": args.disparity_source, "cache_dir": args.cache_dir,
@@ -62,10 +65,14 @@ def _open_dataset(args: argparse.Namespace):  # -> StereoRoadDataset (import kep
     if args.lidar_densify is not None:
         if args.disparity_source != "lidar":
             raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
-        if args.dataset not in ("kitti", "synth"):
-            raise InvalidOptionError("--lidar-densify is for KITTI road trees (the only layout with Velodyne scans)")
+        if args.dataset not in ("kitti", "synth", "kitti-raw", "kitti_raw"):
+            raise InvalidOptionError("--lidar-densify is for KITTI road and KITTI raw trees (the layouts with Velodyne "
+                                     "scans)")
         options["lidar_densify"] = args.lidar_densify
-    return get_dataset(args.dataset, args.root, args.split, **options)
+    dataset = get_dataset(args.dataset, args.root, args.split, **options)
+    if needs_right is not None and hasattr(dataset, "require_right"):
+        dataset.require_right(needs_right)
+    return dataset
 
 
 @dataclass(frozen=True)
@@ -97,14 +104,15 @@ def _check_mode(parser: argparse.ArgumentParser, args: argparse.Namespace, modes
         raise InvalidOptionError(f"{mode.what} needs {', '.join(missing)}{mode.hint} (see --help)")
 
 
-def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], options: Any, done: str) -> int:
+def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], options: Any, done: str,
+                 needs_right: str | None = None) -> int:
     """The dataset mode of ``generate`` and ``autolabel``: ``run`` (``generate_dataset``, ``autolabel_dataset``)
     over the dataset the options name, then one line of counts (``summary[done]`` frames made) and one per
     failed frame; exit code 1 when a frame failed."""
     from freespace.shard import parse_shard
 
     shard = parse_shard(args.shard) if args.shard is not None else None
-    summary = run(_open_dataset(args), args.out, workers=args.workers, options=options, overwrite=args.overwrite,
+    summary = run(_open_dataset(args, needs_right), args.out, workers=args.workers, options=options, overwrite=args.overwrite,
                   shard=shard)
     failed = summary["failed"]
     print(f"{summary[done]} {done}, {summary['skipped']} already done, {len(failed)} failed of {summary['frames']} "
@@ -204,7 +212,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
         return 0
     from freespace.datagen.generate import generate_dataset
 
-    return _run_dataset(args, generate_dataset, options, "generated")
+    return _run_dataset(args, generate_dataset, options, "generated",
+                        needs_right="the DS-Generator warps the right image")
 
 
 # --- autolabel -----------------------------------------------------------------------------------------
@@ -339,24 +348,44 @@ def _datasets_parser(p: argparse.ArgumentParser) -> None:
     _add_dataset_root(q, split=False)
     q.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of user-supplied disparities")
     q.add_argument("--seed", type=int, default=0, help="seed of the train/val/test split shown (default 0)")
+    _split_options(q, "shown")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.set_defaults(func=cmd_datasets_info)
     q = sub.add_parser("split", help="write the paper's train/val/test split by scenario as list files",
-                       description="Split the labelled frames by scenario with the paper's sizes (289 → "
-                                   "173/58/58, 300 → 180/60/60, else 60/20/20 %) and write train.txt, val.txt, "
-                                   "test.txt (frame names).")
+                       description="Split the labelled frames (every frame of kitti-raw, which has no labels of its "
+                                   "own) by scenario with the paper's sizes (289 → 173/58/58, 300 → 180/60/60, else "
+                                   "60/20/20 %%), or with --by time each drive into contiguous time blocks (train "
+                                   "first, then val, then test; never interleaved frames, which at 10 Hz are near "
+                                   "duplicates), and write train.txt, val.txt, test.txt (frame names).")
     _add_dataset_root(q)
     q.add_argument("--seed", type=int, default=0, help="shuffling seed (default 0)")
+    _split_options(q, "written")
     q.add_argument("--out", required=True, help="folder for the list files")
     q.set_defaults(func=cmd_datasets_split)
+
+
+def _split_options(q: argparse.ArgumentParser, what: str) -> None:
+    """``--by``, ``--fractions`` and ``--gap`` of ``datasets info`` and ``datasets split``."""
+    from freespace.data.splits import SPLIT_BY
+
+    q.add_argument("--by", choices=SPLIT_BY, default="scenario",
+                   help=f"split {what}: whole scenarios/drives (default) or contiguous time blocks of each drive")
+    q.add_argument("--fractions", metavar="TRAIN,VAL,TEST",
+                   help="shares of the frames (default: the paper's sizes by scenario, 0.6,0.2,0.2 by time), "
+                        "e.g. 0.8,0,0.2")
+    q.add_argument("--gap", type=int, default=0, metavar="N",
+                   help="--by time: frames of each drive left out between two blocks (default 0)")
 
 
 def cmd_datasets_info(args: argparse.Namespace) -> int:
     """``freespace datasets info``: counts, what is there, and every problem by frame."""
     from freespace.data.info import dataset_info, format_info
 
+    from freespace.data.splits import parse_fractions
+
     info = dataset_info(args.dataset, args.root, progress=not args.no_progress, seed=args.seed,
-                        disparity_dir=args.disparity_dir)
+                        disparity_dir=args.disparity_dir, by=args.by, gap=args.gap,
+                        fractions=parse_fractions(args.fractions) if args.fractions is not None else None)
     print(format_info(info))
     return 1 if info["problems"] else 0
 
@@ -364,17 +393,16 @@ def cmd_datasets_info(args: argparse.Namespace) -> int:
 def cmd_datasets_split(args: argparse.Namespace) -> int:
     """``freespace datasets split``: the paper's train/val/test split by scenario, as list files."""
     from freespace.data.registry import get_dataset
-    from freespace.data.splits import make_splits, write_splits
+    from freespace.data.splits import check_split_by, parse_fractions, split_frames, write_splits
     from freespace.io.files import check_outputs, check_writable
     from freespace.io.outdir import claim_folder
 
     check_writable(args.out, folder=True)
     check_outputs({"out": args.out}, {"root": args.root})
+    fractions = parse_fractions(args.fractions) if args.fractions is not None else None
+    check_split_by(args.by, args.gap)
     dataset = get_dataset(args.dataset, args.root, args.split, disparity_source="none")
-    labelled = [(f.name, f.scenario) for f in dataset.labelled()]
-    if not labelled:
-        raise InvalidOptionError(f"split {dataset.split!r} of {args.root} has no labelled frames to split")
-    splits = make_splits(labelled, seed=args.seed)
+    splits = split_frames(dataset, args.by, seed=args.seed, fractions=fractions, gap=args.gap)
     with claim_folder(args.out, "datasets split") as folder, folder.staged() as staging:
         write_splits(staging, splits)
     print(" ".join(f"{k} {len(v)}" for k, v in splits.items()) + f" → {args.out}/{{train,val,test}}.txt")

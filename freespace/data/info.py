@@ -9,7 +9,7 @@ import numpy as np
 
 from freespace.data.base import Problem, StereoRoadDataset, check_dataset_root
 from freespace.data.registry import get_dataset, get_dataset_class
-from freespace.data.splits import make_splits
+from freespace.data.splits import check_split_by, split_frames
 from freespace.errors import DatasetError, FreespaceError, InputFileError
 from freespace.io.codecs import read_disparity, read_raw
 from freespace.io.files import PathLike
@@ -94,20 +94,27 @@ def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[li
 
 
 def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int = 0,
-                 disparity_dir: PathLike | None = None) -> dict[str, Any]:
+                 disparity_dir: PathLike | None = None, by: str = "scenario",
+                 fractions: tuple[float, float, float] | None = None, gap: int = 0) -> dict[str, Any]:
     """Open every on-disk split of dataset ``name`` at ``root`` and check every frame.
+
+    A layout's ``info_options`` (KITTI raw: ``strict=False``) open it so that every problem of its tree is
+    listed, not only the first.
 
     Returns:
         ``{"dataset", "root", "splits": {split: {"frames", "categories", "resolutions", "have", "paper_split"}},
         "problems": [str, ...]}``; ``have`` counts the frames with each partner file; ``paper_split`` gives
-        the train/val/test sizes of the labelled split (by scenario, ``seed``).
+        the train/val/test sizes of the labelled frames (every frame for a layout without labels of its own)
+        split as :func:`freespace.data.splits.split_frames` splits them (``by``, ``seed``, ``fractions``,
+        ``gap``), and ``split_by`` says how.
 
     Raises:
         InputFileError: the root is missing. DatasetError: no split holds any frame.
     """
     layout = get_dataset_class(name)
     check_dataset_root(root, layout.name)
-    options: dict[str, Any] = {"disparity_source": "file"}
+    check_split_by(by, gap)
+    options: dict[str, Any] = {"disparity_source": "file", **getattr(layout, "info_options", {})}
     if disparity_dir is not None:
         options["disparity_dir"] = disparity_dir
     info: dict[str, Any] = {"dataset": name, "root": str(root), "splits": {}, "problems": []}
@@ -126,17 +133,27 @@ def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int 
             "resolutions": {f"{w}×{h}": n for (h, w), n in sorted(Counter(sizes.values()).items())},
             "have": {k: sum(getattr(f, k) is not None for f in ds.frames) for k in _KINDS},
         }
-        labelled = [(f.name, f.scenario) for f in ds.labelled()]
+        own_labels = getattr(layout, "has_labels", True)
+        labelled = [(f.name, f.scenario) for f in (ds.labelled() if own_labels else ds)]
         if labelled:
-            entry["paper_split"] = {k: len(v) for k, v in make_splits(labelled, seed=seed).items()}
+            try:
+                splits = split_frames(ds, by, seed=seed, fractions=fractions, gap=gap)
+            except DatasetError as exc:  # a drive too short for the time blocks asked
+                problems.append(Problem("split", str(exc)))
+                splits = None
+        if labelled and splits is not None:
+            entry["paper_split"] = {k: len(v) for k, v in splits.items()}
+            entry["split_by"] = by
             empty = [k for k, v in entry["paper_split"].items() if not v]
-            if empty:
+            if empty and by == "scenario":
                 sizes = "/".join(str(v) for v in entry["paper_split"].values())
+                blocks = "" if own_labels else ", or split each drive into time blocks (--by time)"
                 problems.append(Problem("split", f"the train/val/test split by scenario ({sizes}, seed {seed}) leaves "
-                                                 f"{' and '.join(empty)} empty: {len(labelled)} labelled frames in "
+                                                 f"{' and '.join(empty)} empty: {len(labelled)} "
+                                                 f"{'labelled ' if own_labels else ''}frames in "
                                                  f"{len({s for _, s in labelled})} scenarios; train needs frames "
                                                  f"in each, so add frames of more scenarios or give "
-                                                 f"freespace train --splits"))
+                                                 f"freespace train --splits{blocks}"))
         info["splits"][split] = entry
         info["problems"] += [f"[{split}] {p}" for p in problems]
     if not info["splits"]:
@@ -155,7 +172,8 @@ def format_info(info: dict[str, Any]) -> str:
         lines.append(f"    files: {have}")
         if "paper_split" in e:
             ps = e["paper_split"]
-            lines.append(f"    train/val/test by scenario: {ps['train']}/{ps['val']}/{ps['test']}")
+            how = "by time blocks" if e.get("split_by") == "time" else "by scenario"
+            lines.append(f"    train/val/test {how}: {ps['train']}/{ps['val']}/{ps['test']}")
     problems = info["problems"]
     lines.append(f"{len(problems)} problem{'s' if len(problems) != 1 else ''}" + (":" if problems else ""))
     lines += [f"  {p}" for p in problems]

@@ -1,11 +1,17 @@
-"""Train/validation/test splits by scenario, with the paper's sizes, written to and read from lists.
+"""Train/validation/test splits by scenario, with the paper's sizes, or by time blocks of each scenario;
+written to and read from lists.
 
-The paper splits KITTI road's 289 labelled frames 173/58/58 and SYNTHIA's and SYN-Stereo's 300
-frames 180/60/60; other sizes get 60/20/20 %. Frames of one scenario (drive, sequence) always land in
-the same split. The assignment is a deterministic function of the scenario list and the seed: scenarios in a
-seeded random order each go to the split furthest below its target size. Sizes are met exactly when
-every scenario is one frame (or all scenarios divide the targets), and as nearly as whole scenarios
-allow otherwise.
+By scenario (:func:`make_splits`): the paper splits KITTI road's 289 labelled frames 173/58/58 and SYNTHIA's
+and SYN-Stereo's 300 frames 180/60/60; other sizes get 60/20/20 %. Frames of one scenario (drive, sequence)
+always land in the same split. The assignment is a deterministic function of the scenario list and the seed:
+scenarios in a seeded random order each go to the split furthest below its target size. Sizes are met
+exactly when every scenario is one frame (or all scenarios divide the targets), and as nearly as whole
+scenarios allow otherwise.
+
+By time blocks (:func:`make_block_splits`): each scenario's frames in time order are cut into three
+contiguous blocks (train first, then val, then test), optionally with a gap of frames left out between
+blocks. Neighbouring frames of a drive (10 Hz for KITTI raw) are near duplicates, so frames are never
+assigned one by one (interleaved): a test frame's neighbours are then in no training block.
 """
 
 from __future__ import annotations
@@ -13,15 +19,21 @@ from __future__ import annotations
 from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError, check_seed
+from freespace.errors import DatasetError, InputFileError, InvalidOptionError, check_seed, param
 from freespace.io.files import PathLike, atomic_write_text
 
-__all__ = ["SPLIT_NAMES", "split_sizes", "make_splits", "write_splits", "read_splits"]
+__all__ = ["SPLIT_NAMES", "SPLIT_BY", "split_sizes", "make_splits", "make_block_splits", "split_frames",
+           "parse_fractions", "check_split_by", "write_splits", "read_splits"]
 
 SPLIT_NAMES = ("train", "val", "test")
+SPLIT_BY = ("scenario", "time")
+"""How frames are split: ``scenario`` (whole drives/sequences, :func:`make_splits`) or ``time`` (contiguous
+time blocks of each scenario, :func:`make_block_splits`)."""
+DEFAULT_FRACTIONS = (0.6, 0.2, 0.2)
 _PAPER = {289: (173, 58, 58), 300: (180, 60, 60)}
 
 
@@ -30,6 +42,27 @@ def split_sizes(n: int) -> tuple[int, int, int]:
     if n in _PAPER:
         return _PAPER[n]
     val = test = int(round(0.2 * n))
+    return n - val - test, val, test
+
+
+def parse_fractions(fractions: Sequence[float] | str) -> tuple[float, float, float]:
+    """Train/val/test fractions (``"0.8,0,0.2"`` or three numbers), each in [0, 1], adding up to 1, train > 0.
+
+    Raises:
+        InvalidOptionError: anything else.
+    """
+    try:
+        values = tuple(float(x) for x in (fractions.split(",") if isinstance(fractions, str) else fractions))
+    except (TypeError, ValueError):
+        values = ()
+    if len(values) != 3 or not all(0 <= v <= 1 for v in values) or abs(sum(values) - 1) > 1e-6 or not values[0] > 0:
+        raise InvalidOptionError(f"{param('fractions')} must be three numbers TRAIN,VAL,TEST in [0, 1] adding up to 1 "
+                                 f"with TRAIN > 0 (e.g. 0.8,0,0.2), got {fractions!r}")
+    return values  # type: ignore[return-value]
+
+
+def _sizes_of(n: int, fractions: tuple[float, float, float]) -> tuple[int, int, int]:
+    val, test = int(round(fractions[1] * n)), int(round(fractions[2] * n))
     return n - val - test, val, test
 
 
@@ -63,6 +96,85 @@ def make_splits(frames: Sequence[tuple[str, str]], seed: int = 0,
         split = max(("test", "val", "train"), key=lambda k: targets[k] - len(out[k]))
         out[split] += members
     return {k: sorted(v) for k, v in out.items()}
+
+
+def make_block_splits(frames: Sequence[tuple[str, str]], fractions: Sequence[float] = DEFAULT_FRACTIONS,
+                      gap: int = 0) -> dict[str, list[str]]:
+    """Split every scenario into contiguous time blocks: its first frames train, the next val, the last test.
+
+    Args:
+        frames: ``(frame name, scenario)`` pairs; within a scenario, names sort in time order (KITTI raw's
+            ``<drive>/<ten-digit frame>``, or any zero-padded frame number).
+        fractions: train/val/test shares of each scenario's frames (:func:`parse_fractions`); a scenario of
+            ``n`` frames gets ``round(val · n)`` val and ``round(test · n)`` test frames, train the rest.
+        gap: frames left out (in no split) at the end of the train block and of the val block when a later
+            block follows, so that no two frames of different splits are closer than ``gap + 1`` frames.
+
+    Returns:
+        ``{"train": [...], "val": [...], "test": [...]}``, names sorted; frames of the gaps are in none.
+
+    Raises:
+        DatasetError: no frames, or a scenario too short for its blocks and gaps. InvalidOptionError: bad
+            ``fractions`` or ``gap``.
+    """
+    shares = parse_fractions(fractions)
+    if isinstance(gap, bool) or not isinstance(gap, int) or gap < 0:
+        raise InvalidOptionError(f"{param('gap')} must be a whole number of frames ≥ 0, got {gap!r}")
+    if not frames:
+        raise DatasetError("no frames to split")
+    groups: OrderedDict[str, list[str]] = OrderedDict()
+    for name, scenario in sorted(frames, key=lambda f: (f[1], f[0])):
+        groups.setdefault(scenario, []).append(name)
+    out: dict[str, list[str]] = {k: [] for k in SPLIT_NAMES}
+    for scenario, names in groups.items():
+        n_train, n_val, n_test = _sizes_of(len(names), shares)
+        cut_train = gap if (n_val or n_test) else 0
+        cut_val = gap if (n_val and n_test) else 0
+        if n_train - cut_train < 1 or (n_val and n_val - cut_val < 1):
+            raise DatasetError(f"scenario {scenario} has {len(names)} frames: too few for time blocks "
+                               f"{'/'.join(f'{x:g}' for x in shares)} with a gap of {gap} frames; lower "
+                               f"{param('gap')} or leave the scenario out")
+        out["train"] += names[:n_train - cut_train]
+        out["val"] += names[n_train:n_train + n_val - cut_val]
+        out["test"] += names[len(names) - n_test:]
+    return {k: sorted(v) for k, v in out.items()}
+
+
+def check_split_by(by: str, gap: int = 0) -> None:
+    """Refuse an unknown ``by`` (:data:`SPLIT_BY`), a ``gap`` that is not a whole number ≥ 0, or one without
+    ``by="time"`` (InvalidOptionError)."""
+    if by not in SPLIT_BY:
+        raise InvalidOptionError(f"unknown split {param('by')} {by!r}; choose one of {', '.join(SPLIT_BY)}")
+    if isinstance(gap, bool) or not isinstance(gap, int) or gap < 0:
+        raise InvalidOptionError(f"{param('gap')} must be a whole number of frames ≥ 0, got {gap!r}")
+    if gap and by != "time":
+        raise InvalidOptionError(f"{param('gap')} is for {param('by')} time (frames left out between time blocks)")
+
+
+def split_frames(dataset: Any, by: str = "scenario", *, seed: int = 0, fractions: Sequence[float] | None = None,
+                 gap: int = 0) -> dict[str, list[str]]:
+    """Train/val/test lists of a dataset's frames: the labelled ones, or every frame for a layout without
+    labels of its own (KITTI raw, ``has_labels = False``: its labels come from ``freespace autolabel``).
+
+    Args:
+        dataset: a :class:`~freespace.data.base.StereoRoadDataset`.
+        by: ``scenario`` (:func:`make_splits`; ``fractions`` None: the paper's sizes) or ``time``
+            (:func:`make_block_splits`; ``fractions`` None: 0.6/0.2/0.2).
+        seed: the shuffling seed of ``scenario``. gap: frames left out between the blocks of ``time``.
+
+    Raises:
+        InvalidOptionError: an unknown ``by``, ``gap`` without ``time``, or no frame to split.
+    """
+    check_split_by(by, gap)
+    own_labels = getattr(type(dataset), "has_labels", True)
+    frames = dataset.labelled().frames if own_labels else dataset.frames
+    if not frames:
+        raise InvalidOptionError(f"split {dataset.split!r} of {dataset.root} has no labelled frames to split")
+    pairs = [(f.name, f.scenario) for f in frames]
+    if by == "time":
+        return make_block_splits(pairs, fractions if fractions is not None else DEFAULT_FRACTIONS, gap)
+    sizes = _sizes_of(len(pairs), parse_fractions(fractions)) if fractions is not None else None
+    return make_splits(pairs, seed=seed, sizes=sizes)
 
 
 def write_splits(folder: PathLike, splits: dict[str, list[str]]) -> list[Path]:
