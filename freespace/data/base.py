@@ -210,9 +210,13 @@ class StereoRoadDataset(ABC):
         view.label_files = {**self.label_files, **files}
         return view
 
+    def has_label(self, frame: FrameRef) -> bool:
+        """Whether ``frame`` has a road label: its own, or one from a label tree (:meth:`with_labels`)."""
+        return frame.label is not None or frame.name in self.label_files
+
     def labelled(self) -> StereoRoadDataset:
-        """The frames that have a road label (:meth:`subset`), in order."""
-        return self.subset(f.name for f in self.frames if f.label is not None)
+        """The frames that have a road label (:meth:`has_label`; :meth:`subset`), in order."""
+        return self.subset(f.name for f in self.frames if self.has_label(f))
 
     def load(self, i: int, *, right: bool = True, label: bool = True, disparity: bool = True) -> Sample:
         """Load frame ``i`` (what is not asked for, or not there, is None)."""
