@@ -10,8 +10,10 @@ Two kinds of real label:
   certainly is, not where it ends). How they were drawn: the frame was shown with a 50 px grid; each vertex was
   placed on road surface at least about 20 px inside the visible road edge (kerb, kerb stone, lane of parked
   cars, a vehicle's shadow edge counted as road), stopping below the row where the road meets the first
-  obstacle or the vanishing point; then the filled polygon was overlaid on the frame and checked by eye. They
-  cover 10–25 % of the frame's road; a model that marks the polygon fully can still miss the road's edges.
+  obstacle or the vanishing point; then the filled polygon was overlaid on the frame and checked by eye (the
+  three KITTI road frames' polygons are older, drawn the same way for the autolabel's quality in issue 22).
+  They cover about half of the frame's road; a model that marks the polygon fully can still miss the road's
+  edges.
 
 Frames and sources (all CC BY-NC-SA 3.0, KITTI):
 
@@ -57,9 +59,10 @@ _POLYGON_FRAMES = {
 
 #: conservative road polygons, (u, v) pixel vertices on the 1242×375 left image (see the module docstring)
 ROAD_POLYGONS: dict[str, list[tuple[int, int]]] = {
-    "um_000000": [(250, 374), (560, 205), (620, 205), (760, 330), (770, 374)],
-    "uu_000000": [(250, 374), (470, 240), (540, 205), (630, 205), (690, 270), (760, 374)],
-    "uu_000001": [(250, 374), (330, 300), (450, 230), (560, 200), (610, 200), (680, 250), (700, 320), (720, 374)],
+    # the three KITTI road frames: the polygons of tests/test_depth.py (drawn for issue 22's label quality)
+    "um_000000": [(230, 370), (560, 200), (625, 200), (770, 370)],
+    "uu_000000": [(200, 370), (510, 205), (630, 205), (790, 370)],
+    "uu_000001": [(200, 370), (330, 290), (490, 215), (620, 215), (720, 300), (720, 370)],
     "2011_09_26_drive_0001_sync/0000000090":
         [(150, 374), (300, 300), (540, 200), (600, 200), (660, 230), (725, 330), (725, 374)],
     "2011_09_26_drive_0001_sync/0000000105":

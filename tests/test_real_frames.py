@@ -61,7 +61,8 @@ def test_each_polygon_lies_on_one_road_plane(name: str) -> None:
     # a polygon on the road: most of its valid disparities are road-plane inliers, the plane slopes down
     # the image (ϰ > 0: nearer rows, larger disparity) and the camera stands about level (|roll| < 5°)
     assert model.num_valid > 0.3 * frame.road.sum()
-    assert model.num_inliers > 0.85 * model.num_valid, (model.num_inliers, model.num_valid)
+    # measured: 85.2–100 % (uu_000001 85.2, uu_000000 87.7: LiDAR depth interpolated across a kerb)
+    assert model.num_inliers > 0.8 * model.num_valid, (model.num_inliers, model.num_valid)
     assert model.kappa_hat > 0 and abs(model.roll_deg) < 5
 
 
