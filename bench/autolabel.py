@@ -7,9 +7,11 @@ that the autolabel does not mark don't care). Counts are summed over each set's 
   from the renderer's exact disparity and from SGBM (`--max-disparity 64`) on the rendered pair;
 - the two real KITTI stereo 2015 frames (../shared/data/kitti_stereo_2015, road_mask/ the human label),
   from SGBM on the real pair and from the LiDAR disparity disp_occ_0 (baseline 0.54 m);
-- the three real KITTI road frames with LiDAR depth (../shared/data/kitti_road_depth), against the road
-  polygons tests/test_depth.py draws: the polygons mark road only, so only recall and coverage (inside
-  the polygon) are measured there.
+- the three real KITTI road frames with LiDAR depth (../shared/data/kitti_road_depth), and the KITTI raw
+  frames of real_frames.py (SGBM from the pair where there is a right image, LiDAR where there is a scan:
+  $FREESPACE_KITTI_RAW), against the road polygons of real_frames.py: the polygons mark road only, so only
+  recall and coverage (inside the polygon) are measured there;
+- on KITTI stereo 2015 also ``fused``: LiDAR and SGBM joined (freespace.data.disparity.fuse_disparities).
 
     .venv/bin/python bench/autolabel.py [--frames 40] [--csv OUT.csv] [--shared DIR] [--write]
 
@@ -31,10 +33,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, write_section  # noqa: E402
+from real_frames import ROAD_POLYGONS as ROAD_POLYGONS_BY_NAME, polygon_mask  # noqa: E402
 
 from freespace.data.synthetic import SynthConfig, render_sample  # noqa: E402
 from freespace.datagen.autolabel import autolabel  # noqa: E402
-from freespace.errors import RoadFitError  # noqa: E402
+from freespace.data.disparity import fuse_disparities  # noqa: E402
+from freespace.errors import DatasetError, RoadFitError  # noqa: E402
 from freespace.geometry import compute_disparity  # noqa: E402
 from freespace.geometry.depth import depth_to_disparity, rig_from_kitti  # noqa: E402
 from freespace.io.codecs import read_depth, read_disparity, read_image, read_road_label  # noqa: E402
@@ -44,12 +48,9 @@ from freespace.labels import RoadLabel  # noqa: E402
 SETS = {"test": (SynthConfig(width=320, height=240, frames_per_scenario=5), 0),
         "shifted": (SynthConfig(width=320, height=240, frames_per_scenario=5, max_roll_deg=6.0,
                                 camera_heights=(1.0, 2.6), pitches_deg=(-5.0, 5.0), baselines=(0.2, 2.0)), 1)}
-# the road polygons of tests/test_depth.py: (split folder, frame) → (u, v) vertices on the left image
-ROAD_POLYGONS = {
-    ("testing", "um_000000"): [(230, 370), (560, 200), (625, 200), (770, 370)],
-    ("unknown_split", "uu_000000"): [(200, 370), (510, 205), (630, 205), (790, 370)],
-    ("unknown_split", "uu_000001"): [(200, 370), (330, 290), (490, 215), (620, 215), (720, 300), (720, 370)],
-}
+# the road polygons of the KITTI road frames (real_frames.py): (split folder, frame) → (u, v) vertices
+ROAD_POLYGONS = {("testing" if name.startswith("um") else "unknown_split", name): ROAD_POLYGONS_BY_NAME[name]
+                 for name in ("um_000000", "uu_000000", "uu_000001")}
 
 Case = tuple[str, str, np.ndarray, RoadLabel, float | None]  # set, source, disparity, human label, baseline
 
@@ -69,7 +70,9 @@ def kitti_stereo(shared: Path) -> Iterator[Case]:
         label = read_road_label(path)
         left, right = read_image(root / "image_2" / path.name), read_image(root / "image_3" / path.name)
         yield "KITTI stereo 2015", "SGBM", compute_disparity(left, right), label, 0.54
-        yield "KITTI stereo 2015", "LiDAR", read_disparity(root / "disp_occ_0" / path.name), label, 0.54
+        lidar = read_disparity(root / "disp_occ_0" / path.name)
+        yield "KITTI stereo 2015", "LiDAR", lidar, label, 0.54
+        yield "KITTI stereo 2015", "fused", fuse_disparities(lidar, compute_disparity(left, right)), label, 0.54
 
 
 def kitti_road_depth(shared: Path) -> Iterator[Case]:
@@ -81,6 +84,33 @@ def kitti_road_depth(shared: Path) -> Iterator[Case]:
         road = np.zeros(disparity.shape, np.uint8)
         cv2.fillPoly(road, [np.array(polygon, np.int32)], 1)
         yield "KITTI road (polygons)", "LiDAR depth", disparity, RoadLabel(road > 0, road > 0), rig.baseline
+
+
+def kitti_raw_polygons() -> Iterator[Case]:
+    """The KITTI raw frames of real_frames.py's polygons, each from every source its drive has (SGBM where
+    there is a right image, LiDAR where there is a scan, fused where both)."""
+    from freespace.data import get_dataset
+    from real_frames import KITTI_RAW, SHARED
+
+    wanted = {name: polygon for name, polygon in ROAD_POLYGONS_BY_NAME.items() if "_drive_" in name}
+    for root in [r for r in (SHARED / "kitti_raw", KITTI_RAW) if r is not None and r.is_dir()]:
+        for source, shown in (("sgbm", "SGBM"), ("lidar", "LiDAR"), ("fused", "fused")):
+            try:
+                ds = get_dataset("kitti-raw", root, disparity_source=source)
+            except DatasetError:  # no frame has a scan (lidar)
+                continue
+            for name, polygon in sorted(wanted.items()):
+                if name not in {f.name for f in ds.frames}:
+                    continue
+                frame = ds.frames[ds.index(name)]
+                if (source == "sgbm" and frame.right is None) or (source == "lidar" and frame.velodyne is None) or \
+                        (source == "fused" and (frame.right is None or frame.velodyne is None)):
+                    continue
+                sample = ds.load(ds.index(name), label=False)
+                road = polygon_mask(polygon, sample.left.shape[:2])
+                yield "KITTI raw (polygons)", shown, sample.disparity, RoadLabel(road, road), \
+                    sample.calibration.baseline
+        wanted = {n: p for n, p in wanted.items() if n not in {f.name for f in ds.frames}}  # the shared copy first
 
 
 def measure(cases: Iterator[Case]) -> list[dict]:
@@ -104,7 +134,7 @@ def measure(cases: Iterator[Case]) -> list[dict]:
         acc[(set_name, source)] = acc.get((set_name, source), 0) + counts
     rows = []
     for (set_name, source), (tp, fp, fn, covered, evaluated, frames, failed, seconds) in acc.items():
-        precision = tp / (tp + fp) if tp + fp and set_name != "KITTI road (polygons)" else float("nan")
+        precision = tp / (tp + fp) if tp + fp and "(polygons)" not in set_name else float("nan")
         recall = tp / (tp + fn) if tp + fn else float("nan")
         f = 2 * precision * recall / (precision + recall) if np.isfinite(precision) else float("nan")
         rows.append({"set": set_name, "disparity": source, "frames": int(frames), "failed": int(failed),
@@ -137,7 +167,7 @@ def main() -> None:
     cv2.setNumThreads(1)
     cases = [rendered(args.frames)]
     if args.shared.is_dir():
-        cases += [kitti_stereo(args.shared), kitti_road_depth(args.shared)]
+        cases += [kitti_stereo(args.shared), kitti_road_depth(args.shared), kitti_raw_polygons()]
     else:
         print(f"({args.shared} not found: real frames skipped)")
     rows = [r for c in cases for r in measure(c)]

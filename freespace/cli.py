@@ -359,7 +359,7 @@ def _datasets_parser(p: argparse.ArgumentParser) -> None:
     q = sub.add_parser("split", help="write the paper's train/val/test split by scenario as list files",
                        description="Split the labelled frames (every frame of kitti-raw, which has no labels of its "
                                    "own) by scenario with the paper's sizes (289 → 173/58/58, 300 → 180/60/60, else "
-                                   "60/20/20 %%), or with --by time each drive into contiguous time blocks (train "
+                                   "60/20/20 %), or with --by time each drive into contiguous time blocks (train "
                                    "first, then val, then test; never interleaved frames, which at 10 Hz are near "
                                    "duplicates), and write train.txt, val.txt, test.txt (frame names).")
     _add_dataset_root(q)

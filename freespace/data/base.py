@@ -56,7 +56,7 @@ class Sample:
         left: ``H×W×3 uint8`` RGB reference image; right: the target image or None.
         label: road label with don't-care (``valid``), or None (unlabelled split).
         disparity: ``float32 H×W`` left disparity in pixels (NaN invalid), or None.
-        disparity_source: ``file``, ``depth``, ``lidar``, ``sgbm`` or ``none``.
+        disparity_source: ``file``, ``depth``, ``lidar``, ``sgbm``, ``fused`` or ``none``.
         calibration: the rig (and road plane when known), or None.
     """
 
@@ -127,6 +127,10 @@ class StereoRoadDataset(ABC):
         names = [f.name for f in self.frames]
         if len(set(names)) != len(names):
             raise DatasetError(f"{self.name}: frame names are not unique under {self.root}")
+        if self.disparity_source == "fused" and not any(f.velodyne is not None or f.right is not None
+                                                         for f in self.frames):
+            raise DatasetError(f"{param('disparity_source')} fused: no frame of {self.name} split {self.split!r} under "
+                               f"{self.root} has a Velodyne scan or a right image; see the layout's tree in the docs")
         kind = {"depth": "depth", "lidar": "velodyne"}.get(self.disparity_source)
         if kind is not None and not any(getattr(f, kind) is not None for f in self.frames):
             raise DatasetError(f"{param('disparity_source')} {self.disparity_source}: no frame of {self.name} split "
@@ -210,9 +214,13 @@ class StereoRoadDataset(ABC):
         view.label_files = {**self.label_files, **files}
         return view
 
+    def has_label(self, frame: FrameRef) -> bool:
+        """Whether ``frame`` has a road label: its own, or one from a label tree (:meth:`with_labels`)."""
+        return frame.label is not None or frame.name in self.label_files
+
     def labelled(self) -> StereoRoadDataset:
-        """The frames that have a road label (:meth:`subset`), in order."""
-        return self.subset(f.name for f in self.frames if f.label is not None)
+        """The frames that have a road label (:meth:`has_label`; :meth:`subset`), in order."""
+        return self.subset(f.name for f in self.frames if self.has_label(f))
 
     def load(self, i: int, *, right: bool = True, label: bool = True, disparity: bool = True) -> Sample:
         """Load frame ``i`` (what is not asked for, or not there, is None)."""

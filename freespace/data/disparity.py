@@ -8,6 +8,11 @@ of a loaded sample (``file``, ``depth``, ``lidar``, ``sgbm`` or ``none``) says w
 sparse map (about one pixel in twenty, none above the scanner's field of view) whose use should be a
 choice, and a tree that gains a ``velodyne/`` folder must not silently change what ``auto`` generated.
 Ask for it with ``lidar``.
+
+``fused`` joins a LiDAR scan and SGBM (:func:`fuse_disparities`): where both measure a pixel they must agree
+(within :data:`FUSE_TOLERANCE_PX` or :data:`FUSE_TOLERANCE_REL` of the disparity) and the scan's value is
+kept; where they disagree the pixel has no disparity (so an autolabel leaves it don't care); where only one
+measures, its value is kept. A frame with only one of the two gets that one.
 """
 
 from __future__ import annotations
@@ -32,13 +37,15 @@ from freespace.io.files import PathLike, atomic_write_bytes
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DISPARITY_SOURCES", "SGBM_SOURCES", "check_disparity_source", "DisparityCache", "resolve_disparity"]
+__all__ = ["DISPARITY_SOURCES", "SGBM_SOURCES", "FUSE_TOLERANCE_PX", "FUSE_TOLERANCE_REL", "check_disparity_source",
+           "DisparityCache", "fuse_disparities", "resolve_disparity"]
 
-DISPARITY_SOURCES = ("auto", "file", "depth", "lidar", "sgbm", "none")
+DISPARITY_SOURCES = ("auto", "file", "depth", "lidar", "sgbm", "fused", "none")
 """``auto``: file, else depth + camera, else cached SGBM; ``file``: file, else depth + camera; ``depth``:
 depth + camera only; ``lidar``: the frame's Velodyne scan projected with its calibration only; ``sgbm``:
-always SGBM; ``none``: no disparity."""
-SGBM_SOURCES = ("auto", "sgbm")
+always SGBM; ``fused``: the Velodyne scan and SGBM joined (:func:`fuse_disparities`); ``none``: no
+disparity."""
+SGBM_SOURCES = ("auto", "sgbm", "fused")
 """The disparity sources under which a frame's disparity may come from SGBM."""
 
 
@@ -97,6 +104,37 @@ class DisparityCache:
         return disp
 
 
+#: two disparities of one pixel agree when they differ by at most this many pixels …
+FUSE_TOLERANCE_PX = 1.0
+#: … or by at most this share of the LiDAR disparity, whichever is larger (SGBM's error on a real road is
+#: about 0.3 px; a LiDAR point seen past an object's edge, the scanner sitting 0.8 m above the camera, differs
+#: by many pixels)
+FUSE_TOLERANCE_REL = 0.05
+
+
+def fuse_disparities(lidar: np.ndarray, sgbm: np.ndarray) -> np.ndarray:
+    """Join a LiDAR disparity and an SGBM disparity of one left image (``float32 H×W`` pixels, NaN invalid).
+
+    Where both are valid and agree (``|lidar − sgbm| ≤ max(FUSE_TOLERANCE_PX, FUSE_TOLERANCE_REL · lidar)``)
+    the LiDAR value is kept; where both are valid and disagree the pixel becomes NaN (neither is trusted);
+    where one is valid, its value is kept. Returns a new ``float32 H×W`` map.
+
+    >>> import numpy as np
+    >>> lidar = np.array([[10.0, 10.0, np.nan, np.nan]], np.float32)
+    >>> sgbm = np.array([[10.4, 14.0, 7.0, np.nan]], np.float32)
+    >>> fuse_disparities(lidar, sgbm)
+    array([[10., nan,  7., nan]], dtype=float32)
+    """
+    if lidar.shape != sgbm.shape:
+        raise ValueError(f"the LiDAR disparity is {lidar.shape} and the SGBM one {sgbm.shape}; give maps of one image")
+    both = np.isfinite(lidar) & np.isfinite(sgbm)
+    agree = np.zeros_like(both)
+    agree[both] = np.abs(lidar[both] - sgbm[both]) <= np.maximum(FUSE_TOLERANCE_PX, FUSE_TOLERANCE_REL * lidar[both])
+    out = np.where(np.isfinite(lidar), lidar, sgbm).astype(np.float32)
+    out[both & ~agree] = np.nan
+    return out
+
+
 def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | None,
                       calib: StereoCalibration | None, *, mode: str, cache: DisparityCache,
                       read_depth: Callable[[], np.ndarray],
@@ -106,14 +144,15 @@ def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | N
     ``mode`` ``auto``: the disparity file, else depth (``read_depth()``, metres) and ``calib`` (with a
     baseline > 0; a monocular camera, baseline 0, gives no disparity from depth), else
     cached SGBM of ``left`` and ``right``; ``file``: file or depth only; ``depth``: depth only; ``lidar``:
-    ``read_lidar()`` only (the scan's disparity, already in pixels); ``sgbm``: always SGBM; ``none``:
+    ``read_lidar()`` only (the scan's disparity, already in pixels); ``sgbm``: always SGBM; ``fused``: the
+    scan and SGBM joined by :func:`fuse_disparities` (either alone where the frame has only one); ``none``:
     nothing. Returns ``(None, "none")`` when no allowed source is there, except for ``depth`` and
     ``lidar``, which were asked for by name.
 
     Raises:
         DatasetError: mode ``depth`` and the frame has no depth file or no camera (or a monocular one,
             baseline 0); mode ``lidar`` and
-            it has no scan or no calibration.
+            it has no scan or no calibration; mode ``fused`` and it has neither a scan nor a right image.
     """
     if mode == "depth":
         if frame.depth is None or calib is None or not calib.baseline > 0:
@@ -128,6 +167,15 @@ def resolve_disparity(frame: FrameFiles, left: np.ndarray, right: np.ndarray | N
                                f"{param('disparity_source')} lidar "
                                f"needs one for every frame")
         return read_lidar(), "lidar"
+    if mode == "fused":
+        lidar = read_lidar() if frame.velodyne is not None and read_lidar is not None else None
+        sgbm = cache.get(frame, left, right) if right is not None else None
+        if lidar is None and sgbm is None:
+            raise DatasetError(f"{frame.name} has neither a Velodyne scan nor a right image; "
+                               f"{param('disparity_source')} fused needs one of them")
+        if lidar is None or sgbm is None:
+            return (sgbm, "sgbm") if lidar is None else (lidar, "lidar")
+        return fuse_disparities(lidar, sgbm), "fused"
     if mode in ("auto", "file"):
         if frame.disparity is not None:
             return read_disparity(frame.disparity), "file"

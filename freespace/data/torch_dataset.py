@@ -134,7 +134,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         self.dataset = dataset
         wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
         self.items = [n if isinstance(n, Item) else Item(dataset.index(n), n) for n in wanted]
-        unlabelled = [it.name for it in self.items if dataset.frames[it.index].label is None]
+        unlabelled = [it.name for it in self.items if not dataset.has_label(dataset.frames[it.index])]
         if unlabelled:
             raise DatasetError(f"{len(unlabelled)} frames have no road label (first: {unlabelled[0]}); "
                                f"train on a labelled split")

@@ -18,7 +18,7 @@ from freespace.data.registry import get_dataset
 from freespace.data.splits import make_splits, read_splits, write_splits
 from freespace.data.torch_dataset import Item, VirtualAugment
 from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, ranges_text
-from freespace.errors import DatasetError, param
+from freespace.errors import DatasetError, InvalidOptionError, param
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +73,14 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     ds = get_dataset(config.dataset, config.root, config.split, disparity_source=config.disparity_source,
                      cache_dir=config.cache_dir)
     labelled = ds.labelled().frames
+    if not labelled and config.labels is not None:  # a layout without labels (KITTI raw): the tree labels every split
+        if config.human_share:
+            raise InvalidOptionError(f"{param('human_share')} needs frames labelled by people; {config.dataset} at "
+                                     f"{config.root} has none: leave it at 0")
+        ds = ds.with_labels(config.labels, [f.name for f in ds.frames if (Path(config.labels) / f"{f.name}.png").is_file()])
+        labelled = ds.labelled().frames
+        log.warning("labels: %s at %s has no labels of its own: validation and test use %s as well (measure the "
+                    "model on human labels with freespace evaluate)", config.dataset, config.root, config.labels)
     if config.max_frames is not None:
         labelled = labelled[: config.max_frames]
     if len(labelled) < 3:
