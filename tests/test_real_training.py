@@ -22,13 +22,16 @@ DRIVE = "2011_09_26_drive_0001_sync"
 
 
 def _label_tree(folder: Path, frames: list[str]) -> Path:
-    """A KITTI-colour label per frame: the lower centre road, a don't-care band, the rest non-road."""
+    """A KITTI-colour label per frame (``<drive>/<frame>.png``): the lower centre road, a don't-care band, the rest
+    non-road; and a grey confidence map beside it under ``confidence/``, as `freespace autolabel` writes."""
     h, w = 375, 1242
     v, u = np.mgrid[0:h, 0:w]
     road = (v > 250) & (np.abs(u - w / 2) < (v - 200) * 2.5)
     valid = ~((v > 230) & (v <= 250))
+    confidence = np.clip(v * 255 // h, 0, 255).astype(np.uint8)  # autolabel's grey confidence/ maps: no labels
     for name in frames:
         write_image(folder / f"{name}.png", road_label_to_kitti(RoadLabel(road=road, valid=valid)))
+        write_image(folder / "confidence" / f"{name}.png", confidence)
     return folder
 
 

@@ -428,13 +428,20 @@ def _file_sha256(path: Path, signature: tuple[int, int, int]) -> str:
 
 
 def label_files(folder: PathLike) -> dict[str, Path]:
-    """The label files of the label tree ``folder`` that training reads, by frame name: ``<frame>.png`` at its
-    top level (a link is followed; ``confidence/`` and the reports are no labels)."""
+    """The label files of the label tree ``folder`` that training reads, by frame name: ``<frame>.png``, where
+    a frame name may hold folders (KITTI raw's ``<drive>/<frame>``; a link is followed; ``confidence/``,
+    ``reports/`` and ``.freespace/`` hold no labels)."""
+    folder = Path(folder)
     found = {}
-    for entry in sorted(Path(folder).glob("*.png")):
-        if entry.is_file():
-            found[entry.stem] = entry
+    for entry in sorted(folder.rglob("*.png")):
+        rel = entry.relative_to(folder)
+        if rel.parts[0] not in _NOT_LABELS and entry.is_file():
+            found[rel.with_suffix("").as_posix()] = entry
     return found
+
+
+#: the folders of an autolabel tree that hold no labels
+_NOT_LABELS = ("confidence", "reports", ".freespace")
 
 
 def label_tree_sha256(folder: PathLike) -> tuple[str, int]:
