@@ -3,7 +3,7 @@ preset table; :func:`create_model` builds by name and checks the preset and the 
 
 >>> from freespace.models import create_model, list_models, presets
 >>> list_models()
-['deeplabv3plus', 'denseaspp', 'dupsampling', 'gscnn', 'segnet', 'unet']
+['deeplabv3plus', 'denseaspp', 'dupsampling', 'fastscnn', 'gscnn', 'segnet', 'unet']
 >>> sorted(presets("unet"))
 ['light', 'paper']
 """
