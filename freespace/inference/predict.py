@@ -353,7 +353,7 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
     if fmt not in ("onnx", "torchscript"):
         raise InvalidOptionError(f"{param('fmt')} must be onnx or torchscript, got {fmt!r}")
     if calibration is not None and fmt != "onnx":
-        raise InvalidOptionError(f"int8 quantisation ({param('calibration')}) is for {param('format')} onnx")
+        raise InvalidOptionError(f"int8 quantisation ({param('calibration')}) is for {param('fmt')} onnx")
     check_writable(out)
     check_outputs({"out": out}, {"checkpoint": checkpoint, **({"calibration": calibration} if calibration else {})})
     import torch

@@ -146,7 +146,7 @@ def create_model(name: str, num_classes: int = 2, preset: str = "light", **optio
     """Build the network called ``name``.
 
     Args:
-        name: one of :func:`list_models` (``segnet``, ``unet``, ``deeplabv3plus``, ``denseaspp``,
+        name: one of :func:`list_models` (``segnet``, ``unet``, ``deeplabv3plus``, ``denseaspp``, ``fastscnn``,
             ``dupsampling``, ``gscnn``).
         num_classes: output classes (2: non-road, road).
         preset: ``light`` (the default; trains on a CPU) or ``paper`` (the original papers'
