@@ -354,3 +354,40 @@ def test_predict_option_mistakes_are_one_line(files: dict[str, Path], tmp_path: 
         err = capsys.readouterr().err.strip()
         assert message in err and err.count("\n") == 0
     assert not (tmp_path / "o").exists() and not (tmp_path / "o.mp4").exists()
+
+
+def test_ctrl_c_stops_the_pipeline_at_once_and_writes_nothing(files: dict[str, Path], tmp_path: Path) -> None:
+    """Ctrl-C in the middle of a long video: the reader and writer threads stop with the command (exit 130,
+    "interrupted", no traceback) and no video is left."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    video = tmp_path / "long.mp4"
+    with VideoWriter(video, fps=30) as writer:
+        for i, frame in enumerate(_frames(4)):
+            for _ in range(150):
+                writer.write(np.roll(frame, i, axis=1))
+    out = tmp_path / "road.mp4"
+    # Python's own Ctrl-C handler, as from a terminal (a shell without job control starts it ignored)
+    code = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            "from freespace.cli import main; sys.exit(main(sys.argv[1:]))")
+    proc = subprocess.Popen([sys.executable, "-c", code, "predict", "--onnx", str(files["onnx"]), "--input",
+                             str(video), "--out", str(out), "--batch-size", "1"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                            start_new_session=True)
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline and not list(tmp_path.glob(".road.*.tmp.mp4")):  # the writer has begun
+            time.sleep(0.05)
+        assert proc.poll() is None, "finished before the signal"
+        os.killpg(proc.pid, signal.SIGINT)
+        err = proc.stderr.read()  # type: ignore[union-attr]
+        assert proc.wait(timeout=60) == 130, err[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert err.rstrip().splitlines()[-1] == "freespace: interrupted" and "Traceback" not in err, err[-2000:]
+    assert not out.exists() and not list(tmp_path.glob(".road.*"))

@@ -66,9 +66,9 @@ def _shard_marker(shard: tuple[int, int]) -> str:
     return f"summary.shard-{shard[0]}-of-{shard[1]}.json"
 
 
-#: frames a pipeline's queues hold at most, in units of the batch size (per queue: decoded frames waiting for
-#: the network, and predictions waiting to be written), so memory stays flat however long the input
-QUEUE_BATCHES = 1
+#: predictions a pipeline holds waiting to be written (its writer always has the next one at hand); decoded
+#: frames waiting for the network are one batch. So memory stays flat however long the input.
+WRITE_QUEUE = 2
 
 _END = object()
 
@@ -128,8 +128,8 @@ def run_frames(predictor: Any, frames: Iterable[VideoFrame], batch_size: int,
     ``batch_size`` (:meth:`Predictor.infer`), and a writer upsamples the probabilities
     (:meth:`Predictor.restore`) and calls ``write``. OpenCV's decoders and encoders and ONNX Runtime (or
     PyTorch) release the GIL, so on two cores decoding and writing run beside the network. The queues
-    between them hold at most ``QUEUE_BATCHES × batch_size`` frames each: memory does not grow with the
-    input's length. Without ``pipeline`` the same steps run one after another in the calling thread (same
+    between them hold at most one batch of decoded frames and :data:`WRITE_QUEUE` predictions: memory does
+    not grow with the input's length. Without ``pipeline`` the same steps run one after another in the calling thread (same
     batches, same outputs). An error in any thread stops the others and is raised here.
 
     Args:
@@ -164,8 +164,8 @@ def run_frames(predictor: Any, frames: Iterable[VideoFrame], batch_size: int,
         return stats
 
     stop = threading.Event()
-    inbox: queue.Queue = queue.Queue(maxsize=QUEUE_BATCHES * batch_size)
-    outbox: queue.Queue = queue.Queue(maxsize=QUEUE_BATCHES * batch_size)
+    inbox: queue.Queue = queue.Queue(maxsize=batch_size)
+    outbox: queue.Queue = queue.Queue(maxsize=WRITE_QUEUE)
     errors: list[BaseException] = []
 
     def guard(fn: Callable[[], None]) -> Callable[[], None]:
