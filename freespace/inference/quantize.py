@@ -1,5 +1,5 @@
-"""int8 static quantisation of an exported ONNX road model (``freespace export --format onnx --int8
---calibration DIR``), calibrated on real frames, with its accuracy change against float32 measured.
+"""int8 static quantisation of an exported ONNX road model, calibrated on real frames, with its accuracy change
+against float32 measured: ``freespace export --format onnx --int8 --calibration DIR``.
 
 ONNX Runtime's ``quantize_static`` in the QDQ format: weights int8 per output channel (symmetric),
 activations uint8 per tensor, their ranges from the minima and maxima the float model reaches on the
@@ -36,7 +36,7 @@ def calibration_inputs(source: PathLike, size: tuple[int, int] | None,
     left at their own size when None.
 
     Raises:
-        InputFileError: the source is missing or holds no frames (the message names ``--calibration``).
+        InputFileError: the source is missing or holds no frames (the message names the parameter ``calibration``).
         CorruptFileError: a frame cannot be decoded.
     """
     import cv2
