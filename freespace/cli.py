@@ -526,8 +526,8 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch-size", type=int, default=4, help="frames per network call (default 4)")
     p.add_argument("--shard", metavar="K/N", help="only the K-th of N disjoint parts of the images, by file name "
                                                   "(K from 1); shards share --out")
-    p.add_argument("--no-overlays", action="store_true", help="write the confidence PNGs only, not overlays/ (for "
-                                                                  "real time: an overlay PNG costs ~3 masks)")
+    p.add_argument("--no-overlays", action="store_true",
+                   help="write the confidence PNGs only, not overlays/ (for real time: an overlay PNG costs ~3 masks)")
     p.add_argument("--threads", type=int, help="ONNX Runtime threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--out", required=True, help="output folder (PNGs), or OUT.mp4: the overlaid video")
@@ -592,9 +592,10 @@ def cmd_export(args: argparse.Namespace) -> int:
     r = export_model(args.checkpoint, args.fmt, args.out, calibration=args.calibration)
     if "int8" in r:
         q = r["int8"]
-        print(f"onnx int8 → {r['path']}  against float32 on {q['frames']} calibration frames: masks agree on "
-              f"{100 * q['mask_agreement']:.2f} % of the pixels, F {100 * q['f_vs_float']:.2f} (float32's masks as "
-              f"the reference), max probability difference {q['max_prob_diff']:.3f}")
+        print(f"onnx int8 → {r['path']}  (float32 export: max abs difference to PyTorch {r['max_abs_diff']:.2e}); "
+              f"against float32 on {q['frames']} calibration frames: masks agree on {100 * q['mask_agreement']:.2f} % "
+              f"of the pixels, F {100 * q['f_vs_float']:.2f} (float32's masks as the reference), max probability "
+              f"difference {q['max_prob_diff']:.3f}")
         return 0
     print(f"{r['format']} → {r['path']}  max abs difference to PyTorch {r['max_abs_diff']:.2e} "
           f"(sizes {', '.join('×'.join(map(str, s[2:])) for s in r['checked_sizes'])})")
