@@ -173,7 +173,8 @@ def rendered_pairs(root: Path, split_file: Path | None) -> list[tuple[Path, Path
     training = root / "data_road" / "training"
     if not training.is_dir():
         return []
-    names = split_file.read_text().split() if split_file else [p.stem for p in sorted((training / "image_2").glob("*.png"))]
+    names = (split_file.read_text().split() if split_file
+             else [p.stem for p in sorted((training / "image_2").glob("*.png"))])
     pairs = []
     for name in names:
         cat, idx = name.rsplit("_", 1)
@@ -227,7 +228,8 @@ def markdown(report: dict[str, Any]) -> str:
             fr, fs = r["f_real"] or {}, r["f_rendered"] or {}
             lines.append(f"| {key}: {r['model']} | {dtype} | {'×'.join(map(str, r['internal_size']))} | "
                          f"{r['network_ms']:.1f} | **{e['folder, masks, pipeline']['fps']:.1f}** | "
-                         f"{e['folder, masks, sequential']['fps']:.1f} | {e['folder, masks + overlays, pipeline']['fps']:.1f} | "
+                         f"{e['folder, masks, sequential']['fps']:.1f} | "
+                         f"{e['folder, masks + overlays, pipeline']['fps']:.1f} | "
                          f"{e['video → video, pipeline']['fps']:.1f} | "
                          f"{100 * e['folder, masks, pipeline']['network_share']:.0f} % | "
                          f"{e['folder, masks, pipeline']['cpu_ms_per_frame']:.1f} | {pct(fr.get('f'))} | "
@@ -281,8 +283,8 @@ def main() -> None:
         work = args.work or Path(tempfile.mkdtemp(prefix="realtime-"))
         trained = train_placeholders(work)
         args.fast, args.best = args.fast or trained["fast"], args.best or trained["best"]
-        note = ("Models: placeholders trained here on 84 rendered frames (Fast-SCNN light from scratch, U-Net with an "
-                "ImageNet Lite0 encoder; 192×640, 8 epochs, the same training), not the real models.")
+        note = ("Models: placeholders trained here on 70 of 120 rendered frames (Fast-SCNN light from scratch, "
+                "U-Net with an ImageNet Lite0 encoder; 192×640, 8 epochs, the same training), not the real models.")
         if rendered is None:
             rendered, split = work / "synth", work / "run-fast" / "splits" / "test.txt"
     with tempfile.TemporaryDirectory() as tmp:

@@ -129,8 +129,8 @@ def run_frames(predictor: Any, frames: Iterable[VideoFrame], batch_size: int,
     (:meth:`Predictor.restore`) and calls ``write``. OpenCV's decoders and encoders and ONNX Runtime (or
     PyTorch) release the GIL, so on two cores decoding and writing run beside the network. The queues
     between them hold at most one batch of decoded frames and :data:`WRITE_QUEUE` predictions: memory does
-    not grow with the input's length. Without ``pipeline`` the same steps run one after another in the calling thread (same
-    batches, same outputs). An error in any thread stops the others and is raised here.
+    not grow with the input's length. Without ``pipeline`` the same steps run one after another in the calling
+    thread (same batches, same outputs). An error in any thread stops the others and is raised here.
 
     Args:
         frames: decoded lazily (e.g. a :class:`~freespace.io.video.FrameSource`). batch_size: ≥ 1.

@@ -25,8 +25,8 @@ if TYPE_CHECKING:
 
     from freespace.models import SegmentationModel
 
-__all__ = ["load_checkpoint", "read_checkpoint_file", "checkpoint_state_dict", "rebuild_model", "check_weights", "Predictor",
-           "session_options", "machine_threads"]
+__all__ = ["load_checkpoint", "read_checkpoint_file", "checkpoint_state_dict", "rebuild_model", "check_weights",
+           "Predictor", "session_options", "machine_threads"]
 
 
 def read_checkpoint_file(path: PathLike) -> Any:

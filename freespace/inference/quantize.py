@@ -107,7 +107,8 @@ def compare_models(reference: bytes, other: bytes, inputs: list[np.ndarray], thr
 
     from freespace.inference.predictor import session_options
 
-    sessions = [ort.InferenceSession(m, session_options(), providers=["CPUExecutionProvider"]) for m in (reference, other)]
+    sessions = [ort.InferenceSession(m, session_options(), providers=["CPUExecutionProvider"])
+                for m in (reference, other)]
     same = total = tp = fp = fn = 0
     diff = 0.0
     for x in inputs:
