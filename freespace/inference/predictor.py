@@ -9,6 +9,7 @@ imported only to read a checkpoint, onnxruntime only to read an ONNX file.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -24,7 +25,8 @@ if TYPE_CHECKING:
 
     from freespace.models import SegmentationModel
 
-__all__ = ["load_checkpoint", "read_checkpoint_file", "checkpoint_state_dict", "rebuild_model", "check_weights", "Predictor"]
+__all__ = ["load_checkpoint", "read_checkpoint_file", "checkpoint_state_dict", "rebuild_model", "check_weights",
+           "Predictor", "session_options", "machine_threads"]
 
 
 def read_checkpoint_file(path: PathLike) -> Any:
@@ -142,6 +144,38 @@ def _image_size(size: Any, source: PathLike) -> tuple[int, int] | None:
 _EXPORT_HINT = "export one with freespace export --format onnx"
 
 
+def machine_threads() -> int:
+    """The CPU cores this process may run on (``os.sched_getaffinity``: a container's or ``taskset``'s share,
+    not the machine's count), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # no affinity on this platform
+        return max(1, os.cpu_count() or 1)
+
+
+def session_options(threads: int | None = None) -> Any:
+    """ONNX Runtime session options for prediction on the CPU: every graph optimisation (``ORT_ENABLE_ALL``:
+    constant folding, node fusions such as Conv+BN+ReLU, layout changes), ``threads`` intra-op threads
+    (None: :func:`machine_threads`), one inter-op thread, and no spinning of idle worker threads, so that a
+    pipeline's reader and writer threads get the cores while the network waits for its next batch.
+
+    Raises:
+        InvalidOptionError: ``threads`` < 1.
+    """
+    import onnxruntime as ort
+
+    if threads is not None and threads < 1:
+        raise InvalidOptionError(f"{param('threads')} must be ≥ 1, got {threads}")
+    options = ort.SessionOptions()
+    options.log_severity_level = 4  # its failures become one-line errors here, not log lines
+    options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    options.intra_op_num_threads = threads or machine_threads()
+    options.inter_op_num_threads = 1
+    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    options.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    return options
+
+
 def _check_onnx_signature(session: Any, path: Path) -> None:
     """Refuse an ONNX model that does not take one float32 N×3×H×W image, or does not give N×C×H×W
     logits (C ≥ 2) first; the message says whether the input or the output is wrong."""
@@ -172,9 +206,17 @@ class Predictor:
     None: each image goes to the network at its own size. An ONNX model whose input height and width are
     fixed gets its images resized to that size (whatever its metadata says: it takes no other), and one
     whose batch size is fixed gets batches of that size (the last padded).
+
+    A model trained at a reduced size thus runs at that size on larger frames: the probabilities are
+    upsampled bilinearly to the frame's size before any threshold (a mask at the input's size). The three
+    steps of :meth:`predict` are also callable apart, so that a pipeline runs them in different threads:
+    :meth:`prepare` (resize, scale to [0, 1], CHW), :meth:`infer` (the network) and :meth:`restore` (back to
+    the frame's size). ``threads``: ONNX Runtime's intra-op threads (None: the cores this process may use;
+    :func:`session_options`).
     """
 
-    def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None) -> None:
+    def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
+                 threads: int | None = None) -> None:
         if (checkpoint is None) == (onnx is None):
             raise InvalidOptionError(f"give exactly one of {param('checkpoint')} and {param('onnx')}")
         self.resize_to: tuple[int, int] | None = None
@@ -194,9 +236,8 @@ class Predictor:
             if not path.is_file():
                 raise missing_input(path, "ONNX model")
             try:
-                options = ort.SessionOptions()
-                options.log_severity_level = 4  # its failures become one-line errors here, not log lines
-                self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+                self.session = ort.InferenceSession(str(path), session_options(threads),
+                                                    providers=["CPUExecutionProvider"])
             except Exception as exc:  # onnxruntime raises its own types for corrupt files
                 raise CorruptFileError(f"cannot load {path} as an ONNX model ({type(exc).__name__})") from None
             _check_onnx_signature(self.session, path)
@@ -240,21 +281,39 @@ class Predictor:
         e = np.exp(logits - logits.max(1, keepdims=True))
         return (e[:, 1] / e.sum(1)).astype(np.float32)
 
+    def prepare(self, image: np.ndarray) -> np.ndarray:
+        """The network's input for one ``H×W×3 uint8`` RGB image: ``float32 3×h×w`` in [0, 1], resized to
+        :attr:`resize_to` (area interpolation) when the model states a size.
+
+        Raises:
+            InvalidOptionError: the image is not H×W×3.
+        """
+        if image.ndim != 3 or image.shape[2] != 3:
+            raise InvalidOptionError(f"expected RGB images, got shape {image.shape}")
+        if self.resize_to is not None and image.shape[:2] != self.resize_to:
+            image = cv2.resize(image, (self.resize_to[1], self.resize_to[0]), interpolation=cv2.INTER_AREA)
+        return image.transpose(2, 0, 1).astype(np.float32) / 255.0
+
+    def infer(self, inputs: list[np.ndarray]) -> list[np.ndarray]:
+        """Road probabilities (``float32 h×w``) of prepared inputs (:meth:`prepare`), at the network's size;
+        inputs of one size go through the network together."""
+        by_size: dict[tuple[int, ...], list[int]] = {}
+        for i, x in enumerate(inputs):
+            by_size.setdefault(x.shape, []).append(i)
+        out: list[np.ndarray | None] = [None] * len(inputs)
+        for idx in by_size.values():
+            for i, prob in zip(idx, self._run(np.stack([inputs[i] for i in idx]))):
+                out[i] = prob
+        return out  # type: ignore[return-value]
+
+    @staticmethod
+    def restore(prob: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+        """``prob`` (``float32 h×w``) at ``size`` = (H, W): bilinear on the probabilities (a threshold after it
+        gives a smooth mask boundary, not the network's blocks)."""
+        h, w = size
+        return prob if prob.shape == (h, w) else cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
+
     def predict(self, images: list[np.ndarray]) -> list[np.ndarray]:
         """Road probability (``float32 H×W`` in [0, 1]) of each ``H×W×3 uint8`` RGB image, at its own size."""
-        by_size: dict[tuple[int, int], list[int]] = {}
-        resized = []
-        for i, img in enumerate(images):
-            if img.ndim != 3 or img.shape[2] != 3:
-                raise InvalidOptionError(f"expected RGB images, got shape {img.shape}")
-            if self.resize_to is not None and img.shape[:2] != self.resize_to:
-                img = cv2.resize(img, (self.resize_to[1], self.resize_to[0]), interpolation=cv2.INTER_AREA)
-            resized.append(img)
-            by_size.setdefault(img.shape[:2], []).append(i)
-        out: list[np.ndarray | None] = [None] * len(images)
-        for idx in by_size.values():
-            batch = np.stack([resized[i].transpose(2, 0, 1) for i in idx]).astype(np.float32) / 255.0
-            for i, prob in zip(idx, self._run(batch)):
-                h, w = images[i].shape[:2]
-                out[i] = prob if prob.shape == (h, w) else cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
-        return out  # type: ignore[return-value]
+        probs = self.infer([self.prepare(img) for img in images])
+        return [self.restore(p, img.shape[:2]) for p, img in zip(probs, images)]

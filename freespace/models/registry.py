@@ -3,7 +3,7 @@ preset table; :func:`create_model` builds by name and checks the preset and the 
 
 >>> from freespace.models import create_model, list_models, presets
 >>> list_models()
-['deeplabv3plus', 'denseaspp', 'dupsampling', 'gscnn', 'segnet', 'unet']
+['deeplabv3plus', 'denseaspp', 'dupsampling', 'fastscnn', 'gscnn', 'segnet', 'unet']
 >>> sorted(presets("unet"))
 ['light', 'paper']
 """
@@ -146,7 +146,7 @@ def create_model(name: str, num_classes: int = 2, preset: str = "light", **optio
     """Build the network called ``name``.
 
     Args:
-        name: one of :func:`list_models` (``segnet``, ``unet``, ``deeplabv3plus``, ``denseaspp``,
+        name: one of :func:`list_models` (``segnet``, ``unet``, ``deeplabv3plus``, ``denseaspp``, ``fastscnn``,
             ``dupsampling``, ``gscnn``).
         num_classes: output classes (2: non-road, road).
         preset: ``light`` (the default; trains on a CPU) or ``paper`` (the original papers'
