@@ -664,7 +664,7 @@ REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "val_window", "min
 
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:
     _add_config_options(p, REPRODUCE_OPTIONS, values={"dataset": None, "root": None})  # not with --tables
-    p.add_argument("--models", help="all or a comma-separated list (default all)")
+    p.add_argument("--models", help="all (the paper's six networks) or a comma-separated list (default all)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
     p.add_argument("--variants", help="comma-separated arms: X, HA-X (DS-Generator views), "
                    "X-dup (the control: X with HA-X's number of steps), X-long (X with twice the epochs and "

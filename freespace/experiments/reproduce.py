@@ -103,6 +103,8 @@ GAINS = (("HA-X", "X"), ("HA-X", "X-dup"), ("HA-X", "X-long"), ("X-dup", "X"), (
 PRIMARY = {"versus": "HA-X - X-dup", "metric": "f_score", "test_set": "same-rigs", "margin": 1.0}
 #: the ``network`` of the gains averaged over networks
 ALL_NETWORKS = "all"
+#: the paper's six networks: what ``models="all"`` trains (networks registered later, e.g. ``fastscnn``, by name)
+PAPER_NETWORKS = ("deeplabv3plus", "denseaspp", "dupsampling", "gscnn", "segnet", "unet")
 GAIN_METRICS = ("f_score", "iou")
 #: the name of a further test set (``test_root``) given without one
 DEFAULT_TEST_SET = "shifted"
@@ -128,8 +130,8 @@ def _name(model: str, variant: str, seed: int) -> str:
 
 
 def parse_models(text: str | list[str] | tuple[str, ...] | None) -> list[str]:
-    """``"unet,segnet"`` (``models``) → the networks, in the given order; ``"all"`` or None → every
-    registered network.
+    """``"unet,segnet"`` (``models``) → the networks, in the given order; ``"all"`` or None → the paper's six
+    (:data:`PAPER_NETWORKS`).
 
     Raises:
         InvalidOptionError: an unknown network, or none.
@@ -137,7 +139,7 @@ def parse_models(text: str | list[str] | tuple[str, ...] | None) -> list[str]:
     from freespace.models import list_models
 
     if text is None or text == "all":
-        return list_models()
+        return list(PAPER_NETWORKS)
     names = list(dict.fromkeys(n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()))
     unknown = [n for n in names if n not in list_models()]
     if unknown or not names:
