@@ -231,7 +231,7 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -
         kind = None
     if kind is not None:
         link = " (through a symbolic link)" if path.is_symlink() else ""
-        raise InvalidOptionError(f"{flag} {path} is {kind}{link}, not a regular {'folder' if folder else 'file'}; "
+        raise InvalidOptionError(f"{flag} {path} is {kind}{link}, not a {'folder' if folder else 'regular file'}; "
                                  f"freespace writes only regular files and folders: give a "
                                  f"{'folder' if folder else 'file'} path")
     if folder and path.exists() and not path.is_dir():
