@@ -35,7 +35,7 @@ PathLike = str | os.PathLike[str]
 
 __all__ = ["PathLike", "atomic_write_bytes", "write_files_together", "atomic_write_text", "encode_json", "write_json",
            "write_csv", "check_outputs", "check_writable", "check_writable_files", "missing_input", "read_bytes",
-           "replaceable", "keep_mode", "special_kind", "inside_meta", "META"]
+           "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "META"]
 
 # ---------------------------------------------------------------------------------------------------
 # atomic writes
@@ -83,11 +83,11 @@ def _pseudo_fs(folder: Path) -> str | None:
     return fs if fs in _PSEUDO_FS else None
 
 
-def _on_pseudo_fs(path: Path) -> str | None:
+def on_pseudo_fs(path: Path) -> str | None:
     """Why no output may be written at ``path`` because it lies on a kernel's pseudo file system (``/proc``,
     ``/sys``, ``devtmpfs``, …; links followed), or None."""
     real = Path(os.path.realpath(path))
-    existing = real.parent if real != real.parent else real
+    existing = real
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent
     fs = _pseudo_fs(existing)
@@ -136,7 +136,7 @@ def replaceable(path: PathLike, what: str = "output") -> os.stat_result | None:
         if not stat.S_ISDIR(st.st_mode) and (not os.access(path, os.W_OK) or not st.st_mode & 0o222):
             raise OutputError(f"{what} {path} is read-only (mode {stat.S_IMODE(st.st_mode):04o}); make it writable "
                               f"(chmod u+w) to replace it, or choose another path")
-    where = _on_pseudo_fs(path)
+    where = on_pseudo_fs(path)
     if where is not None:
         raise OutputError(f"{what} {path} {where}")
     return st
@@ -250,7 +250,7 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -
         raise OutputError(f"cannot write {flag} {path}: {existing} is a file, not a folder; choose another path")
     if not folder:
         replaceable(path, flag)
-    elif (where := _on_pseudo_fs(path)) is not None:
+    elif (where := on_pseudo_fs(path)) is not None:
         raise OutputError(f"{flag} {path} {where}")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write {flag} {path}: no permission to write in {existing}; choose a writable "

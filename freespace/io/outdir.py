@@ -50,7 +50,8 @@ from pathlib import Path
 from typing import Any
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError, param
-from freespace.io.files import META, inside_meta, keep_mode, replaceable, special_kind, write_files_together
+from freespace.io.files import (META, inside_meta, keep_mode, on_pseudo_fs, replaceable, special_kind,
+    write_files_together)
 
 PathLike = str | os.PathLike[str]
 
@@ -426,6 +427,9 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         raise InvalidOptionError(f"{flag} {out} lies inside {meta_above}, where freespace keeps an output folder's "
                                  f"manifest, lock and stages (replaced and deleted by its next run); choose a folder "
                                  f"outside it")
+    pseudo = on_pseudo_fs(out)
+    if pseudo is not None:
+        raise OutputError(f"{flag} {out} {pseudo}")
     meta = out / META
     if meta.is_symlink() or (meta.exists() and not meta.is_dir()):
         raise InvalidOptionError(f"{flag} {out} holds {META}, which is not a folder but a link or a file; "
