@@ -267,18 +267,22 @@ def _check_restart(run_dir: Path) -> None:
         folder = run_dir / sub
         for path in sorted(folder.rglob("*")) if folder.is_dir() and not folder.is_symlink() else []:
             rel = path.relative_to(folder)
-            temp = len(rel.parts) == 1 and any(rel.name.startswith(f".{n}.") and rel.name.endswith(".tmp") for n in names)
-            if not (len(rel.parts) == 1 and rel.name in names) and not temp:
-                raise InvalidOptionError(f"{run_dir} holds a run without checkpoints/last.ckpt, and {sub}/{rel.as_posix()}, "
-                                         f"which freespace train did not write; starting the run again deletes "
-                                         f"{sub}/: move that file away, or choose another {param('out')}")
+            ours = len(rel.parts) == 1 and any(  # one of its files, or what a killed write of one left
+                rel.name == n or rel.name.startswith(f".{n}.") and rel.name.endswith(".tmp") for n in names)
+            if not ours:
+                raise InvalidOptionError(f"{run_dir} holds a run without checkpoints/last.ckpt, and "
+                                         f"{sub}/{rel.as_posix()}, which freespace train did not write; starting the "
+                                         f"run again deletes {sub}/: move that file away, or choose another "
+                                         f"{param('out')}")
     try:
-        epochs = sum(1 for _ in csv.DictReader((run_dir / "metrics.csv").open()))
+        with (run_dir / "metrics.csv").open(newline="") as f:
+            epochs = sum(1 for _ in csv.DictReader(f))
     except (OSError, ValueError, csv.Error):
         epochs = 0
     if epochs or (run_dir / "checkpoints" / "best.ckpt").is_file():
         log.warning("%s holds a run that trained %d epoch(s) but whose checkpoints/last.ckpt is gone, so it cannot "
-                    "be resumed: training it again from the start (put last.ckpt back to continue it instead)", run_dir, epochs)
+                    "be resumed: training it again from the start (put last.ckpt back to continue it instead)",
+                    run_dir, epochs)
     else:
         log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
 

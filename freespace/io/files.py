@@ -93,7 +93,8 @@ def on_pseudo_fs(path: Path) -> str | None:
     fs = _pseudo_fs(existing)
     if fs is None and not (real.is_relative_to("/proc") or real.is_relative_to("/sys")):
         return None
-    return f"lies on the kernel's {fs or 'system'} file system ({existing}), where no output belongs; choose a path on a disk"
+    return (f"lies on the kernel's {fs or 'system'} file system ({existing}), where no output belongs; choose a path "
+            f"on a disk")
 
 
 def inside_meta(path: PathLike) -> Path | None:

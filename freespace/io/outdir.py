@@ -268,10 +268,8 @@ def _unreadable(path: Path, why: str) -> CorruptFileError:
     """The error for the unreadable manifest ``path`` (``OUT/.freespace/manifest.json``)."""
     folder = path.parent.parent
     return CorruptFileError(f"the output folder {folder} has an unreadable manifest {path} ({why}), so which of its "
-                            f"files freespace wrote is unknown and none is touched; {_UNREADABLE_FIX.format(folder, META)}")
-
-
-_UNREADABLE_FIX = "choose another output folder, or empty {0} (its {1} included) to write it anew"
+                            f"files freespace wrote is unknown and none is touched; choose another output folder, or "
+                            f"empty {folder} (its {META} included) to write it anew")
 
 
 def _write_manifest(path: Path, command: str, entries: set[str]) -> None:
