@@ -104,6 +104,11 @@ def pair(tmp_path: Path) -> dict[str, Path]:
     return files
 
 
+def _images(trained: dict[str, Path]) -> Path:
+    """The folder of the trained run's left images (an input of ``predict``)."""
+    return trained["data"] / "data_road" / "training" / "image_2"
+
+
 def _kitti_pair(folder: Path) -> tuple[Path, Path]:
     """A KITTI ground-truth folder and a prediction folder of one frame (both valid)."""
     gt, pred = folder / "gt", folder / "pred"
@@ -170,7 +175,7 @@ def test_an_output_file_that_is_a_device_pipe_or_socket_is_refused(option: str, 
 
 
 FOLDER_OUTPUTS = {
-    "predict": lambda t, x: ["predict", "--checkpoint", str(t["ckpt"]), "--input", str(t["data"]), "--out", str(x)],
+    "predict": lambda t, x: ["predict", "--checkpoint", str(t["ckpt"]), "--input", str(_images(t)), "--out", str(x)],
     "evaluate": lambda t, x: ["evaluate", "--checkpoint", str(t["ckpt"]), "--dataset", "synth", "--root",
                               str(t["data"]), "--out", str(x)],
     "kitti-submit": lambda t, x: ["kitti-submit", "--checkpoint", str(t["ckpt"]), "--root", str(t["data"]),
@@ -262,7 +267,7 @@ def test_a_fifo_manifest_does_not_hang_a_command(trained: dict[str, Path], tmp_p
     (out / META).mkdir(parents=True)
     os.mkfifo(out / META / "manifest.json")
     res = subprocess.run([sys.executable, "-m", "freespace.cli", "predict", "--checkpoint", str(trained["ckpt"]),
-                          "--input", str(trained["data"]), "--out", str(out)], capture_output=True, text=True,
+                          "--input", str(_images(trained)), "--out", str(out)], capture_output=True, text=True,
                          timeout=120)
     err = res.stderr.strip()
     assert res.returncode == 2 and len(err.splitlines()) == 1 and "unreadable manifest" in err, err
@@ -365,6 +370,26 @@ def test_an_output_file_through_a_link(tmp_path: Path) -> None:
     (tmp_path / "dirlink").symlink_to(elsewhere, target_is_directory=True)
     with pytest.raises(InvalidOptionError, match="is a folder"):
         check_writable(tmp_path / "dirlink")
+
+
+def test_a_link_that_cannot_be_followed_is_refused_in_one_line(trained: dict[str, Path], tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture) -> None:
+    """A link loop (a file or a folder output: a traceback before), a link into a missing folder, and an
+    output folder that is a dangling link: refused, naming the link; nothing is created."""
+    loop, lost, dangling = tmp_path / "loop", tmp_path / "lost.pt", tmp_path / "dangling"
+    loop.symlink_to("loop")
+    lost.symlink_to(tmp_path / "missing" / "m.pt")
+    dangling.symlink_to(tmp_path / "not-yet")
+    export = ["export", "--checkpoint", str(trained["ckpt"]), "--format", "torchscript", "--out"]
+    predict = ["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(_images(trained)), "--out"]
+    refused(capsys, [*export, str(loop)], match="cannot be followed")
+    refused(capsys, [*predict, str(loop)], match="cannot be followed")
+    refused(capsys, [*export, str(lost)], match="does not exist")
+    refused(capsys, [*predict, str(dangling)], match="does not exist")
+    with pytest.raises(InvalidOptionError, match="cannot be followed"):
+        with claim_folder(loop, "predict"):
+            pass
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling", "loop", "lost.pt"]
 
 
 # ---------------------------------------------------------------------- G22. nested output folders
@@ -474,10 +499,11 @@ def test_an_output_inside_a_freespace_folder_is_refused(trained: dict[str, Path]
     meta = run / META
     before = sorted(p.name for p in meta.iterdir())
     (tmp_path / "link").symlink_to(meta, target_is_directory=True)
-    predict = ["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(trained["data"]), "--no-progress"]
+    predict = ["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(_images(trained)), "--no-progress"]
     for out in (meta / "p", meta, tmp_path / "link" / "p", meta / "stage-1-x"):
         refused(capsys, [*predict, "--out", str(out)], match=".freespace")
-    refused(capsys, ["export", "--checkpoint", str(trained["ckpt"]), "--out", str(meta / "m.onnx")], match=".freespace")
+    refused(capsys, ["export", "--checkpoint", str(trained["ckpt"]), "--format", "onnx", "--out", str(meta / "m.onnx")],
+            match=".freespace")
     refused(capsys, ["evaluate", "--checkpoint", str(trained["ckpt"]), "--dataset", "synth", "--root",
                      str(trained["data"]), "--out", str(tmp_path / "link" / "e")], match=".freespace")
     assert sorted(p.name for p in meta.iterdir()) == before
@@ -489,7 +515,7 @@ def test_an_output_inside_a_freespace_folder_is_refused(trained: dict[str, Path]
 def test_an_unreadable_manifest_is_named(manifest: str, trained: dict[str, Path], tmp_path: Path,
                                          capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "out"
-    predict = ["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(trained["data"]), "--out", str(out),
+    predict = ["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(_images(trained)), "--out", str(out),
                "--no-progress"]
     assert main(predict) == 0
     path = out / META / "manifest.json"

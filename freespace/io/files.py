@@ -35,7 +35,7 @@ PathLike = str | os.PathLike[str]
 
 __all__ = ["PathLike", "atomic_write_bytes", "write_files_together", "atomic_write_text", "encode_json", "write_json",
            "write_csv", "check_outputs", "check_writable", "check_writable_files", "missing_input", "read_bytes",
-           "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "META"]
+           "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "unfollowable_link", "META"]
 
 # ---------------------------------------------------------------------------------------------------
 # atomic writes
@@ -95,6 +95,29 @@ def on_pseudo_fs(path: Path) -> str | None:
         return None
     return (f"lies on the kernel's {fs or 'system'} file system ({existing}), where no output belongs; choose a path "
             f"on a disk")
+
+
+def unfollowable_link(path: PathLike, folder: bool = False) -> str | None:
+    """Why the output ``path`` cannot be used when it is a symbolic link that cannot be followed (a loop, one
+    that leads into a missing folder, or, for an output ``folder``, one to a missing name): ``"is a symbolic
+    link … ; …"``, else None. A file output's link to a missing name in an existing folder is fine: the new
+    file replaces the link."""
+    path = Path(path)
+    if not path.is_symlink():
+        return None
+    try:
+        os.stat(path)
+        return None
+    except FileNotFoundError:
+        target = Path(os.path.realpath(path))
+        if folder:
+            return f"is a symbolic link to {target}, which does not exist; create it, or choose another path"
+        if target.parent.is_dir():
+            return None
+        return (f"is a symbolic link to {target}, whose folder does not exist; create it or remove the link, or "
+                f"choose another path")
+    except OSError as exc:
+        return f"is a symbolic link that cannot be followed ({exc.strerror}); remove it or choose another path"
 
 
 def inside_meta(path: PathLike) -> Path | None:
@@ -226,6 +249,9 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -
     existing folder is not writable (folders on the way are created by the writers). Nothing is created.
     """
     path, flag = Path(os.path.expanduser(os.fspath(path))), param(name)
+    unfollowable = unfollowable_link(path, folder)
+    if unfollowable is not None:
+        raise InvalidOptionError(f"{flag} {path} {unfollowable}")
     try:
         kind = special_kind(os.stat(path).st_mode)
     except OSError:
@@ -248,7 +274,11 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -
     while not existing.exists() and not existing.is_symlink() and existing != existing.parent:
         existing = existing.parent
     if not existing.is_dir():
-        raise OutputError(f"cannot write {flag} {path}: {existing} is a file, not a folder; choose another path")
+        try:
+            what = special_kind(os.stat(existing).st_mode) or "a file"
+        except OSError:
+            what = "a file"
+        raise OutputError(f"cannot write {flag} {path}: {existing} is {what}, not a folder; choose another path")
     if not folder:
         replaceable(path, flag)
     elif (where := on_pseudo_fs(path)) is not None:

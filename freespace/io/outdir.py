@@ -51,7 +51,7 @@ from typing import Any
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError, param
 from freespace.io.files import (META, inside_meta, keep_mode, on_pseudo_fs, replaceable, special_kind,
-    write_files_together)
+    unfollowable_link, write_files_together)
 
 PathLike = str | os.PathLike[str]
 
@@ -412,6 +412,9 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         OutputError: it cannot be created or written.
     """
     out, flag = Path(out), param(name)
+    unfollowable = unfollowable_link(out, folder=True)
+    if unfollowable is not None:
+        raise InvalidOptionError(f"{flag} {out} {unfollowable}")
     try:
         kind = special_kind(os.stat(out).st_mode)
     except OSError:
