@@ -415,6 +415,34 @@ def test_the_readme_flow_evaluate_into_the_run_then_resume(trained: dict[str, Pa
     assert "eval/" not in json.loads((run / META / "manifest.json").read_text())["entries"]
 
 
+def test_reproduce_tables_beside_an_evaluation_and_a_cell_without_checkpoints(trained: dict[str, Path], tmp_path: Path,
+                                                                             capsys: pytest.CaptureFixture) -> None:
+    """One cell (``--only``), ``evaluate --out OUT/eval`` on it, then ``reproduce --tables``: the tables are
+    written and the evaluation is left as it was (22). The cell with its checkpoints deleted and a user file
+    in ``checkpoints/``: the rerun refuses, naming the file, and deletes nothing (23)."""
+    out = tmp_path / "rep"
+    base = ["reproduce", "--dataset", "synth", "--root", str(trained["data"]), "--models", "segnet", "--seeds", "1",
+            "--epochs", "1", "--image-size", "64x64", "--batch-size", "4", "--no-progress", "--out", str(out)]
+    assert main([*base, "--only", "segnet,X,0"]) == 0
+    cell = next((out / "runs").iterdir())
+    assert main(["evaluate", "--checkpoint", str(cell / "checkpoints" / "best.ckpt"), "--dataset", "synth", "--root",
+                 str(trained["data"]), "--out", str(out / "eval"), "--no-progress"]) == 0
+    before = {p: p.read_bytes() for p in sorted((out / "eval").rglob("*")) if p.is_file()}
+    for _ in range(2):
+        assert main(["reproduce", "--tables", "--out", str(out)]) == 0
+    assert (out / "results.csv").is_file()
+    assert {p: p.read_bytes() for p in sorted((out / "eval").rglob("*")) if p.is_file()} == before
+
+    for path in [cell / "metrics.json", *(cell / "checkpoints").glob("*.ckpt")]:
+        path.unlink()
+    (cell / "checkpoints" / "mine.txt").write_text("mine")
+    capsys.readouterr()
+    assert main([*base, "--only", "segnet,X,0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()  # reproduce's progress line, then the one-line error
+    assert "checkpoints/mine.txt, which freespace train did not write" in err[-1] and "Traceback" not in "".join(err)
+    assert (cell / "checkpoints" / "mine.txt").read_text() == "mine" and (cell / "config.yaml").is_file()
+
+
 def test_a_nested_output_folder_is_never_touched_by_the_outer_command(tmp_path: Path) -> None:
     """The outer command replaces its own output (``reproduce --tables``'s folder here) beside another
     command's folder in it: the nested folder's files stay; a nested folder at or inside one of the outer

@@ -26,6 +26,15 @@ refused, unless the command writing that enclosing folder is this very run (``de
 atomic write leaves beside an entry (``.NAME.XXXXXXXX.tmp``) count as the command's and are removed by the
 next run that holds the folder alone.
 
+Nested output folders: a folder inside the output folder that holds its own manifest is another command's
+output folder (``evaluate --out RUN/eval`` in a training run). It does not block the command, which never
+replaces or deletes anything in it; one that stands where the command is about to write (at an entry it
+has not written yet, on the way to a file entry, or where a staged file would land) is refused. No output
+folder may lie inside a ``.freespace`` folder. A device, pipe, socket or other special file (or a link to
+one) anywhere in the folder is refused, as is a manifest that cannot be read (never opened when it is a
+pipe): the message says so and how to fix it. Files follow :func:`freespace.io.files.replaceable` (no
+special file, no read-only file; a replaced file keeps its mode).
+
 The folder itself is never renamed or replaced, so an output folder that is a symbolic link stays one, and
 ``.`` works. Files are listed in the manifest **before** they are written (in place or by a
 stage), so a run killed half-way leaves only files that its next run knows.
@@ -55,7 +64,6 @@ from freespace.io.files import (META, inside_meta, keep_mode, on_pseudo_fs, repl
 
 PathLike = str | os.PathLike[str]
 
-#: the hidden folder of an output folder that holds its manifest, lock and stages
 #: the parameters an output folder's messages name
 OUT, OVERWRITE = param("out"), param("overwrite")
 MANIFEST = "manifest.json"
@@ -328,10 +336,11 @@ def _enclosing(out: Path) -> tuple[Path, str, str] | None:
 def _check_contents(out: Path, entries: set[str], writes: set[str], command: str, flag: str) -> None:
     """Refuse ``out`` when it holds something ``command`` may not replace (sorted, depth first): a file
     that ``entries`` (its manifest) does not cover (named; empty folders hold nothing), a device, pipe,
-    socket or other special file anywhere (inside ``"dir/"`` entries too; a link to one counts), or the
-    output folder of another command (a folder with a :data:`META` manifest) at or inside an entry or one
-    of ``writes`` (what it is about to write). Any other such nested output folder is another command's,
-    never touched, and left out of the check."""
+    socket or other special file anywhere (inside ``"dir/"`` entries too; a link to one counts), or a nested
+    output folder (a folder with a :data:`META` manifest) where the command is about to write: at one of
+    ``writes`` that it has not written yet, or on the way to a file entry. A nested output folder at or in
+    one of its ``"dir/"`` entries is its own (``demo`` writes ``dataset/`` with ``synth``, ``reproduce``
+    ``runs/*`` with ``train``); any other is another command's, never touched, and left out of the check."""
     def nested(rel: str) -> str | None:  # the command that owns out/rel, or None
         meta = out / rel / META
         if meta.is_symlink() or not meta.is_dir():
@@ -362,8 +371,9 @@ def _check_contents(out: Path, entries: set[str], writes: set[str], command: str
                 if owner is None:
                     below.append(rel + "/")
                     continue
-                if owned or any(rel == e.rstrip("/") or e.startswith(rel + "/") or _known(rel + "/", {e})
-                                for e in entries | writes):
+                if owned or _known(rel + "/", entries):
+                    continue  # at or in a "dir/" entry it wrote: its own, made by another command (demo's dataset/)
+                if any(rel == e.rstrip("/") or e.startswith(rel + "/") for e in entries | writes):
                     raise InvalidOptionError(f"{flag} {out} holds {rel}/, the output folder of freespace {owner}, "
                                              f"where freespace {command} writes its own files; move it away or choose "
                                              f"another {flag}")
