@@ -43,7 +43,7 @@ import pytest
 from freespace.cli import main
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, OutputError
 from freespace.io.codecs import write_image
-from freespace.io.files import atomic_write_bytes, check_writable, write_files_together, write_json
+from freespace.io.files import atomic_write_bytes, check_writable, replaceable, write_files_together, write_json
 from freespace.io.outdir import META, claim_folder
 from freespace.io.video import VideoWriter
 
@@ -294,6 +294,17 @@ def test_outputs_on_a_devtmpfs_dev_are_refused_before_anything_is_written(tmp_pa
         with pytest.raises(OutputError, match="devtmpfs"):
             check_writable(path, folder=folder)
         assert path == "/dev" or not os.path.lexists(path)
+
+
+@pytest.mark.parametrize("path", ["/dev/stdout", "/dev/stderr", "/dev/freespace-probe.json"])
+def test_a_name_in_dev_is_refused_whatever_it_leads_to(path: str) -> None:
+    """``/dev/stdout`` leads to a regular file when the output is redirected to one: the name is still in
+    ``/dev`` (the rename would replace the system's link). Checked only (these checks never write)."""
+    with pytest.raises(FreespaceError, match="/dev"):
+        check_writable(path)
+    with pytest.raises(OutputError, match="/dev"):
+        replaceable(path)
+    assert not os.path.exists("/dev/freespace-probe.json")
 
 
 def test_a_replaced_file_keeps_its_mode_and_owner(tmp_path: Path) -> None:

@@ -83,15 +83,19 @@ def _pseudo_fs(folder: Path) -> str | None:
     return fs if fs in _PSEUDO_FS else None
 
 
-def on_pseudo_fs(path: Path) -> str | None:
+def on_pseudo_fs(path: PathLike, folder: bool = False) -> str | None:
     """Why no output may be written at ``path`` because it lies on a kernel's pseudo file system (``/proc``,
-    ``/sys``, ``devtmpfs``, …; links followed), or None."""
-    real = Path(os.path.realpath(path))
-    existing = real
+    ``/sys``, ``devtmpfs``, …), or None. For a file, the folder that holds its name is checked (a new file
+    is made there and renamed onto the name, a link included); for a ``folder``, the folder itself (links
+    followed), or the nearest existing folder above it."""
+    path = Path(os.path.abspath(os.path.expanduser(os.fspath(path))))
+    existing = Path(os.path.realpath(path if folder else path.parent))
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent
     fs = _pseudo_fs(existing)
-    if fs is None and not (real.is_relative_to("/proc") or real.is_relative_to("/sys")):
+    system = any(existing.is_relative_to(d) for d in ("/proc", "/sys", "/dev")) \
+        and not existing.is_relative_to("/dev/shm")  # (a container's /dev may be a tmpfs: /dev/stdout a link there)
+    if fs is None and not system:
         return None
     return (f"lies on the kernel's {fs or 'system'} file system ({existing}), where no output belongs; choose a path "
             f"on a disk")
@@ -275,13 +279,13 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -
         existing = existing.parent
     if not existing.is_dir():
         try:
-            what = special_kind(os.stat(existing).st_mode) or "a file"
+            what = f"is {special_kind(os.stat(existing).st_mode) or 'a file'}, not a folder; choose another path"
         except OSError:
-            what = "a file"
-        raise OutputError(f"cannot write {flag} {path}: {existing} is {what}, not a folder; choose another path")
+            what = unfollowable_link(existing, folder=True) or "is no folder; choose another path"
+        raise OutputError(f"cannot write {flag} {path}: {existing} {what}")
     if not folder:
         replaceable(path, flag)
-    elif (where := on_pseudo_fs(path)) is not None:
+    elif (where := on_pseudo_fs(path, folder=True)) is not None:
         raise OutputError(f"{flag} {path} {where}")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write {flag} {path}: no permission to write in {existing}; choose a writable "

@@ -438,7 +438,7 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         raise InvalidOptionError(f"{flag} {out} lies inside {meta_above}, where freespace keeps an output folder's "
                                  f"manifest, lock and stages (replaced and deleted by its next run); choose a folder "
                                  f"outside it")
-    pseudo = on_pseudo_fs(out)
+    pseudo = on_pseudo_fs(out, folder=True)
     if pseudo is not None:
         raise OutputError(f"{flag} {out} {pseudo}")
     meta = out / META
