@@ -13,8 +13,10 @@ is written, so every writer follows it):
 * never a character or block device (``/dev/null``), a named pipe, a socket or another special file, nor a
   symbolic link to one: the rename would replace it with a regular file (as root, ``/dev/null`` itself);
 * a symbolic link to a regular file is replaced by the new file (the file it leads to is not written);
-* never on a kernel's pseudo file system (``/proc``, ``/sys``, ``devtmpfs`` ``/dev``, …), nor inside a
-  ``.freespace`` folder (where an output folder keeps its manifest, lock and stages).
+* never a name in ``/proc``, ``/sys`` or ``/dev`` (``/dev/shm`` aside) or on another kernel's pseudo file
+  system, wherever it leads (``/dev/stdout`` may lead to a regular file), nor a link that cannot be followed;
+* never inside a ``.freespace`` folder (where an output folder keeps its manifest, lock and stages; checked
+  by :func:`check_writable` and :func:`freespace.io.outdir.claim_folder`, as the package itself writes there).
 """
 
 from __future__ import annotations
