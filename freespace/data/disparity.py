@@ -33,7 +33,7 @@ from freespace.geometry import StereoCalibration, compute_disparity
 from freespace.geometry.stereo import SGBM_VERSION
 from freespace.geometry.depth import depth_to_disparity
 from freespace.io.codecs import read_disparity
-from freespace.io.files import PathLike, atomic_write_bytes
+from freespace.io.files import PathLike, atomic_write_bytes, check_writable
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +75,8 @@ class DisparityCache:
     def __init__(self, folder: PathLike | None = None, **settings: Any) -> None:
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "freespace" / "sgbm"
         self.folder = Path(folder) if folder is not None else base
+        if folder is not None:  # an output folder the user named: no device, nothing on /proc, … (one line)
+            check_writable(self.folder, "cache_dir", folder=True)
         if self.folder.exists() and not self.folder.is_dir():
             raise InvalidOptionError(f"{param('cache_dir')} {self.folder} is a file; give a folder for the SGBM "
                                      f"disparities")

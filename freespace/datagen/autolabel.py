@@ -68,8 +68,8 @@ from freespace.errors import (
 )
 from freespace.geometry import SGBM_MAX_DISPARITY, RoadModel, compute_disparity, fit_road_model
 from freespace.io.codecs import encode_image, read_disparity, read_image, road_label_to_kitti
-from freespace.io.files import (PathLike, check_outputs, check_writable_files, encode_json, write_json,
-    write_files_together)
+from freespace.io.files import (PathLike, check_outputs, check_writable, check_writable_files, encode_json,
+    write_json, write_files_together)
 from freespace.io.kitti import read_kitti_calib
 from freespace.labels import RoadLabel
 
@@ -598,7 +598,7 @@ def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
     options.check()
     if workers < 1:
         raise InvalidOptionError(f"{param('workers')} must be ≥ 1, got {workers}")
-    out_dir = Path(out_dir)
+    out_dir = check_writable(out_dir, folder=True)  # no device, pipe, /proc, … (freespace.io.files)
     if out_dir.exists() and not out_dir.is_dir():
         raise InvalidOptionError(f"{param('out')} {out_dir} is a file; give a folder for the label tree")
     check_outputs({"out": out_dir}, {"root": dataset.root})

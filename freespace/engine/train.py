@@ -308,7 +308,7 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
             if last.is_file():
                 raise InvalidOptionError(f"{run_dir} already holds a run; add {param('resume')} to continue it or "
                                          f"choose another {param('out')}")
-            log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
+            _check_restart(run_dir)
             folder.forget(RUN_ENTRIES)
             folder.record(RUN_ENTRIES)  # the new run writes them again: still this command's files
         if not resume:  # (a resumed run of an older version records nothing it cannot vouch for)
@@ -319,6 +319,38 @@ def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
             if exc.exit_code == 2 and not last.is_file():
                 folder.forget(RUN_ENTRIES)
             raise
+
+
+#: the files a run writes in its subfolders whose names it knows (a file there that is none of them is the user's)
+_OWN_FILES = {"checkpoints": ("best.ckpt", "last.ckpt"), "splits": ("train.txt", "val.txt", "test.txt")}
+
+
+def _check_restart(run_dir: Path) -> None:
+    """Before a run without ``checkpoints/last.ckpt`` is started again in ``run_dir`` (its files deleted):
+    refuse when ``checkpoints/`` or ``splits/`` holds a file the run does not write (named), and say whether
+    the run had trained (its checkpoints then were removed) or never reached a checkpoint."""
+    for sub, names in _OWN_FILES.items():
+        folder = run_dir / sub
+        for path in sorted(folder.rglob("*")) if folder.is_dir() and not folder.is_symlink() else []:
+            rel = path.relative_to(folder)
+            ours = len(rel.parts) == 1 and any(  # one of its files, or what a killed write of one left
+                rel.name == n or rel.name.startswith(f".{n}.") and rel.name.endswith(".tmp") for n in names)
+            if not ours:
+                raise InvalidOptionError(f"{run_dir} holds a run without checkpoints/last.ckpt, and "
+                                         f"{sub}/{rel.as_posix()}, which freespace train did not write; starting the "
+                                         f"run again deletes {sub}/: move that file away, or choose another "
+                                         f"{param('out')}")
+    try:
+        with (run_dir / "metrics.csv").open(newline="") as f:
+            epochs = sum(1 for _ in csv.DictReader(f))
+    except (OSError, ValueError, csv.Error):
+        epochs = 0
+    if epochs or (run_dir / "checkpoints" / "best.ckpt").is_file():
+        log.warning("%s holds a run that trained %d epoch(s) but whose checkpoints/last.ckpt is gone, so it cannot "
+                    "be resumed: training it again from the start (put last.ckpt back to continue it instead)",
+                    run_dir, epochs)
+    else:
+        log.info("%s holds a run that never reached a checkpoint: starting it again", run_dir)
 
 
 def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> TrainConfig:

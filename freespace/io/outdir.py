@@ -26,6 +26,15 @@ refused, unless the command writing that enclosing folder is this very run (``de
 atomic write leaves beside an entry (``.NAME.XXXXXXXX.tmp``) count as the command's and are removed by the
 next run that holds the folder alone.
 
+Nested output folders: a folder inside the output folder that holds its own manifest is another command's
+output folder (``evaluate --out RUN/eval`` in a training run). It does not block the command, which never
+replaces or deletes anything in it; one that stands where the command is about to write (at an entry it
+has not written yet, on the way to a file entry, or where a staged file would land) is refused. No output
+folder may lie inside a ``.freespace`` folder. A device, pipe, socket or other special file (or a link to
+one) anywhere in the folder is refused, as is a manifest that cannot be read (never opened when it is a
+pipe): the message says so and how to fix it. Files follow :func:`freespace.io.files.replaceable` (no
+special file, no read-only file; a replaced file keeps its mode).
+
 The folder itself is never renamed or replaced, so an output folder that is a symbolic link stays one, and
 ``.`` works. Files are listed in the manifest **before** they are written (in place or by a
 stage), so a run killed half-way leaves only files that its next run knows.
@@ -42,6 +51,7 @@ import json
 import os
 import re
 import shutil
+import stat
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
@@ -49,14 +59,13 @@ from pathlib import Path
 from typing import Any
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError, param
-from freespace.io.files import write_files_together
+from freespace.io.files import (META, inside_meta, keep_mode, on_pseudo_fs, replaceable, special_kind,
+    unfollowable_link, write_files_together)
 
 PathLike = str | os.PathLike[str]
 
-#: the hidden folder of an output folder that holds its manifest, lock and stages
 #: the parameters an output folder's messages name
 OUT, OVERWRITE = param("out"), param("overwrite")
-META = ".freespace"
 MANIFEST = "manifest.json"
 _LOCK = "lock"
 _STAGE = "stage-"
@@ -170,6 +179,17 @@ class OwnedFolder:
                               f"link or choose another {self.flag}")
         return target
 
+    def _not_in_a_nested_folder(self, rel: str) -> None:
+        """Refuse ``rel`` when a folder on its way inside the folder is the output folder of a command (it
+        holds a :data:`META` folder): that command's files are never written over."""
+        parts = rel.split("/")[:-1]
+        for i in range(1, len(parts) + 1):
+            sub = "/".join(parts[:i])
+            if (self.path / sub / META).is_dir():
+                raise OutputError(f"{self.flag} {self.path}: freespace {self.command} would write {rel} inside {sub}/, "
+                                  f"the output folder of another freespace command; move {sub}/ away or choose "
+                                  f"another {self.flag}")
+
     def _clash(self, rel: str) -> OutputError:
         return OutputError(f"{self.flag} {self.path} has a folder {rel} where freespace {self.command} writes a "
                            f"file; move it away or choose another {self.flag}")
@@ -203,10 +223,16 @@ class OwnedFolder:
             clash = next((w for w, t in targets.items() if t.is_dir() and not t.is_symlink()), None)
             if clash is not None:
                 raise self._clash(clash)
+            for w in targets:
+                self._not_in_a_nested_folder(w)
+            old = {w: replaceable(t, f"{self.flag} {self.path}: the output file") for w, t in targets.items()}
             self.record(written)
             for path in files:
-                target = targets[path.relative_to(stage).as_posix()]
+                rel = path.relative_to(stage).as_posix()
+                target = targets[rel]
                 target.parent.mkdir(parents=True, exist_ok=True)
+                if not path.is_symlink():
+                    keep_mode(path, old[rel])
                 os.replace(path, target)
             if stale:
                 self.forget(stale)
@@ -215,21 +241,43 @@ class OwnedFolder:
 
 
 def _read_manifest(path: Path) -> tuple[str | None, list[str]]:
-    """``(command, entries)`` of a manifest file, ``(None, [])`` when there is none or it is unreadable
-    (its folder's files are then nobody's); a :class:`CorruptFileError` when it lists an entry that is no
-    path inside the folder (see :func:`_valid_entry`)."""
+    """``(command, entries)`` of a manifest file, ``(None, [])`` when there is none.
+
+    Raises:
+        CorruptFileError: it is unreadable (not a regular file, not JSON, not the manifest freespace writes),
+            or lists an entry that is no path inside the folder (see :func:`_valid_entry`).
+    """
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None, []
+    except OSError as exc:
+        raise _unreadable(path, exc.strerror) from None
+    kind = "a folder" if stat.S_ISDIR(st.st_mode) else special_kind(st.st_mode)
+    if kind is not None:  # never opened: a named pipe would block the reader
+        raise _unreadable(path, f"it is {kind}")
     try:
         data = json.loads(path.read_text())
         command, entries = data["command"], data["entries"]
-        if not (isinstance(command, str) and isinstance(entries, list) and all(isinstance(e, str) for e in entries)):
-            return None, []
-    except (OSError, ValueError, KeyError, TypeError):
-        return None, []
+    except OSError as exc:
+        raise _unreadable(path, exc.strerror) from None
+    except (ValueError, KeyError, TypeError):
+        raise _unreadable(path, "not the JSON manifest freespace writes") from None
+    if not (isinstance(command, str) and isinstance(entries, list) and all(isinstance(e, str) for e in entries)):
+        raise _unreadable(path, "not the JSON manifest freespace writes")
     bad = next((e for e in entries if not _valid_entry(e)), None)
     if bad is not None:
         raise CorruptFileError(f"{path} lists {bad!r}, which is no path inside its folder (edited by hand?); "
                                f"freespace follows no such entry: remove it from the manifest")
     return command, entries
+
+
+def _unreadable(path: Path, why: str) -> CorruptFileError:
+    """The error for the unreadable manifest ``path`` (``OUT/.freespace/manifest.json``)."""
+    folder = path.parent.parent
+    return CorruptFileError(f"the output folder {folder} has an unreadable manifest {path} ({why}), so which of its "
+                            f"files freespace wrote is unknown and none is touched; choose another output folder, or "
+                            f"empty {folder} (its {META} included) to write it anew")
 
 
 def _write_manifest(path: Path, command: str, entries: set[str]) -> None:
@@ -251,9 +299,21 @@ def _open_lock(path: Path) -> int:
     """A file descriptor of the lock file ``path`` (created if missing; a symbolic link is refused, so a
     planted link never makes a file elsewhere)."""
     try:
-        return os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666 & ~_umask())
+        kind = special_kind(os.lstat(path).st_mode)
+    except OSError:
+        kind = None
+    if kind is not None:  # never opened: a named pipe or a device is no lock
+        raise OutputError(f"{path} is {kind}, not the lock file freespace writes; remove it or choose another "
+                          f"output folder")
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o666 & ~_umask())
     except OSError as exc:
         raise OutputError(f"cannot write {path}: {exc.strerror}; remove it or choose another output folder") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise OutputError(f"{path} is no regular file, not the lock file freespace writes; remove it or choose "
+                          f"another output folder")
+    return fd
 
 
 def _enclosing(out: Path) -> tuple[Path, str, str] | None:
@@ -273,26 +333,72 @@ def _enclosing(out: Path) -> tuple[Path, str, str] | None:
     return None
 
 
-def _unknown_file(out: Path, entries: set[str]) -> str | None:
-    """The first file or folder in ``out`` (sorted, depth first) that ``entries`` does not cover, or None."""
-    for root, dirs, files in os.walk(out):
-        rel_root = Path(root).relative_to(out).as_posix()
-        prefix = "" if rel_root == "." else rel_root + "/"
-        if not prefix:
-            dirs[:] = [d for d in dirs if d != META]
-        dirs.sort()
-        for name in sorted(files):
-            if not _known(prefix + name, entries):
-                return prefix + name
-        for name in list(dirs):
-            rel = prefix + name
-            if _known(rel + "/", entries):
-                dirs.remove(name)  # a whole subtree of the command's
-            elif not any(e.startswith(rel + "/") for e in entries):
-                if not any(os.scandir(out / rel)):
-                    continue  # an empty folder holds nothing to lose
-                return rel + "/"
-    return None
+def _check_contents(out: Path, entries: set[str], writes: set[str], command: str, flag: str) -> None:
+    """Refuse ``out`` when it holds something ``command`` may not replace (sorted, depth first): a file
+    that ``entries`` (its manifest) does not cover (named; empty folders hold nothing), a device, pipe,
+    socket or other special file anywhere (inside ``"dir/"`` entries too; a link to one counts), or a nested
+    output folder (a folder with a :data:`META` manifest) where the command is about to write: at one of
+    ``writes`` that it has not written yet, or on the way to a file entry. A nested output folder at or in
+    one of its ``"dir/"`` entries is its own (``demo`` writes ``dataset/`` with ``synth``, ``reproduce``
+    ``runs/*`` with ``train``); any other is another command's, never touched, and left out of the check."""
+    def nested(rel: str) -> str | None:  # the command that owns out/rel, or None
+        meta = out / rel / META
+        if meta.is_symlink() or not meta.is_dir():
+            return None
+        try:
+            owner, _ = _read_manifest(meta / MANIFEST)
+        except CorruptFileError:
+            raise InvalidOptionError(f"{flag} {out} holds {rel}/, an output folder of freespace with an unreadable "
+                                     f"manifest, so what it holds is unknown; move {rel}/ away, or empty it (its "
+                                     f"{META} included)") from None
+        return owner
+
+    stack = [""]
+    while stack:
+        prefix = stack.pop()
+        try:
+            items = sorted(os.scandir(out / prefix) if prefix else os.scandir(out), key=lambda e: e.name)
+        except OSError as exc:
+            raise OutputError(f"cannot read {flag} {out / prefix}: {exc.strerror}; choose another {flag}") from None
+        owned = bool(prefix) and _known(prefix, entries)  # inside a "dir/" entry: the command's
+        below: list[str] = []
+        for item in items:
+            rel = prefix + item.name
+            if not prefix and item.name == META:
+                continue
+            if item.is_dir(follow_symlinks=False):
+                owner = nested(rel)
+                if owner is None:
+                    below.append(rel + "/")
+                    continue
+                if owned or _known(rel + "/", entries):
+                    continue  # at or in a "dir/" entry it wrote: its own, made by another command (demo's dataset/)
+                if any(rel == e.rstrip("/") or e.startswith(rel + "/") for e in entries | writes):
+                    raise InvalidOptionError(f"{flag} {out} holds {rel}/, the output folder of freespace {owner}, "
+                                             f"where freespace {command} writes its own files; move it away or choose "
+                                             f"another {flag}")
+                continue  # another command's output folder: never touched
+            mode = stat.S_IFREG  # from the folder listing: no stat for a regular file
+            if not item.is_file(follow_symlinks=False):
+                try:
+                    mode = item.stat(follow_symlinks=item.is_symlink()).st_mode
+                except OSError:
+                    mode = stat.S_IFLNK  # a dangling link
+            kind = special_kind(mode) if not stat.S_ISLNK(mode) else None
+            if kind is not None:
+                link = " through a symbolic link" if item.is_symlink() else ""
+                raise InvalidOptionError(f"{flag} {out} holds {rel}, {kind}{link}, which freespace {command} did not "
+                                         f"write and never replaces; move it away or choose another {flag}")
+            if stat.S_ISDIR(mode):  # a link to a folder: covered as a file or a "dir/" entry, or empty
+                if owned or _known(rel, entries) or _known(rel + "/", entries) or not any(os.scandir(item.path)) \
+                        or any(e.startswith(rel + "/") for e in entries):  # entries behind it: see _inside
+                    continue
+                raise InvalidOptionError(f"{flag} {out} holds {rel}/ (a link to a folder), which freespace {command} "
+                                         f"did not write; choose a new or empty folder, or move it away")
+            if not owned and not _known(rel, entries):
+                raise InvalidOptionError(f"{flag} {out} holds {rel}, which freespace {command} did not write; choose "
+                                         f"a new or empty folder, or move that file away")
+        stack.extend(reversed(below))  # depth first, in name order
 
 
 @contextmanager
@@ -316,8 +422,25 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         OutputError: it cannot be created or written.
     """
     out, flag = Path(out), param(name)
+    unfollowable = unfollowable_link(out, folder=True)
+    if unfollowable is not None:
+        raise InvalidOptionError(f"{flag} {out} {unfollowable}")
+    try:
+        kind = special_kind(os.stat(out).st_mode)
+    except OSError:
+        kind = None
+    if kind is not None:
+        raise InvalidOptionError(f"{flag} {out} is {kind}, not a folder; give a folder")
     if out.exists() and not out.is_dir():
         raise InvalidOptionError(f"{flag} {out} is a file; give a folder")
+    meta_above = inside_meta(out)
+    if meta_above is not None:
+        raise InvalidOptionError(f"{flag} {out} lies inside {meta_above}, where freespace keeps an output folder's "
+                                 f"manifest, lock and stages (replaced and deleted by its next run); choose a folder "
+                                 f"outside it")
+    pseudo = on_pseudo_fs(out, folder=True)
+    if pseudo is not None:
+        raise OutputError(f"{flag} {out} {pseudo}")
     meta = out / META
     if meta.is_symlink() or (meta.exists() and not meta.is_dir()):
         raise InvalidOptionError(f"{flag} {out} holds {META}, which is not a folder but a link or a file; "
@@ -332,10 +455,7 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         if owner is not None and owner != command:
             raise InvalidOptionError(f"{flag} {out} holds the output of freespace {owner}; choose another {flag} for "
                                      f"freespace {command}")
-        stray = _unknown_file(out, set(known))
-        if stray is not None:
-            raise InvalidOptionError(f"{flag} {out} holds {stray}, which freespace {command} did not write; choose a "
-                                     f"new or empty folder, or move that file away")
+        _check_contents(out, set(known), {str(e) for e in entries}, command, flag)
     existing = out
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent  # the folders below it are created here, and removed if left empty

@@ -34,7 +34,7 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
 from freespace.io.codecs import IMAGE_SUFFIXES, read_image
-from freespace.io.files import PathLike
+from freespace.io.files import PathLike, keep_mode, replaceable
 
 __all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path",
            "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "DEFAULT_FPS"]
@@ -44,8 +44,6 @@ DEFAULT_FPS = 10.0
 """Frame rate given to folders and globs of images (KITTI's cameras run at 10 Hz)."""
 
 _GLOB_CHARS = re.compile(r"[*?\[]")
-_UMASK = os.umask(0)
-os.umask(_UMASK)
 
 
 @contextlib.contextmanager
@@ -265,6 +263,7 @@ class VideoWriter:
             self.abort()
 
     def _open(self, h: int, w: int) -> None:
+        replaceable(self.path)  # no device, pipe or read-only file: before the first frame is encoded
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.stem}.", suffix=".tmp.mp4")
@@ -320,7 +319,7 @@ class VideoWriter:
         try:
             if tmp.stat().st_size == 0:
                 raise OutputError(f"the MP4 encoder wrote nothing for {self.path}")
-            os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files
+            keep_mode(tmp, replaceable(self.path))  # mkstemp makes 0600 files: a replaced file's mode, or 0666 & ~umask
             os.replace(tmp, self.path)
         except OSError as exc:
             self.abort()
