@@ -1,6 +1,6 @@
 """The bounds of the numeric options: each declared once, with its type, and checked before any work.
 
-A number the user gives (a flag, a YAML value of ``train --config``) is refused in one line, naming it, when it
+A number the user gives (a flag, or a value of a training config file) is refused in one line, naming it, when it
 is not of its type, not finite, or outside its bounds; a bound says what no real use needs and what would exhaust
 the machine or end in a traceback deep inside a library (``islice`` refuses a stop beyond ``sys.maxsize``; a
 Python int too large for C ends a process pool; 100 000 loader processes fork the machine to a halt).
@@ -12,7 +12,7 @@ Python int too large for C ends a process pool; 100 000 loader processes fork th
 * Worker processes: at most :data:`WORKERS_PER_CORE` per CPU core this process may run on
   (:func:`max_workers`): the work is CPU-bound, so more processes only share the same cores (and memory).
 
-Torch-free: ``freespace generate`` imports this.
+Torch-free: the generate command imports this.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ MAX_INLIER_THRESHOLD_PX = 1000.0
 
 
 def usable_cores() -> int:
-    """The CPU cores this process may run on (its affinity: a SLURM job's ``--cpus-per-task``), at least 1."""
+    """The CPU cores this process may run on (its affinity: the cores a SLURM job was given), at least 1."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):
@@ -87,6 +87,8 @@ def check_workers(workers: int, name: str = "workers") -> int:
 
 
 def _number(x: float) -> str:
+    if isinstance(x, int):
+        return str(x)
     short = f"{x:g}"
     return short if float(short) == x else repr(x)
 
@@ -115,19 +117,18 @@ class Bounded:
         return self.high() if callable(self.high) else self.high
 
     def describe(self) -> str:
-        """What a value must be: ``"an integer in 1…1024"``, ``"a finite number in (0, 10)"``, ``"≥ 0"``."""
-        what = "an integer" if self.kind is int else "a finite number"
+        """What a value must be, as :class:`~freespace.engine.config.TrainConfig` says it of a YAML value:
+        ``"an integer in [1, 1024]"``, ``"in (0, 10)"``, ``"≥ 0"`` (a float is finite in any case)."""
+        what = "an integer " if self.kind is int else ""
         low, high = self.low, self.upper()
-        if self.kind is int and not self.low_open and not self.high_open and low is not None and high is not None:
-            return f"{what} in {_number(low)}…{_number(high)}"
         if low is not None and high is not None:
-            return (f"{what} in {'(' if self.low_open else '['}{_number(low)}, {_number(high)}"
+            return (f"{what}in {'(' if self.low_open else '['}{_number(low)}, {_number(high)}"
                     f"{')' if self.high_open else ']'}")
         if low is not None:
-            return f"{what} {'>' if self.low_open else '≥'} {_number(low)}"
+            return f"{what}{'>' if self.low_open else '≥'} {_number(low)}"
         if high is not None:
-            return f"{what} {'<' if self.high_open else '≤'} {_number(high)}"
-        return what
+            return f"{what}{'<' if self.high_open else '≤'} {_number(high)}"
+        return what.strip() or "a finite number"
 
     def check(self, value: float) -> float:
         """``value`` when it lies within the bounds, else :class:`InvalidOptionError` (``"must be …, got …"``)."""
@@ -161,7 +162,7 @@ def bounded_float(low: float | None = None, high: float | Callable[[], float] | 
 
 
 def bounded_triple(most: float) -> Callable[[str], str]:
-    """The type of an option of three numbers ``A,B,C`` (a pose: ``--shift``, ``--rotate``), each finite with
+    """The type of an option of three numbers ``A,B,C`` (a virtual camera's move or rotation), each finite with
     ``|x| < most``; returns the text unchanged (the library parses it)."""
     def triple(text: str) -> str:
         parts = [p for p in text.replace(",", " ").split() if p]

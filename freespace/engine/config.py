@@ -94,7 +94,10 @@ def parse_augment(value: str | tuple[str, ...]) -> tuple[str, ...]:
 
 
 def _number(x: float) -> str:
-    """The shortest spelling of ``x`` that reads back as ``x`` (``0.0`` → ``"0"``, ``0.5`` → ``"0.5"``)."""
+    """The shortest spelling of ``x`` that reads back as ``x`` (``0.0`` → ``"0"``, ``0.5`` → ``"0.5"``; an int
+    as itself)."""
+    if isinstance(x, int):
+        return str(x)
     short = f"{x:g}"
     return short if float(short) == x else repr(x)
 
