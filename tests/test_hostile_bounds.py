@@ -120,6 +120,8 @@ def test_train_workers_beyond_the_machine_are_refused_before_work(tmp_path: Path
     err = refused(capsys, ["train", "--dataset", "synth", "--root", str(data), "--workers", str(max_workers() + 1),
                            "--out", str(tmp_path / "run")], match="--workers")
     assert "per CPU core" in err
+    refused(capsys, ["train", "--dataset", "synth", "--root", str(data), "--devices", str(max_workers() + 1),
+                     "--out", str(tmp_path / "run")], match="--devices")  # one process per device on a CPU
     assert not (tmp_path / "run").exists()
     config = tmp_path / "c.yaml"  # a run's config.yaml from a larger machine: the same check
     config.write_text(f"dataset: synth\nroot: {data}\nworkers: {max_workers() + 1}\n")

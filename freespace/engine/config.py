@@ -314,6 +314,7 @@ class TrainConfig:
                 raise InvalidOptionError(f"{param('tensorboard')} needs the tensorboard package: pip install "
                                          f"tensorboard") from None
         check_workers(self.workers)  # this machine's bound: config.yaml may come from a larger one
+        check_workers(self.devices, "devices")  # one process per device (on a CPU: per requested device)
         _check_encoder(self.model, self.preset, self.encoder_name, self.encoder_weights)
         check_dataset_root(self.root, get_dataset_class(self.dataset).name)
         if self.labels is not None and not Path(self.labels).is_dir():
