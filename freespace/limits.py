@@ -138,7 +138,9 @@ class Bounded:
               and (low is None or (value > low if self.low_open else value >= low))
               and (high is None or (value < high if self.high_open else value <= high)))
         if not ok:
-            raise InvalidOptionError(f"must be {self.describe()}{f' ({self.why})' if self.why else ''}, got {value!r}")
+            finite = "a finite number " if isinstance(value, float) and not math.isfinite(value) else ""
+            raise InvalidOptionError(f"must be {finite}{self.describe()}{f' ({self.why})' if self.why else ''}, "
+                                     f"got {value!r}")
         return value
 
     def __call__(self, text: str) -> int | float:
