@@ -57,7 +57,7 @@ def refused(capsys: pytest.CaptureFixture, argv: list[str], *, match: str | None
     return err
 
 
-def _options(kinds: tuple[type, ...] | None = None) -> list[tuple[list[str], argparse.Action]]:
+def _options() -> list[tuple[list[str], argparse.Action]]:
     """``(command words, action)`` of every option of every command that takes a value."""
     found = []
 
