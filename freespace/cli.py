@@ -22,9 +22,16 @@ from pathlib import Path
 from typing import Any
 
 from freespace import __version__
-from freespace.errors import FreespaceError, InvalidOptionError, Terminated
+from freespace.errors import MAX_SEED, FreespaceError, InvalidOptionError, Terminated, param
+from freespace.limits import (MAX_BASELINE_M, MAX_BATCH_SIZE, MAX_CURB_HEIGHT_M, MAX_DISPARITY_PX, MAX_EPOCHS, MAX_FRAME_COUNT,
+                              MAX_INLIER_THRESHOLD_PX, MAX_LIDAR_FILL_PX, MAX_NOISE_PX, MAX_POSE, WORKERS_PER_CORE,
+                              bounded_float, bounded_int, bounded_triple, max_workers)
 
 # --- options shared by several commands ----------------------------------------------------------------
+
+#: worker processes (generate, autolabel, synth): at most a few per CPU core of this machine
+_WORKERS = bounded_int(1, max_workers, why=f"{WORKERS_PER_CORE} per CPU core")
+_SEED = bounded_int(0, MAX_SEED)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -35,6 +42,20 @@ class _Parser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-(\.?\d|inf|nan)", re.IGNORECASE)
+
+    def _get_value(self, action: argparse.Action, arg_string: str) -> Any:
+        """An empty value ('' or blanks: a path that would be the current folder) and a value of an option of this
+        module's types (:class:`~freespace.limits.Bounded`: out of its bounds, or no number) are refused in one
+        line naming the option (argparse's own message comes with the usage)."""
+        if action.option_strings and isinstance(arg_string, str) and not arg_string.strip():  # '' = the current folder
+            raise InvalidOptionError(f"{param(action.dest)} is empty; give it a value"
+                                     + ("" if action.required else ", or leave it out"))
+        if action.type is not None and not isinstance(action.type, type):  # Bounded, _range: one line
+            try:
+                return action.type(arg_string)
+            except (InvalidOptionError, argparse.ArgumentTypeError) as exc:
+                raise InvalidOptionError(f"{param(action.dest)} {exc}") from None
+        return super()._get_value(action, arg_string)
 
 
 def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, required: bool = True,
@@ -107,6 +128,17 @@ def _check_mode(parser: argparse.ArgumentParser, args: argparse.Namespace, modes
         raise InvalidOptionError(f"{mode.what} needs {', '.join(missing)}{mode.hint} (see --help)")
 
 
+def _refuse_folders(args: argparse.Namespace, names: Sequence[str]) -> None:
+    """Refuse a folder given to an option that reads one file (``names``: argparse ``dest``), first: later checks
+    would blame something else (an output inside that "input folder")."""
+    from freespace.errors import InputFileError
+
+    for name in names:
+        value = getattr(args, name, None)
+        if value is not None and os.path.isdir(value):
+            raise InputFileError(f"{param(name)} {value} is a folder; give a file")
+
+
 def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], options: Any, done: str,
                  needs_right: str | None = None) -> int:
     """The dataset mode of ``generate`` and ``autolabel``: ``run`` (``generate_dataset``, ``autolabel_dataset``)
@@ -147,9 +179,9 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
                       "--shift/--rotate through the road plane (from --disparity's fit, else Tr_cam_to_road)")
     virt.add_argument("--calib", metavar="CALIB.txt",
                       help="KITTI calibration (P2, P3; Tr_cam_to_road without --disparity)")
-    virt.add_argument("--shift", metavar="DX,DY,DZ",
+    virt.add_argument("--shift", metavar="DX,DY,DZ", type=bounded_triple(MAX_POSE),
                       help="camera centre move in metres (+x right, +y down; default 0,0,0)")
-    virt.add_argument("--rotate", metavar="ROLL,PITCH,YAW", help="degrees about z, x, y, R = R_yaw·R_pitch·R_roll; "
+    virt.add_argument("--rotate", metavar="ROLL,PITCH,YAW", type=bounded_triple(MAX_POSE), help="degrees about z, x, y, R = R_yaw·R_pitch·R_roll; "
                       "positive pitch looks down, positive yaw left (default 0,0,0)")
     virt.add_argument("--label-out", metavar="VL.png", help="the view's label, KITTI colours (don't care black)")
     g = p.add_argument_group("dataset")
@@ -158,23 +190,24 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
     g.add_argument("--disparity-source", dest="disparity_source", choices=DISPARITY_SOURCES, default="auto",
                    help="auto: file, else depth + camera, else cached SGBM (default); depth: depth maps only "
                         "(KITTI: depth_u16/); lidar: Velodyne scans only (KITTI: velodyne/<frame>.bin)")
-    g.add_argument("--lidar-densify", type=float, metavar="PX",
+    g.add_argument("--lidar-densify", type=bounded_float(0, MAX_LIDAR_FILL_PX), metavar="PX",
                    help="--disparity-source lidar: fill holes within PX pixels of a point with its value "
                         "(default: keep the sparse map, which is all the road fit needs)")
     g.add_argument("--cache-dir", metavar="DIR", help="SGBM disparity cache (default ~/.cache/freespace/sgbm)")
     g.add_argument("--shard", metavar="K/N", help="only the K-th of N disjoint parts of the frames (K from 1, "
                                                   "e.g. ${SLURM_ARRAY_TASK_ID}/N); totals go to "
                                                   "summary.shard-K-of-N.json and report.shard-K-of-N.csv")
-    p.add_argument("--workers", type=int, default=1, help="processes, for --dataset (default 1)")
+    p.add_argument("--workers", type=_WORKERS, default=1, help="processes, for --dataset (default 1)")
     p.add_argument("--out", required=True, help="output image (one pair) or folder (dataset)")
     p.add_argument("--overwrite", action="store_true",
                    help="--dataset: replace what an earlier run with other settings generated in --out")
     g = p.add_argument_group("road fit")
-    g.add_argument("--inlier-threshold", type=float, default=1.0, metavar="PX",
+    g.add_argument("--inlier-threshold", type=bounded_float(0, MAX_INLIER_THRESHOLD_PX, low_open=True), default=1.0,
+                   metavar="PX",
                    help="disparity residual (pixels) above which a road pixel is an outlier (default 1.0)")
     g.add_argument("--no-robust", dest="robust", action="store_false",
                    help="plain least squares over all valid road pixels (no outlier rejection)")
-    g.add_argument("--max-disparity", type=int, default=SGBM_MAX_DISPARITY, metavar="PX",
+    g.add_argument("--max-disparity", type=bounded_int(1, MAX_DISPARITY_PX), default=SGBM_MAX_DISPARITY, metavar="PX",
                    help="SGBM search range when no disparity is given (default %(default)s)")
     p.set_defaults(func=cmd_generate, parser=p)
 
@@ -197,6 +230,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
     mode = "virtual" if args.virtual else "dataset" if args.dataset else "pair"
     _check_mode(args.parser, args, _GENERATE_MODES, mode)
+    _refuse_folders(args, ("reference", "target", "road_mask", "disparity", "calib"))
     options = FitOptions(robust=args.robust, inlier_threshold=args.inlier_threshold, max_disparity=args.max_disparity)
     if mode == "virtual":
         from freespace.datagen.generate import generate_virtual_pair
@@ -227,6 +261,7 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     from freespace.data.disparity import DISPARITY_SOURCES
     from freespace.datagen.autolabel import AutolabelOptions
     from freespace.geometry import SGBM_MAX_DISPARITY
+    from freespace.geometry.road_model import CAMERA_HEIGHT_RANGE_M
 
     one = p.add_argument_group("one image")
     one.add_argument("--reference", metavar="L.png", help="left image")
@@ -236,29 +271,33 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     one.add_argument("--confidence", metavar="C.png", help="also write the label's confidence (8-bit grey PNG)")
     one.add_argument("--model-json", metavar="M.json", help="also write the road model and statistics as JSON")
     one.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration: the baseline from P2/P3")
-    one.add_argument("--baseline", type=float, metavar="B", help="the baseline in metres (instead of --calib)")
+    one.add_argument("--baseline", type=bounded_float(0, MAX_BASELINE_M, low_open=True), metavar="B", help="the baseline in metres (instead of --calib)")
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
     g.add_argument("--disparity-source", dest="disparity_source", default="auto",
                    choices=[s for s in DISPARITY_SOURCES if s != "none"],  # a label needs a disparity
                    help="auto: file, else depth + camera, else cached SGBM (default); depth, lidar, sgbm: only that")
-    g.add_argument("--lidar-densify", type=float, metavar="PX", help="--disparity-source lidar: fill holes within "
+    g.add_argument("--lidar-densify", type=bounded_float(0, MAX_LIDAR_FILL_PX), metavar="PX",
+                   help="--disparity-source lidar: fill holes within "
                                                                       "PX pixels of a point")
     g.add_argument("--cache-dir", metavar="DIR", help="SGBM disparity cache (default ~/.cache/freespace/sgbm)")
     g.add_argument("--shard", metavar="K/N", help="only the K-th of N disjoint parts of the frames (K from 1)")
-    g.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    g.add_argument("--workers", type=_WORKERS, default=1, help="processes (default 1)")
     g.add_argument("--overwrite", action="store_true",
                    help="replace what an earlier run with other settings labelled in --out")
     p.add_argument("--out", required=True, help="label image LABEL.png (one image) or folder (dataset)")
     d = AutolabelOptions()
     g = p.add_argument_group("method")
-    g.add_argument("--curb-height", type=float, default=d.curb_height, metavar="M",
+    g.add_argument("--curb-height", type=bounded_float(0, MAX_CURB_HEIGHT_M, low_open=True), default=d.curb_height,
+                   metavar="M",
                    help="smallest step off the road to tell apart, metres (default %(default)s)")
-    g.add_argument("--camera-height", type=float, default=d.camera_height, metavar="M",
-                   help="camera height above the road when the baseline is unknown (default %(default)s)")
-    g.add_argument("--noise", type=float, metavar="PX", help="disparity noise in pixels (default: estimated)")
-    g.add_argument("--max-disparity", type=int, default=SGBM_MAX_DISPARITY, metavar="PX",
+    g.add_argument("--camera-height", type=bounded_float(*CAMERA_HEIGHT_RANGE_M, why="the heights every road fit "
+                                                         "keeps"), default=d.camera_height, metavar="M",
+                   help=f"camera height above the road when the baseline is unknown, {CAMERA_HEIGHT_RANGE_M[0]:g}–"
+                        f"{CAMERA_HEIGHT_RANGE_M[1]:g} m (default %(default)s)")
+    g.add_argument("--noise", type=bounded_float(0, MAX_NOISE_PX, low_open=True), metavar="PX", help="disparity noise in pixels (default: estimated)")
+    g.add_argument("--max-disparity", type=bounded_int(1, MAX_DISPARITY_PX), default=SGBM_MAX_DISPARITY, metavar="PX",
                    help="SGBM search range (default %(default)s)")
     p.set_defaults(func=cmd_autolabel, parser=p)
 
@@ -277,6 +316,7 @@ def cmd_autolabel(args: argparse.Namespace) -> int:
 
     mode = "dataset" if args.dataset else "one"
     _check_mode(args.parser, args, _AUTOLABEL_MODES, mode)
+    _refuse_folders(args, ("reference", "target", "disparity", "calib"))
     options = AutolabelOptions(curb_height=args.curb_height, camera_height=args.camera_height, noise=args.noise,
                                max_disparity=args.max_disparity)
     if mode == "one":
@@ -297,20 +337,25 @@ def _range(text: str) -> tuple[float, float]:
     try:
         lo, hi = (float(x) for x in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected MIN,MAX (two numbers), got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"must be MIN,MAX (two numbers), got {text!r}") from None
     return lo, hi
 
 
 def _synth_parser(p: argparse.ArgumentParser) -> None:
+    from freespace.data.synthetic.dataset import MAX_FRAMES
+    from freespace.data.synthetic.scene import MAX_ROLL_DEG
+    from freespace.io.codecs import MAX_IMAGE_SIDE
+
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--num", type=int, required=True, help="number of frames")
-    p.add_argument("--width", type=int, default=640, help="image width (default 640)")
-    p.add_argument("--height", type=int, default=480, help="image height (default 480)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--frames-per-scenario", type=int, default=10, help="frames per drive (default 10)")
+    p.add_argument("--num", type=bounded_int(1, MAX_FRAMES), required=True, help="number of frames")
+    p.add_argument("--width", type=bounded_int(32, MAX_IMAGE_SIDE), default=640, help="image width (default 640)")
+    p.add_argument("--height", type=bounded_int(32, MAX_IMAGE_SIDE), default=480, help="image height (default 480)")
+    p.add_argument("--seed", type=_SEED, default=0, help="random seed (default 0)")
+    p.add_argument("--frames-per-scenario", type=bounded_int(1, MAX_FRAMES), default=10,
+                   help="frames per drive (default 10)")
     p.add_argument("--non-planar", action="store_true", help="roads with slopes and camber")
-    p.add_argument("--baseline", type=float, help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
-    p.add_argument("--max-roll", dest="max_roll_deg", type=float, default=3.0,
+    p.add_argument("--baseline", type=bounded_float(0, MAX_BASELINE_M, low_open=True), help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
+    p.add_argument("--max-roll", dest="max_roll_deg", type=bounded_float(0, MAX_ROLL_DEG), default=3.0,
                    help="rig roll range ± degrees, at most 15 (default 3)")
     p.add_argument("--baselines", type=_range, default=(0.3, 1.6), metavar="MIN,MAX",
                    help="baseline range in metres, drawn per drive when --baseline is not given (default 0.3,1.6)")
@@ -319,7 +364,7 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pitches", dest="pitches_deg", type=_range, default=(-2.0, 2.0), metavar="MIN,MAX",
                    help="rig pitch range in degrees, positive = looking down at the road (default -2,2)")
     p.add_argument("--weather", help="comma-separated subset of clear,cloudy,rain,sunset,dusk,fog (default all)")
-    p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    p.add_argument("--workers", type=_WORKERS, default=1, help="processes (default 1)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace a dataset rendered with other settings in --out (default: refuse)")
     p.set_defaults(func=cmd_synth)
@@ -352,7 +397,7 @@ def _datasets_parser(p: argparse.ArgumentParser) -> None:
                                    "when there is none.")
     _add_dataset_root(q, split=False)
     q.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of user-supplied disparities")
-    q.add_argument("--seed", type=int, default=0, help="seed of the train/val/test split shown (default 0)")
+    q.add_argument("--seed", type=_SEED, default=0, help="seed of the train/val/test split shown (default 0)")
     _split_options(q, "shown")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.set_defaults(func=cmd_datasets_info)
@@ -363,7 +408,7 @@ def _datasets_parser(p: argparse.ArgumentParser) -> None:
                                    "first, then val, then test; never interleaved frames, which at 10 Hz are near "
                                    "duplicates), and write train.txt, val.txt, test.txt (frame names).")
     _add_dataset_root(q)
-    q.add_argument("--seed", type=int, default=0, help="shuffling seed (default 0)")
+    q.add_argument("--seed", type=_SEED, default=0, help="shuffling seed (default 0)")
     _split_options(q, "written")
     q.add_argument("--out", required=True, help="folder for the list files")
     q.set_defaults(func=cmd_datasets_split)
@@ -378,7 +423,7 @@ def _split_options(q: argparse.ArgumentParser, what: str) -> None:
     q.add_argument("--fractions", metavar="TRAIN,VAL,TEST",
                    help="shares of the frames (default: the paper's sizes by scenario, 0.6,0.2,0.2 by time), "
                         "e.g. 0.8,0,0.2")
-    q.add_argument("--gap", type=int, default=0, metavar="N",
+    q.add_argument("--gap", type=bounded_int(0, MAX_FRAME_COUNT), default=0, metavar="N",
                    help="--by time: frames of each drive left out between two blocks (default 0)")
 
 
@@ -477,6 +522,8 @@ def _config_file_options(argv: Sequence[str]) -> dict[str, Any] | None:
     if len(known.config) > 1:  # the last would win without a word, as a key given twice in one file would
         raise InvalidOptionError(f"--config is given {len(known.config)} times ({', '.join(known.config)}); give one "
                                  f"file (flags given as well override it)")
+    if not known.config[0].strip():
+        raise InvalidOptionError("--config is empty; give it a YAML file, or leave it out")
     from freespace.engine.config import read_config_yaml
 
     return read_config_yaml(known.config[0])
@@ -559,12 +606,13 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
     src.add_argument("--onnx", help="a model exported with `freespace export --format onnx`")
     p.add_argument("--input", required=True, help="an image, a folder of images, a quoted glob ('frames/*.png') "
                                                    "or a video")
-    p.add_argument("--batch-size", type=int, default=4, help="frames per network call (default 4)")
+    p.add_argument("--batch-size", type=bounded_int(1, MAX_BATCH_SIZE), default=4,
+                   help="frames per network call (default 4)")
     p.add_argument("--shard", metavar="K/N", help="only the K-th of N disjoint parts of the images, by file name "
                                                   "(K from 1); shards share --out")
     p.add_argument("--no-overlays", action="store_true",
                    help="write the confidence PNGs only, not overlays/ (for real time: an overlay PNG costs ~3 masks)")
-    p.add_argument("--threads", type=int, help="ONNX Runtime threads (default: the cores this process may use)")
+    p.add_argument("--threads", type=_WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--out", required=True, help="output folder (PNGs), or OUT.mp4: the overlaid video")
     p.set_defaults(func=cmd_predict)
@@ -583,10 +631,6 @@ def cmd_predict(args: argparse.Namespace) -> int:
     video = is_video_path(args.out)
     if video and shard:
         raise InvalidOptionError("--shard writes frames into a folder; a video --out is one file: leave out --shard")
-    if args.batch_size < 1:
-        raise InvalidOptionError("--batch-size must be ≥ 1")
-    if args.threads is not None and args.threads < 1:
-        raise InvalidOptionError("--threads must be ≥ 1")
     if video and args.no_overlays:
         raise InvalidOptionError("--no-overlays leaves out the overlay PNGs of a folder --out; a video --out is the "
                                  "overlay: leave out --no-overlays")
@@ -663,9 +707,11 @@ REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "val_window", "min
 
 
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:
+    from freespace.experiments.reproduce import MAX_SEEDS
+
     _add_config_options(p, REPRODUCE_OPTIONS, values={"dataset": None, "root": None})  # not with --tables
     p.add_argument("--models", help="all (the paper's six networks) or a comma-separated list (default all)")
-    p.add_argument("--seeds", type=int, default=3, help="seeds per network and variant (default 3)")
+    p.add_argument("--seeds", type=bounded_int(1, MAX_SEEDS), default=3, help="seeds per network and variant (default 3)")
     p.add_argument("--variants", help="comma-separated arms: X, HA-X (DS-Generator views), "
                    "X-dup (the control: X with HA-X's number of steps), X-long (X with twice the epochs and "
                    "patience), HV-X (road-plane virtual views), HAV-X (both), X-auto (training labels from "
@@ -717,11 +763,14 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def _demo_parser(p: argparse.ArgumentParser) -> None:
+    from freespace.data.synthetic.dataset import MAX_FRAMES
+
     p.add_argument("--out", default="demo_out", help="output folder (default demo_out)")
-    p.add_argument("--num", dest="num_frames", type=int, default=60, help="number of rendered frames (default 60)")
+    p.add_argument("--num", dest="num_frames", type=bounded_int(1, MAX_FRAMES), default=60,
+                   help="number of rendered frames (default 60)")
     p.add_argument("--full", action="store_true", help="the six-network protocol with three seeds (long)")
-    p.add_argument("--epochs", type=int, help="training epochs (default 12; 30 with --full)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--epochs", type=bounded_int(1, MAX_EPOCHS), help="training epochs (default 12; 30 with --full)")
+    p.add_argument("--seed", type=_SEED, default=0, help="random seed (default 0)")
     p.set_defaults(func=cmd_demo)
 
 

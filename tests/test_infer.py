@@ -136,7 +136,7 @@ def test_inference_mistakes(trained: dict[str, Path], tmp_path: Path, capsys: py
     images = trained["data"] / "data_road" / "training" / "image_2"
     assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--batch-size", "0",
                  "--out", str(tmp_path / "p")]) == 2
-    assert "--batch-size must be ≥ 1" in capsys.readouterr().err and not (tmp_path / "p").exists()
+    assert "--batch-size must be an integer in [1, 1024], got 0" in capsys.readouterr().err and not (tmp_path / "p").exists()
     assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(tmp_path / "none"), "--out",
                  str(tmp_path / "p")]) == 2
     assert "input not found" in capsys.readouterr().err

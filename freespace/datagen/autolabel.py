@@ -49,6 +49,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -123,6 +124,12 @@ class AutolabelOptions:
         for name, value in positive.items():
             if not 0 < value < math.inf:
                 raise InvalidOptionError(f"{param(name)} must be a finite number > 0, got {value}")
+        from freespace.geometry.road_model import CAMERA_HEIGHT_RANGE_M
+
+        if not CAMERA_HEIGHT_RANGE_M[0] <= self.camera_height <= CAMERA_HEIGHT_RANGE_M[1]:
+            raise InvalidOptionError(f"{param('camera_height')} must be {CAMERA_HEIGHT_RANGE_M[0]:g}–"
+                                     f"{CAMERA_HEIGHT_RANGE_M[1]:g} m (the heights every road fit keeps), got "
+                                     f"{self.camera_height}")
         if self.noise is not None and not 0 < self.noise < math.inf:
             raise InvalidOptionError(f"{param('noise')} must be a finite number of pixels > 0, got {self.noise}")
         if not 1 < self.band < math.inf:
@@ -201,6 +208,12 @@ def _fit_seed(disparity: np.ndarray, valid: np.ndarray, max_roll_deg: float) -> 
             continue
         try:
             model = fit_road_model(disparity, region, inlier_threshold=1.0)
+        except RoadFitError as exc:  # its words are for a labelled road; autolabel reads no label
+            failure = RoadFitError(f"the disparity of the lower image fits no road plane ({re.split('[:;]', str(exc))[0]}); "
+                                   f"check that the disparity is the left image's and that the road fills the lower "
+                                   f"image centre")
+            continue
+        try:
             _check_road_plane(model, max_roll_deg)
             return model
         except RoadFitError as exc:

@@ -34,6 +34,8 @@ from pydantic.fields import FieldInfo
 from freespace.errors import MAX_SEED, CorruptFileError, DatasetError, InputFileError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE, load_yaml
 from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable
+from freespace.limits import (MAX_BATCH_SIZE, MAX_DEVICES, MAX_EPOCHS, MAX_FRAME_COUNT, MAX_NODES, MAX_WEIGHT_DECAY,
+                              MAX_WORKERS, Bounded, check_workers)
 
 __all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "weights_path", "resolved_path", "parse_augment", "augment_text", "ranges_text", "parse_size",
            "AUGMENTS", "AUGMENT_NAMES", "FIRST_FRAME_SIZE", "PRESETS", "STRATEGIES"]
@@ -114,7 +116,10 @@ def parse_augment(value: str | tuple[str, ...]) -> tuple[str, ...]:
 
 
 def _number(x: float) -> str:
-    """The shortest spelling of ``x`` that reads back as ``x`` (``0.0`` → ``"0"``, ``0.5`` → ``"0.5"``)."""
+    """The shortest spelling of ``x`` that reads back as ``x`` (``0.0`` → ``"0"``, ``0.5`` → ``"0.5"``; an int
+    as itself)."""
+    if isinstance(x, int):
+        return str(x)
     short = f"{x:g}"
     return short if float(short) == x else repr(x)
 
@@ -175,7 +180,10 @@ def parse_size(value: str | tuple[int, int] | list[int] | None) -> tuple[int, in
 
 
 def _path_text(value: Any) -> Any:
-    return os.fspath(value) if isinstance(value, os.PathLike) else value
+    value = os.fspath(value) if isinstance(value, os.PathLike) else value
+    if isinstance(value, str) and not value.strip():  # Path("") is the current folder
+        raise ValueError("must be a path, not empty")
+    return value
 
 
 Augment = Annotated[tuple[str, ...], BeforeValidator(_augment), PlainSerializer(augment_text)]
@@ -250,13 +258,13 @@ class TrainConfig:
                                f"duplicate (the control of homography) adds every training frame that has a "
                                f"DS-Generator view once more, unchanged, so that it takes as many steps per epoch",
                                (), choices=AUGMENTS)
-    epochs: Annotated[int, Field(ge=1)] = _option("most epochs", 50)
-    batch_size: Annotated[int, Field(ge=1)] = _option("training batch size", 4)
+    epochs: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = _option("most epochs", 50)
+    batch_size: Annotated[int, Field(ge=1, le=MAX_BATCH_SIZE)] = _option("training batch size", 4)
     lr: Annotated[float, Field(gt=0, lt=10)] = _option("SGD learning rate", 0.001)
     momentum: Annotated[float, Field(ge=0, lt=1)] = _option("SGD momentum", 0.9)
-    weight_decay: Annotated[float, Field(ge=0)] = _option("SGD weight decay", 0.0)
-    patience: Annotated[int, Field(ge=1)] = _option("early-stopping patience in epochs", 10)
-    val_window: Annotated[int, Field(ge=1)] = _option("early stopping and the best checkpoint follow the validation "
+    weight_decay: Annotated[float, Field(ge=0, le=MAX_WEIGHT_DECAY)] = _option("SGD weight decay", 0.0)
+    patience: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = _option("early-stopping patience in epochs", 10)
+    val_window: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = _option("early stopping and the best checkpoint follow the validation "
                                                       "F-score averaged over the last N epochs (1: each epoch's own)",
                                                       1, metavar="N")
     min_delta: Annotated[float, Field(ge=0, lt=1)] = _option("early stopping counts an epoch as better only when the "
@@ -266,13 +274,14 @@ class TrainConfig:
                                     FIRST_FRAME_SIZE, metavar="HxW")
     seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = _option("seed of the split, the data order, the augmentation "
                                                              "and the weights", 0)
-    devices: Annotated[int, Field(ge=1)] = _option("processes or GPUs", 1)
-    num_nodes: Annotated[int, Field(ge=1)] = _option("machines, for multi-node DDP (see the README)", 1)
+    devices: Annotated[int, Field(ge=1, le=MAX_DEVICES)] = _option("processes or GPUs", 1)
+    num_nodes: Annotated[int, Field(ge=1, le=MAX_NODES)] = _option("machines, for multi-node DDP (see the README)", 1)
     strategy: str = _option("ddp: one process per device", "auto", choices=STRATEGIES)
-    workers: Annotated[int, Field(ge=0)] = _option("data-loading processes", 0)
+    workers: Annotated[int, Field(ge=0, le=MAX_WORKERS)] = _option("data-loading processes (at most 4 per CPU core "
+                                                                   "of the machine that trains)", 0)
     splits_dir: PathText | None = _option("train.txt/val.txt/test.txt to use (default: the paper's split)", None,
                                           metavar="DIR")
-    max_frames: Annotated[int, Field(ge=3)] | None = _option("use only the first N labelled frames (quick runs; "
+    max_frames: Annotated[int, Field(ge=3, le=MAX_FRAME_COUNT)] | None = _option("use only the first N labelled frames (quick runs; "
                                                              "train, val and test need one each)", None, metavar="N")
     labels: PathText | None = _option("road labels of the training frames from this label tree (written by "
                                       "`freespace autolabel` for the dataset: DIR/<frame>.png, KITTI colours) instead "
@@ -329,6 +338,8 @@ class TrainConfig:
             except ImportError:
                 raise InvalidOptionError(f"{param('tensorboard')} needs the tensorboard package: pip install "
                                          f"tensorboard") from None
+        check_workers(self.workers)  # this machine's bound: config.yaml may come from a larger one
+        check_workers(self.devices, "devices")  # one process per device (on a CPU: per requested device)
         _check_encoder(self.model, self.preset, self.encoder_name, self.encoder_weights)
         check_dataset_root(self.root, get_dataset_class(self.dataset).name)
         if self.labels is not None and not Path(self.labels).is_dir():
@@ -706,8 +717,9 @@ class Option:
     ``name``: the field's. ``help``: its text (parameters in it written with :func:`~freespace.errors.param`).
     ``default``: as config.yaml spells it (None: none; TrainConfig parses the spelling). ``required``: no
     default. ``choices``: the values, for the help (TrainConfig checks them). ``kind``: the type an interface
-    converts its text to — ``bool`` (a switch), ``int``, ``float`` or ``str`` (passed on as text, which
-    TrainConfig parses).
+    converts its text to — ``bool`` (a switch), a :class:`~freespace.limits.Bounded` int or float (the bounds
+    declared in the field's type: text out of them is refused as TrainConfig refuses the value) or ``str``
+    (passed on as text, which TrainConfig parses).
     """
 
     name: str
@@ -716,7 +728,7 @@ class Option:
     required: bool
     choices: tuple[str, ...] | None
     metavar: str | None
-    kind: type
+    kind: type | Bounded
 
 
 def _kind(hint: Any) -> type:
@@ -727,6 +739,17 @@ def _kind(hint: Any) -> type:
         args = [a for a in get_args(hint) if a is not type(None)]
         return _kind(args[0]) if len(args) == 1 else str
     return hint if hint in (bool, int, float) else str
+
+
+def _bounded(hint: Any) -> type | Bounded:
+    """:func:`_kind`, a number's as a :class:`~freespace.limits.Bounded` of the bounds its type declares."""
+    kind, b = _kind(hint), _bounds(hint)
+    if kind is int:
+        return Bounded(int, b["ge"] if "ge" in b else b["gt"] + 1 if "gt" in b else None,
+                       b["le"] if "le" in b else b["lt"] - 1 if "lt" in b else None)
+    if kind is float:
+        return Bounded(float, b.get("ge", b.get("gt")), b.get("le", b.get("lt")), "gt" in b, "lt" in b)
+    return kind
 
 
 def options(names: Iterable[str] | None = None, values: Mapping[str, Any] | None = None) -> list[Option]:
@@ -743,5 +766,5 @@ def options(names: Iterable[str] | None = None, values: Mapping[str, Any] | None
         default = values[f.name] if given else None if f.default is MISSING else f.default
         plain = _adapters()[f.name].dump_python(_typed(f.name, default)) if default is not None else None
         found.append(Option(f.name, f.metadata["help"], plain, f.default is MISSING and not given, _choices(f.name),
-                            f.metadata.get("metavar"), _kind(_hint(f.name))))
+                            f.metadata.get("metavar"), _bounded(_hint(f.name))))
     return found

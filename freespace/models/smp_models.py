@@ -57,12 +57,13 @@ def smp_kwargs(arch: str, options: dict[str, Any]) -> dict[str, Any]:
 def _build(arch: str, num_classes: int, encoder_weights: str | None, **options: Any) -> SmpModel:
     import segmentation_models_pytorch as smp
 
-    from freespace.models.weights import load_encoder_weights, smp_weights
+    from freespace.models.weights import hub_offline, load_encoder_weights, smp_weights
 
     cls = {"unet": smp.Unet, "deeplabv3plus": smp.DeepLabV3Plus}[arch]
     downloaded = smp_weights(options["encoder_name"], encoder_weights)
     try:
-        net = cls(encoder_weights=downloaded, classes=num_classes, **smp_kwargs(arch, options))
+        with hub_offline():  # no network at run time: the hub's cache, else a one-line error at once
+            net = cls(encoder_weights=downloaded, classes=num_classes, **smp_kwargs(arch, options))
     except FreespaceError:
         raise
     except (KeyError, ValueError, TypeError) as exc:
