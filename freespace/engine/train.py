@@ -27,8 +27,9 @@ from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from freespace.data.torch_dataset import RoadSegmentationDataset
-import os
-import re
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, changed_inputs, content_hashes
+from freespace.engine.data import EpochSampler, is_rank_zero, loader_context, prepare_data
+from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, Terminated, TrainingError, param
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
 from freespace.io.outdir import claim_folder
