@@ -104,3 +104,18 @@ def write_velodyne(path: Path, points: np.ndarray) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(np.asarray(points).astype("<f4").tobytes())
     return path
+
+
+def refused(capsys: pytest.CaptureFixture, argv: list[str], *, match: str | None = None) -> str:
+    """Run the command in-process; assert exit 2 and exactly one line on stderr; return that line."""
+    capsys.readouterr()
+    from freespace.cli import main
+
+    code = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert code == 2, f"exit {code}, stderr: {err!r}"
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert err.startswith("freespace: error: "), err
+    if match is not None:
+        assert match.lower() in err.lower(), err
+    return err

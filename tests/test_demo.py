@@ -52,6 +52,8 @@ def test_demo_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
 
 def test_demo_mistake(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["demo", "--out", str(tmp_path), "--num", "0"]) == 2
+    assert "--num must be an integer in [1, " in capsys.readouterr().err and list(tmp_path.iterdir()) == []
+    assert main(["demo", "--out", str(tmp_path), "--num", "5"]) == 2  # a number, but too few frames to train
     assert "--num must be in 16…" in capsys.readouterr().err and list(tmp_path.iterdir()) == []
 
 

@@ -197,7 +197,7 @@ def test_lidar_and_depth_mistakes(lidar_root, tmp_path: Path, capsys: pytest.Cap
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "has a depth map" in err and not (tmp_path / "d").exists()
     assert main(base + ["--disparity-source", "lidar", "--lidar-densify", "-1", "--out", str(tmp_path / "d")]) == 2
-    assert "--lidar-densify must be a number of pixels ≥ 0" in capsys.readouterr().err
+    assert "--lidar-densify must be in [0, 1000], got -1" in capsys.readouterr().err
     assert main(base + ["--lidar-densify", "2", "--out", str(tmp_path / "d")]) == 2
     assert "--lidar-densify is for --disparity-source lidar" in capsys.readouterr().err
     assert not (tmp_path / "d").exists()

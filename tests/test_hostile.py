@@ -24,7 +24,7 @@ from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.io.codecs import write_disparity, write_image
 
-from helpers import synthetic_pair
+from helpers import refused, synthetic_pair
 
 SMALL = SynthConfig(width=160, height=128, frames_per_scenario=2)
 
@@ -37,18 +37,6 @@ def snapshot(*paths: Path) -> dict[str, bytes]:
             files[str(f)] = f.read_bytes()
     return files
 
-
-def refused(capsys: pytest.CaptureFixture, argv: list[str], *, match: str | None = None) -> str:
-    """Run the command in-process; assert exit 2 and exactly one line on stderr; return that line."""
-    capsys.readouterr()
-    code = main(argv)
-    err = capsys.readouterr().err.strip()
-    assert code == 2, f"exit {code}, stderr: {err!r}"
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    assert err.startswith("freespace: error: "), err
-    if match is not None:
-        assert match.lower() in err.lower(), err
-    return err
 
 
 def run_cli(*args: str, timeout: float = 120, **kw) -> subprocess.CompletedProcess:
@@ -895,12 +883,17 @@ def test_issue20_all_black_ground_truth_scores_nothing(tmp_path: Path, capsys: p
     assert not (tmp_path / "s.json").exists()
 
 
-def test_issue20_all_black_frames_train_without_nan(trained: dict[str, Path], tmp_path: Path) -> None:
+def test_issue20_all_black_frames_are_refused_not_trained(trained: dict[str, Path], tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture) -> None:
+    """Every label all don't care: no pixel to learn from. Issue 20 asked for no NaN; issue 44 (D12) for a
+    refusal before any epoch, since such a run learns nothing at loss 0."""
     root = _kitti_root(trained, tmp_path)
     for gt in (root / "data_road" / "training" / "gt_image_2").iterdir():
-        write_image(gt, np.zeros((128, 160, 3), np.uint8))  # every label all don't care: no pixel to learn from
-    assert main(["train", "--dataset", "synth", "--root", str(root), "--model", "segnet", "--epochs", "1",
-                 "--batch-size", "1", "--image-size", "64x64", "--no-progress", "--out", str(tmp_path / "run")]) == 0
+        write_image(gt, np.zeros((128, 160, 3), np.uint8))
+    refused(capsys, ["train", "--dataset", "synth", "--root", str(root), "--model", "segnet", "--epochs", "1",
+                     "--batch-size", "1", "--image-size", "64x64", "--no-progress", "--out", str(tmp_path / "run")],
+            match="has a labelled pixel")
+    assert not (tmp_path / "run" / "checkpoints").exists()
 
 
 def test_issue20_evaluate_kitti_refuses_colour_predictions(trained: dict[str, Path], tmp_path: Path,

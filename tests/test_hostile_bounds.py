@@ -33,28 +33,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from freespace.cli import build_parser, main
+from freespace.cli import build_parser
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.io.codecs import write_disparity, write_image
 from freespace.limits import Bounded, max_workers
 
-from helpers import synthetic_pair
+from helpers import refused, synthetic_pair
 
 SMALL = SynthConfig(width=160, height=128, frames_per_scenario=2)
 HOSTILE_NUMBERS = ["99999999999999999999", "-99999999999999999999", "nan", "inf", "-inf", "1e400", "x", "1,2"]
 
-
-def refused(capsys: pytest.CaptureFixture, argv: list[str], *, match: str | None = None) -> str:
-    """Run the command in-process; assert exit 2 and exactly one line on stderr; return that line."""
-    capsys.readouterr()
-    code = main(argv)
-    err = capsys.readouterr().err.strip()
-    assert code == 2, f"exit {code}, stderr: {err!r}"
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    assert err.startswith("freespace: error: "), err
-    if match is not None:
-        assert match.lower() in err.lower(), err
-    return err
 
 
 def _options() -> list[tuple[list[str], argparse.Action]]:

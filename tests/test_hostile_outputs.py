@@ -47,22 +47,10 @@ from freespace.io.files import atomic_write_bytes, check_writable, replaceable, 
 from freespace.io.outdir import META, claim_folder
 from freespace.io.video import VideoWriter
 
-from helpers import TRAINED_ARGS, synthetic_pair
+from helpers import TRAINED_ARGS, refused, synthetic_pair
 
 # ------------------------------------------------------------------------------------------------- helpers
 
-
-def refused(capsys: pytest.CaptureFixture, argv: list[str], *, match: str | None = None) -> str:
-    """Run the command in-process; assert exit 2 and exactly one line on stderr; return that line."""
-    capsys.readouterr()
-    code = main(argv)
-    err = capsys.readouterr().err.strip()
-    assert code == 2, f"exit {code}, stderr: {err!r}"
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    assert err.startswith("freespace: error: "), err
-    if match is not None:
-        assert match.lower() in err.lower(), err
-    return err
 
 
 def _node(path: Path, kind: str) -> Callable[[], bool]:

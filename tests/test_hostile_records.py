@@ -44,7 +44,7 @@ import pytest
 from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.engine.config import TrainConfig, read_config_yaml
-from freespace.errors import CorruptFileError, DatasetError, FreespaceError, InvalidOptionError
+from freespace.errors import CorruptFileError, InvalidOptionError
 from freespace.io.codecs import encode_image, load_yaml, read_image
 
 SIZE = ["--image-size", "64x96"]

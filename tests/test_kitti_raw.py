@@ -243,7 +243,7 @@ def test_split_options_are_refused_in_one_line(tmp_path: Path, capsys: pytest.Ca
     make_drive(tmp_path / "raw", frames=3)
     for extra, message in ((["--gap", "2"], "--gap is for --by time"),
                            (["--by", "time", "--fractions", "0.9,0.2"], "--fractions must be three numbers"),
-                           (["--by", "time", "--gap", "-1"], "--gap must be a whole number")):
+                           (["--by", "time", "--gap", "-1"], "--gap must be an integer in [0, ")):
         assert main(["datasets", "split", "--dataset", "kitti-raw", "--root", str(tmp_path / "raw"), "--out",
                      str(tmp_path / "s"), *extra]) == 2
         assert message in _one_line_error(capsys)

@@ -469,5 +469,5 @@ def test_pretrained_weights_fail_clearly_offline(monkeypatch: pytest.MonkeyPatch
 
     monkeypatch.setattr(smp.encoders, "get_encoder", offline)
     for name in ("gscnn", "dupsampling"):
-        with pytest.raises(PretrainedWeightsError, match="encoder_weights=None"):
+        with pytest.raises(PretrainedWeightsError, match="not in the Hugging Face cache"):
             create_model(name, encoder_weights="imagenet")

@@ -347,7 +347,7 @@ def test_int8_export_mistakes_are_one_line(files: dict[str, Path], tmp_path: Pat
 
 
 def test_predict_option_mistakes_are_one_line(files: dict[str, Path], tmp_path: Path, capsys) -> None:
-    for extra, message in ((["--threads", "0", "--out", str(tmp_path / "o")], "--threads must be ≥ 1"),
+    for extra, message in ((["--threads", "0", "--out", str(tmp_path / "o")], "--threads must be an integer in [1, "),
                            (["--no-overlays", "--out", str(tmp_path / "o.mp4")], "leave out --no-overlays")):
         assert main(["predict", "--onnx", str(files["onnx"]), "--input", str(files["frames"]), "--no-progress",
                      *extra]) == 2

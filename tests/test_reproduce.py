@@ -235,7 +235,7 @@ def test_a_larger_cap_or_patience_extends_a_finished_cell(data: Path, same_rigs:
 
 @pytest.mark.parametrize("extra, message", [
     (["--models", "fcn"], "unknown models"),
-    (["--seeds", "0"], "--seeds must be in 1…1000"),
+    (["--seeds", "0"], "--seeds must be an integer in [1, 1000]"),
     (["--only", "fcn,X,0"], "--only: unknown network 'fcn'"),
     (["--only", "unet,HB-X,0"], "--only: unknown variant 'HB-X'"),
     (["--only", "unet,X,3"], "--only: the seed must be an integer in 0…2"),

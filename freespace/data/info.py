@@ -10,7 +10,7 @@ import numpy as np
 from freespace.data.base import Problem, StereoRoadDataset, check_dataset_root
 from freespace.data.registry import get_dataset, get_dataset_class
 from freespace.data.splits import check_split_by, split_frames
-from freespace.errors import DatasetError, FreespaceError, InputFileError
+from freespace.errors import DatasetError, FreespaceError, InputFileError, param
 from freespace.io.codecs import read_disparity, read_raw
 from freespace.io.files import PathLike
 from freespace.io.kitti import read_velodyne
@@ -147,7 +147,7 @@ def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int 
             empty = [k for k, v in entry["paper_split"].items() if not v]
             if empty and by == "scenario":
                 sizes = "/".join(str(v) for v in entry["paper_split"].values())
-                blocks = "" if own_labels else ", or split each drive into time blocks (--by time)"
+                blocks = "" if own_labels else f", or split each drive into time blocks ({param('by')} time)"
                 problems.append(Problem("split", f"the train/val/test split by scenario ({sizes}, seed {seed}) leaves "
                                                  f"{' and '.join(empty)} empty: {len(labelled)} "
                                                  f"{'labelled ' if own_labels else ''}frames in "

@@ -11,7 +11,7 @@ Expected tree (KITTI raw's own layout, as its ``*_sync.zip`` and ``*_calib.zip``
                                                                  (optional)
 
 ``<date>`` is ``YYYY_MM_DD``, ``<frame>`` the ten-digit frame number. Any number of days and drives may
-sit under ``ROOT``; ``--root`` may also be one date folder or one drive folder (the calibration is then
+sit under ``ROOT``; ``root`` may also be one date folder or one drive folder (the calibration is then
 read from the drive's parent). Other folders (``image_00``/``image_01``: the grey cameras, ``oxts``,
 ``*_extract``: the unrectified recording) are ignored.
 

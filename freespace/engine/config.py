@@ -565,10 +565,10 @@ def check_label_tree(folder: PathLike, dataset: str, root: PathLike, split: str 
             raise DatasetError(f"{param(option)} {folder} labels another dataset: `freespace autolabel` made it for "
                                f"{k} {theirs[k]}, not {ours[k]} (frames of the same names are other images); label "
                                f"this one with `freespace autolabel` ({dataset} at {root}) and give that tree")
-    files = label_files(folder)
+    dataset_root = resolved_path(os.fspath(folder)) == resolved_path(os.fspath(root)) or any(
+        (folder / name).exists() for name in ("freespace.yaml", "training", "data_road"))
+    files = {} if dataset_root else label_files(folder)  # a dataset root's images are no labels
     if not files:
-        dataset_root = resolved_path(os.fspath(folder)) == resolved_path(os.fspath(root)) or any(
-            (folder / name).exists() for name in ("freespace.yaml", "training", "data_road"))
         what = "a dataset root, not a label tree" if dataset_root else "no <frame>.png"
         raise DatasetError(f"{param(option)} {folder} holds {what}; give the folder that `freespace autolabel` "
                            f"wrote for the dataset (<frame>.png in KITTI colours)")

@@ -27,7 +27,7 @@ atomic write leaves beside an entry (``.NAME.XXXXXXXX.tmp``) count as the comman
 next run that holds the folder alone.
 
 Nested output folders: a folder inside the output folder that holds its own manifest is another command's
-output folder (``evaluate --out RUN/eval`` in a training run). It does not block the command, which never
+output folder (``freespace evaluate --out RUN/eval`` in a training run). It does not block the command, which never
 replaces or deletes anything in it; one that stands where the command is about to write (at an entry it
 has not written yet, on the way to a file entry, or where a staged file would land) is refused. No output
 folder may lie inside a ``.freespace`` folder. A device, pipe, socket or other special file (or a link to
