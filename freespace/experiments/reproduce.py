@@ -462,6 +462,8 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
             entry["status"] = (statuses or {}).get(run_dir.name, "done")
             entry["metrics"] = {k: metrics[k] for k in (*METRICS, "max_f", "ap")}
             entry.update(_convergence(metrics, config))
+            if isinstance(metrics.get("record"), dict):  # the commit, data root and torch that finished the run
+                entry["record"] = metrics["record"]
             for path in sorted(run_dir.glob("*/metrics.json")):  # further test sets: RUN/<name>/metrics.json
                 name = path.parent.name
                 if name in _RESERVED_TEST_SETS:
