@@ -26,8 +26,8 @@
 # both); plan.md names the values the run fixes. A larger PATIENCE or CAP extends the finished cells exactly.
 # Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace, PYTHON=its python; STOP_AT: a
 #        `date` time after which no new cell starts, e.g. "14:10", or "2026-11-26 00:50" past midnight;
-#        CELLS="net,variant,seed ..." to run only those; KEEP=DIR to keep the finished cells elsewhere than
-#        beside this script). Run it from a git worktree pinned at one commit (git worktree add --detach DIR
+#        CELLS="net,variant,seed ..." to run only those; JOBS=1 for one cell at a time (default 2); KEEP=DIR
+#        to keep the finished cells elsewhere than beside this script). Run it from a git worktree pinned at one commit (git worktree add --detach DIR
 #        COMMIT), so that other work does not change the code under the cells; the commit of each session's
 #        cells is in plan.md.
 set -euo pipefail
@@ -102,7 +102,7 @@ if [ -n "${CELLS:-}" ]; then
   printf '%s\n' $CELLS
 else
   for s in $(seq 0 $((SEEDS - 1))); do for n in $NETS; do for v in $VARIANTS; do echo "$n,$v,$s"; done; done; done
-fi | xargs -P 2 -I{} bash -c 'cell {}'
+fi | xargs -P "${JOBS:-2}" -I{} bash -c 'cell {}'
 
 # the tables of every finished cell, copied beside this script
 $FS reproduce --tables --out "$RES" > "logs/$RES-tables.log" 2>&1 || { tail -3 "logs/$RES-tables.log"; exit 1; }
