@@ -24,6 +24,8 @@
 # LR and MIN_DELTA set the learning rate and early stopping's least improvement (defaults 0.001 and 0, the
 # session-1 pilot's), PATIENCE and CAP the patience and the epoch cap (defaults 10 and 100; X-long doubles
 # both); plan.md names the values the run fixes. A larger PATIENCE or CAP extends the finished cells exactly.
+# X-long starts as X's run of the seed continued (reproduce copies X's folder with its checkpoints and extends
+# it), so X's cell must have finished in this WORK first; an X-long queued beside its X fails until X is done.
 # Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace, PYTHON=its python; STOP_AT: a
 #        `date` time after which no new cell starts, e.g. "14:10", or "2026-11-26 00:50" past midnight;
 #        CELLS="net,variant,seed ..." to run only those; JOBS=1 for one cell at a time (default 2); KEEP=DIR
