@@ -60,7 +60,9 @@ mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
 [ -d autolabels ] || $FS autolabel --dataset synth --root syn --disparity-source sgbm --out autolabels
 # the data are made anew on a new machine: they must be those of the cells already finished (datacheck.py beside
 # this script: labels, disparities, calibrations and rig tables byte for byte, as session 2 made them; images
-# and autolabels within a CPU's float rounding), or the run would mix two datasets
+# and autolabels within a CPU's float rounding), or the run would mix two datasets. The autolabels must be made by
+# the package at f341a7f: since ca4bddf (the padded matcher) `autolabel` makes other ones, which the check refuses;
+# from a later pin, make them first in WORK with a worktree at f341a7f on PYTHONPATH (session 21, plan.md)
 PY=${PYTHON:-$(dirname "$(command -v "$FS")")/python}
 $PY "$DIR/datacheck.py" . "$DIR" || exit 1
 
