@@ -5,7 +5,8 @@ The run folder holds ``config.yaml`` (resolved options), ``splits/`` (train/val/
 numbered from 1 as ``best_epoch`` in metrics.json),
 ``checkpoints/best.ckpt`` and ``checkpoints/last.ckpt`` (written atomically) and, at the end,
 ``metrics.json`` (test split: accuracy, precision, recall, f_score, iou, max_f, ap as fractions, seconds
-per frame). ``resume=True`` continues from ``last.ckpt``; with the same seed on a CPU the result is the
+per frame; ``record``: the package commit, data root and torch version that finished the run, never compared
+on resume). ``resume=True`` continues from ``last.ckpt``; with the same seed on a CPU the result is the
 same as an uninterrupted run's: data order, augmentation and dropout are drawn from (seed, epoch).
 """
 
@@ -29,6 +30,7 @@ from lightning.pytorch.plugins.io import TorchCheckpointIO
 from freespace.data.torch_dataset import RoadSegmentationDataset
 from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, changed_inputs, content_hashes
 from freespace.engine.data import EpochSampler, is_rank_zero, loader_context, prepare_data
+from freespace.engine.record import run_record
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, Terminated, TrainingError, param
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
@@ -430,6 +432,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                "first_epoch": FIRST_EPOCH, "epochs_run": trainer.current_epoch,
                "frames": {k: len(data[k]) for k in ("train", "val", "test")}, "image_size": list(size),
                "checkpoint": best.relative_to(run_dir).as_posix()}
+    metrics["record"] = run_record(config.root)  # the commit, data root and torch that finished the run
     if trainer.is_global_zero:
         write_json(run_dir / "metrics.json", metrics)
     return metrics

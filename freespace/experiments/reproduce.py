@@ -41,6 +41,7 @@ import json
 import logging
 import math
 import re
+import shutil
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -341,6 +342,7 @@ def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool
     from freespace.engine.train import run_training
 
     run_dir = Path(config.out)
+    _continue_base_run(config)
     grown = _check_cell(config)
     finished = (run_dir / "metrics.json").is_file()
     tests = parse_test_roots(test_root)
@@ -359,6 +361,56 @@ def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool
     for name, root in tests.items():
         evaluate_test_set(run_dir, config.dataset, root, name)
     return status
+
+
+def _base_variant(spec: Variant) -> Variant | None:
+    """The variant whose run ``spec``'s continues: the one with the same training (augment, labels) and a budget
+    of 1 (X for X-long), or None (``spec`` has a budget of 1, or no such variant)."""
+    if spec.budget == 1:
+        return None
+    return next((v for v in VARIANTS.values() if v.budget == 1 and (v.augment, v.labels) == (spec.augment, spec.labels)),
+                None)
+
+
+def _continue_base_run(config: TrainConfig) -> None:
+    """Start a new cell of a variant with a larger budget (X-long) as its base variant's run (X's, same network
+    and seed) continued: X's config, splits, per-epoch CSV and checkpoints are copied into the new run folder,
+    which :func:`run_cell` then extends from X's ``last.ckpt`` with the larger cap and patience. Its epochs up to
+    X's stop are then X's, byte for byte, whatever machine or software runs the extension (a run trained anew
+    equals X's only where both ran on the same machine, software and data bytes).
+
+    Does nothing when the cell's folder already holds a run, when the variant has no base, or when X's folder
+    is missing (X not run here: the cell trains from scratch, as before). Otherwise X's folder must hold a
+    finished run with its ``last.ckpt`` (an unfinished one, or one whose checkpoints were not kept, e.g. copied
+    from another machine, is refused in one line), started with the cell's settings but for the budget (else
+    one line: which setting differs)."""
+    from freespace.engine.train import RUN_ENTRIES
+
+    run_dir = Path(config.out)
+    named = _RUN_NAME.fullmatch(run_dir.name)
+    spec = _BY_TAG.get(named["tag"]) if named else None
+    base_spec = _base_variant(spec) if spec else None
+    if base_spec is None or (run_dir / "config.yaml").is_file():
+        return
+    base = run_dir.parent / _name(named["model"], base_spec.name, int(named["seed"]))
+    if not (base / "config.yaml").is_file():
+        return
+    if not (base / "metrics.json").is_file() or not (base / "checkpoints" / "last.ckpt").is_file():
+        missing = "is unfinished" if not (base / "metrics.json").is_file() else "has no checkpoints/last.ckpt"
+        raise InvalidOptionError(f"{run_dir.name} continues {base.name}'s run, which {missing}; run {base_spec.name}'s "
+                                 f"cell to its end on this machine first (or move {base} away to train "
+                                 f"{run_dir.name} from scratch)")
+    _check_cell(replace(config, out=str(base), epochs=config.epochs // spec.budget,
+                        patience=config.patience // spec.budget))  # X started with the cell's settings
+    with claim_folder(base, "train", entries=RUN_ENTRIES):  # X's lock: nothing writes X while it is copied
+        with claim_folder(run_dir, "train", entries=RUN_ENTRIES):
+            log.info("%s starts as %s's run continued", run_dir.name, base.name)
+            for name in ("splits", "checkpoints"):
+                (run_dir / name).mkdir(exist_ok=True)
+                for path in sorted((base / name).glob("*.txt" if name == "splits" else "*.ckpt")):
+                    shutil.copy2(path, run_dir / name / path.name)
+            for name in ("metrics.csv", "config.yaml"):  # config last: a folder with it holds a run
+                shutil.copy2(base / name, run_dir / name)
 
 
 def evaluate_test_set(run_dir: PathLike, dataset: str, test_root: PathLike,
@@ -507,6 +559,8 @@ def _collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[di
             entry["status"] = (statuses or {}).get(run_dir.name, "done")
             entry["metrics"] = {k: metrics[k] for k in (*METRICS, "max_f", "ap")}
             entry.update(_convergence(metrics, config))
+            if isinstance(metrics.get("record"), dict):  # the commit, data root and torch that finished the run
+                entry["record"] = metrics["record"]
             for path in sorted(run_dir.glob("*/metrics.json")):  # further test sets: RUN/<name>/metrics.json
                 name = path.parent.name
                 if name in _RESERVED_TEST_SETS:

@@ -24,10 +24,12 @@
 # LR and MIN_DELTA set the learning rate and early stopping's least improvement (defaults 0.001 and 0, the
 # session-1 pilot's), PATIENCE and CAP the patience and the epoch cap (defaults 10 and 100; X-long doubles
 # both); plan.md names the values the run fixes. A larger PATIENCE or CAP extends the finished cells exactly.
+# X-long starts as X's run of the seed continued (reproduce copies X's folder with its checkpoints and extends
+# it), so X's cell must have finished in this WORK first; an X-long queued beside its X fails until X is done.
 # Usage: bash run.sh WORK [STOP_AT]   (FREESPACE=/path/to/.venv/bin/freespace, PYTHON=its python; STOP_AT: a
 #        `date` time after which no new cell starts, e.g. "14:10", or "2026-11-26 00:50" past midnight;
-#        CELLS="net,variant,seed ..." to run only those; KEEP=DIR to keep the finished cells elsewhere than
-#        beside this script). Run it from a git worktree pinned at one commit (git worktree add --detach DIR
+#        CELLS="net,variant,seed ..." to run only those; JOBS=1 for one cell at a time (default 2); KEEP=DIR
+#        to keep the finished cells elsewhere than beside this script). Run it from a git worktree pinned at one commit (git worktree add --detach DIR
 #        COMMIT), so that other work does not change the code under the cells; the commit of each session's
 #        cells is in plan.md.
 set -euo pipefail
@@ -58,7 +60,9 @@ mkdir -p "$WORK" && cd "$WORK" && mkdir -p logs
 [ -d autolabels ] || $FS autolabel --dataset synth --root syn --disparity-source sgbm --out autolabels
 # the data are made anew on a new machine: they must be those of the cells already finished (datacheck.py beside
 # this script: labels, disparities, calibrations and rig tables byte for byte, as session 2 made them; images
-# and autolabels within a CPU's float rounding), or the run would mix two datasets
+# and autolabels within a CPU's float rounding), or the run would mix two datasets. The autolabels must be made by
+# the package at f341a7f: since ca4bddf (the padded matcher) `autolabel` makes other ones, which the check refuses;
+# from a later pin, make them first in WORK with a worktree at f341a7f on PYTHONPATH (session 21, plan.md)
 PY=${PYTHON:-$(dirname "$(command -v "$FS")")/python}
 $PY "$DIR/datacheck.py" . "$DIR" || exit 1
 
@@ -102,7 +106,7 @@ if [ -n "${CELLS:-}" ]; then
   printf '%s\n' $CELLS
 else
   for s in $(seq 0 $((SEEDS - 1))); do for n in $NETS; do for v in $VARIANTS; do echo "$n,$v,$s"; done; done; done
-fi | xargs -P 2 -I{} bash -c 'cell {}'
+fi | xargs -P "${JOBS:-2}" -I{} bash -c 'cell {}'
 
 # the tables of every finished cell, copied beside this script
 $FS reproduce --tables --out "$RES" > "logs/$RES-tables.log" 2>&1 || { tail -3 "logs/$RES-tables.log"; exit 1; }

@@ -1,0 +1,51 @@
+"""What a training run records about where it ran: the package's commit, the data root and the torch version.
+
+These go to the run's ``metrics.json`` (``"record"``), never to ``config.yaml``: they are not training options,
+so a resumed or extended run, or a ``reproduce`` cell, is never refused because the commit or the machine
+changed; the record of a run says which code and data finished it.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+from typing import Any
+
+__all__ = ["package_commit", "run_record"]
+
+#: the commit when the package's source is not a file of a git work tree (an installed wheel, no git)
+UNKNOWN = "unknown"
+
+
+def _git(src: Path, *args: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("GIT_")}  # a caller's GIT_DIR names another repo
+    return subprocess.run(["git", "-C", str(src), *args], capture_output=True, text=True, timeout=20, env=env,
+                          check=False)
+
+
+def package_commit(src: Path | None = None) -> str:
+    """The git commit (40 hex digits) of the package source ``src`` (default: this ``freespace`` package's
+    folder), with ``-dirty`` when the package's files differ from that commit; :data:`UNKNOWN` when ``src``
+    is not tracked in a git work tree (e.g. installed into a virtual environment that lies inside one) or git
+    cannot be run. Local only: it runs ``git`` on the source folder, never the network."""
+    src = Path(src) if src is not None else Path(__file__).resolve().parents[1]
+    try:
+        if _git(src, "ls-files", "--error-unmatch", "__init__.py").returncode != 0:
+            return UNKNOWN
+        head = _git(src, "rev-parse", "--verify", "HEAD")
+        if head.returncode != 0 or len(head.stdout.strip()) < 40:
+            return UNKNOWN
+        dirty = _git(src, "status", "--porcelain", "--untracked-files=no", "--", ".")
+        return head.stdout.strip() + ("-dirty" if dirty.returncode != 0 or dirty.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        return UNKNOWN
+
+
+def run_record(root: str | os.PathLike) -> dict[str, Any]:
+    """``{"commit": package_commit(), "data_root": root resolved to an absolute path, "torch": torch's
+    version}``: what a run's ``metrics.json`` records about the code and data that produced it."""
+    import torch
+
+    return {"commit": package_commit(), "data_root": str(Path(root).expanduser().resolve()),
+            "torch": torch.__version__}
