@@ -8,6 +8,7 @@ changed; the record of a run says which code and data finished it.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -31,12 +32,13 @@ def package_commit(src: Path | None = None) -> str:
     cannot be run. Local only: it runs ``git`` on the source folder, never the network."""
     src = Path(src) if src is not None else Path(__file__).resolve().parents[1]
     try:
-        if _git(src, "ls-files", "--error-unmatch", "__init__.py").returncode != 0:
+        tracked = _git(src, "ls-files", "--", "__init__.py")  # git's short options: no freespace flag here
+        if tracked.returncode != 0 or not tracked.stdout.strip():
             return UNKNOWN
-        head = _git(src, "rev-parse", "--verify", "HEAD")
-        if head.returncode != 0 or len(head.stdout.strip()) < 40:
+        head = _git(src, "rev-parse", "HEAD")
+        if head.returncode != 0 or not re.fullmatch(r"[0-9a-f]{40}", head.stdout.strip()):
             return UNKNOWN
-        dirty = _git(src, "status", "--porcelain", "--untracked-files=no", "--", ".")
+        dirty = _git(src, "status", "-s", "-uno", "--", ".")  # tracked files that differ from HEAD
         return head.stdout.strip() + ("-dirty" if dirty.returncode != 0 or dirty.stdout.strip() else "")
     except (OSError, subprocess.SubprocessError):
         return UNKNOWN
