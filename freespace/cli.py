@@ -43,6 +43,11 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-(\.?\d|inf|nan)", re.IGNORECASE)
 
+    def error(self, message: str) -> Any:  # argparse: NoReturn
+        """argparse's own mistakes (a missing required option, an unknown choice or command) end in one line
+        like every other user mistake, pointing to the command's help instead of printing the usage."""
+        raise InvalidOptionError(f"{message}; see `{self.prog} --help`")
+
     def _get_value(self, action: argparse.Action, arg_string: str) -> Any:
         """An empty value ('' or blanks: a path that would be the current folder) and a value of an option of this
         module's types (:class:`~freespace.limits.Bounded`: out of its bounds, or no number) are refused in one

@@ -15,7 +15,8 @@ E. Weights files are checked at load: meta, sparse, integer, boolean, complex an
 H. The README's ``reproduce … --encoder-name`` command takes networks that all have an encoder; no option value
    is empty (``--out ''`` is not the current folder, on the command line or in YAML); a folder given for a file
    (``--calib DIR``) is called a folder, not an input holding ``--out``; autolabel's failed fit does not blame
-   a label it never read.
+   a label it never read; argparse's own mistakes (a missing required option, an unknown command or choice)
+   end in one line pointing to the command's ``--help``, not in the usage block.
 """
 
 from __future__ import annotations
@@ -469,3 +470,13 @@ def test_autolabel_failure_does_not_blame_a_label(pair: dict[str, Path], tmp_pat
     err = refused(capsys, ["autolabel", "--reference", str(pair["L"]), "--disparity", str(flat), "--out",
                            str(tmp_path / "A.png")], match="fits no road plane")
     assert "road label" not in err and "road mask" not in err, err
+
+
+@pytest.mark.parametrize("argv", [[], ["nosuch"], ["export", "--checkpoint", "x"], ["train", "--dataset", "synth"],
+                                  ["datasets", "split", "--dataset", "kitti-raw"], ["predict", "--bogus"],
+                                  ["datasets", "info", "--dataset", "nosuch", "--root", "."]])
+def test_argparse_mistakes_are_one_line(capsys: pytest.CaptureFixture, argv: list[str]) -> None:
+    """A missing required option, an unknown command or choice: one line with the command's help to read,
+    not argparse's usage block."""
+    err = refused(capsys, argv)
+    assert "--help" in err and "usage:" not in err
