@@ -208,7 +208,10 @@ def test_video_memory_does_not_grow_with_length(tmp_path: Path) -> None:
             tracemalloc.stop()
         assert summary["frames"] == n
         peaks[n] = peak
-    # measured: a peak of about 19 frames' size (a few batches of 4 frames and their overlays) for
-    # 20 frames and for 160
-    assert peaks[160] < 30 * frame_bytes < 160 * frame_bytes
-    assert peaks[160] < 1.2 * peaks[20]
+    # measured (six runs each): peaks of 21.9–25.6 frames' size for 20 frames and 25.3–27.9 for 160 (a few
+    # batches of 4 frames and their overlays in the reader's, the network's and the writer's bounded queues).
+    # The threads fill those queues in an order that varies from run to run, so 160 frames (8× as many) meet a
+    # fuller pipeline more often than 20: up to 1.20× the 20 frames' peak in CI on a clean clone. Memory that
+    # grew with length would be several times it.
+    assert peaks[160] < 40 * frame_bytes < 160 * frame_bytes
+    assert peaks[160] < 1.5 * peaks[20]
