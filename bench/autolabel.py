@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, write_section  # noqa: E402
-from real_frames import ROAD_POLYGONS as ROAD_POLYGONS_BY_NAME, polygon_mask  # noqa: E402
+from real_frames import KITTI_ROAD_POLYGONS as ROAD_POLYGONS, ROAD_POLYGONS as ROAD_POLYGONS_BY_NAME, polygon_mask  # noqa: E402
 
 from freespace.data.synthetic import SynthConfig, render_sample  # noqa: E402
 from freespace.datagen.autolabel import autolabel  # noqa: E402
@@ -48,10 +48,6 @@ from freespace.labels import RoadLabel  # noqa: E402
 SETS = {"test": (SynthConfig(width=320, height=240, frames_per_scenario=5), 0),
         "shifted": (SynthConfig(width=320, height=240, frames_per_scenario=5, max_roll_deg=6.0,
                                 camera_heights=(1.0, 2.6), pitches_deg=(-5.0, 5.0), baselines=(0.2, 2.0)), 1)}
-# the road polygons of the KITTI road frames (real_frames.py): (split folder, frame) → (u, v) vertices
-ROAD_POLYGONS = {("testing" if name.startswith("um") else "unknown_split", name): ROAD_POLYGONS_BY_NAME[name]
-                 for name in ("um_000000", "uu_000000", "uu_000001")}
-
 Case = tuple[str, str, np.ndarray, RoadLabel, float | None]  # set, source, disparity, human label, baseline
 
 

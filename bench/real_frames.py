@@ -71,6 +71,10 @@ ROAD_POLYGONS: dict[str, list[tuple[int, int]]] = {
         [(430, 374), (475, 290), (515, 255), (540, 255), (528, 300), (522, 374)],
 }
 
+#: the KITTI road frames' polygons by (split folder of ``kitti_road_depth``, frame)
+KITTI_ROAD_POLYGONS = {("testing" if name.startswith("um") else "unknown_split", name): ROAD_POLYGONS[name]
+                       for name in ("um_000000", "uu_000000", "uu_000001")}
+
 #: the two fully labelled KITTI stereo 2015 frames
 FULL_MASK_FRAMES = ("000000_10", "000001_10")
 

@@ -24,7 +24,7 @@ from freespace.geometry.depth import (
 from freespace.io.codecs import read_depth, write_disparity
 from freespace.io.kitti import read_kitti_calib
 
-from helpers import disparity_from_depth_file, shared_path
+from helpers import disparity_from_depth_file, real_frames, shared_path
 
 # --- d = f·B/Z ---------------------------------------------------------------------------------------
 
@@ -122,12 +122,8 @@ def test_rig_from_kitti_real_and_virtual() -> None:
 
 # --- real KITTI road frames with LiDAR depth ---------------------------------------------------------
 
-# (split folder, frame) → road polygon (u, v) drawn on the left image
-ROAD_POLYGONS = {
-    ("testing", "um_000000"): [(230, 370), (560, 200), (625, 200), (770, 370)],
-    ("unknown_split", "uu_000000"): [(200, 370), (510, 205), (630, 205), (790, 370)],
-    ("unknown_split", "uu_000001"): [(200, 370), (330, 290), (490, 215), (620, 215), (720, 300), (720, 370)],
-}
+# (split folder, frame) → road polygon (u, v) drawn on the left image (bench/real_frames.py)
+ROAD_POLYGONS = real_frames().KITTI_ROAD_POLYGONS
 
 
 @pytest.fixture(params=sorted(ROAD_POLYGONS), ids=lambda k: k[1])

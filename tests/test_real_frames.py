@@ -8,10 +8,6 @@ for most of its pixels. Skipped when ../shared/data is absent.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -19,10 +15,9 @@ from freespace.geometry import compute_disparity, fit_road_model
 from freespace.io.codecs import read_image
 
 from helpers import SHARED, disparity_from_depth_file
+from helpers import real_frames as real_frames_module
 
-_spec = importlib.util.spec_from_file_location("real_frames", Path(__file__).resolve().parents[1] / "bench" / "real_frames.py")
-real_frames = sys.modules["real_frames"] = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(real_frames)  # type: ignore[union-attr]
+real_frames = real_frames_module()
 
 pytestmark = pytest.mark.skipif(not SHARED.is_dir(), reason=f"shared sample data not available ({SHARED})")
 
