@@ -22,6 +22,7 @@ from freespace.data import get_dataset
 from freespace.data.kitti_raw import KittiRaw
 from freespace.data.splits import make_block_splits, read_splits
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
+from freespace.engine.config import check_label_tree, label_files
 from freespace.io.kitti import read_kitti_raw_calib
 
 DATE = "2011_09_26"
@@ -267,8 +268,14 @@ def test_a_drive_without_image_03_loads_and_labels_from_lidar(tmp_path: Path, ca
     assert main(["autolabel", "--dataset", "kitti-raw", "--root", str(root), "--disparity-source", "lidar",
                  "--out", str(out)]) == 0
     assert "2 labelled" in capsys.readouterr().out
-    assert sorted(p.relative_to(out).as_posix() for p in out.glob("*/*.png")) == [
-        f"{DATE}_drive_0007_sync/0000000000.png", f"{DATE}_drive_0007_sync/0000000001.png"]
+    frames = [f"{DATE}_drive_0007_sync/0000000000", f"{DATE}_drive_0007_sync/0000000001"]
+    assert sorted(p.relative_to(out).as_posix() for p in out.glob(f"{DATE}*/*.png")) == [f"{f}.png" for f in frames]
+    # the confidences lie apart, as OUT/confidence/<frame>.png, so that the tree trains as it is (once they
+    # were written into OUT/<drive>/confidence/, which training refused as labels that are no labels)
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("confidence/**/*.png")) == [
+        f"confidence/{f}.png" for f in frames]
+    assert sorted(label_files(out)) == frames
+    check_label_tree(out, "kitti-raw", root, None)
 
 
 @pytest.mark.parametrize("command", [["generate"], ["autolabel", "--disparity-source", "sgbm"]])

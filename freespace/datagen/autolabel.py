@@ -575,7 +575,8 @@ def _label_frame(dataset: Any, index: int, out: Path, report: Path, options: Aut
         result.stats.update(disparity_source=sample.disparity_source, seconds={"total": time.perf_counter() - t0})
         why = implausible_pair(matched, result)
         record.update(status="done", **result.report(), settings=settings, **({"implausible": why} if why else {}))
-        write_label_files(result, out, out.parent / "confidence" / out.name, report, record)
+        root = out.parents[len(Path(frame.name).parts) - 1]  # OUT: out is OUT/<frame>.png, a frame may hold folders
+        write_label_files(result, out, root / "confidence" / f"{frame.name}.png", report, record)
     except FreespaceError as exc:
         why = implausible_pair(matched, None) if isinstance(exc, RoadFitError) else None
         text = exc.render(param) + (f" ({why}: are the left and right images swapped?)" if why else "")
