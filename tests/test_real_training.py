@@ -60,6 +60,29 @@ def test_kitti_raw_trains_on_a_label_tree_in_every_split(tmp_path: Path, capsys:
     assert metrics["frames"] == {"train": 4, "val": 2, "test": 2} and metrics["f_score"] > 0  # scored on the tree
 
 
+def test_an_autolabelled_drive_trains_with_ds_generator_views_of_its_real_pairs(tmp_path: Path,
+                                                                                capsys: pytest.CaptureFixture) -> None:
+    """The chain of the real-roads study's HA-R-auto: `autolabel` of the drive (SGBM), the time-block split,
+    `train --labels --augment homography`: every training frame gets its DS-Generator view, the road model fitted
+    to the autolabel's road (once the views failed with "missing road label": the drive has no labels of its
+    own, and the generator looked at the frames' own labels only)."""
+    root, labels, cache = shared_path("kitti_raw"), tmp_path / "labels", tmp_path / "cache"
+    assert main(["autolabel", "--dataset", "kitti-raw", "--root", str(root), "--cache-dir", str(cache), "--out",
+                 str(labels)]) == 0
+    assert main(["datasets", "split", "--dataset", "kitti-raw", "--root", str(root), "--by", "time",
+                 "--fractions", "0.5,0.25,0.25", "--out", str(tmp_path / "splits")]) == 0
+    capsys.readouterr()
+    run = tmp_path / "run"
+    code = main(["train", "--dataset", "kitti-raw", "--root", str(root), "--labels", str(labels), "--splits",
+                 str(tmp_path / "splits"), "--augment", "homography", "--cache-dir", str(cache), "--model", "segnet",
+                 "--epochs", "1", "--batch-size", "2", "--image-size", "64x192", "--no-progress", "--out", str(run)])
+    assert code == 0, capsys.readouterr().err
+    assert "gave no generated view" not in capsys.readouterr().err
+    train = (run / "splits" / "train.txt").read_text().split()
+    assert sorted(p.relative_to(run / "generated").with_suffix("").as_posix()
+                  for p in (run / "generated").glob(f"{DRIVE}/*.png")) == sorted(train) and len(train) == 4
+
+
 def test_a_label_less_dataset_without_a_tree_or_with_human_share_is_refused(tmp_path: Path,
                                                                              capsys: pytest.CaptureFixture) -> None:
     root = shared_path("kitti_raw")

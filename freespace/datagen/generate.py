@@ -351,7 +351,7 @@ def _process_frame(dataset: Any, index: int, out: Path, report: Path, options: F
     try:
         if frame.right is None:
             raise DatasetError("missing right image")
-        if frame.label is None:
+        if not dataset.has_label(frame):  # its own label, or one of a label tree (a dataset without labels)
             raise DatasetError("missing road label")
         sample = dataset.load(index)
         result = generate_arrays(sample.left, sample.right, road_to_fit(sample.label), sample.disparity, options,
