@@ -52,10 +52,10 @@ cell() {  # model variant seed
         *) echo "unknown variant $variant" >&2; return 2 ;;
     esac
     if [ -f "$run/checkpoints/last.ckpt" ] && [ ! -f "$run/metrics.json" ]; then
-        OMP_NUM_THREADS=1 $FREESPACE train --out "$run" --resume > "$run.log" 2>&1
+        OMP_NUM_THREADS=1 $FREESPACE train --out "$run" --resume > "$run.log" 2>&1 || return 1
     elif [ ! -f "$run/metrics.json" ]; then
         OMP_NUM_THREADS=1 $FREESPACE train "${args[@]}" --model "$model" --seed "$seed" "${COMMON[@]}" \
-            --out "$run" > "$run.log" 2>&1
+            --out "$run" > "$run.log" 2>&1 || return 1
     fi
     OMP_NUM_THREADS=1 "$PYTHON" "$HERE/evaluate.py" "$run" >> "$run.log" 2>&1
 }
