@@ -25,6 +25,7 @@ log = logging.getLogger("mkdocs.hooks.freespace")
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "freespace"
+DOCS = ROOT / "docs"  # mkdocs.yml's docs_dir
 CHECKED = ("README.md", "BENCHMARKS.md")  # repository files whose links are checked, not rendered
 _REPO = "repo:"  # scheme of a link into the repository while the page is rendered
 # [text](target) and ![alt](target), not inside `code`; the target without a title
@@ -47,6 +48,10 @@ def _modules() -> dict[str, list[str]]:
     return pages
 
 
+def _is_package(module: str) -> bool:
+    return (ROOT.joinpath(*module.split(".")) / "__init__.py").exists()
+
+
 def on_files(files: Files, config) -> Files:
     pages = _modules()
     index = ["# API reference", "",
@@ -56,7 +61,9 @@ def on_files(files: Files, config) -> Files:
              "| page | modules |", "|---|---|"]
     for page, modules in sorted(pages.items(), key=lambda kv: (kv[0] != "freespace", kv[0])):
         title = "freespace (root modules)" if page == "freespace" else f"freespace.{page}"
-        body = [f"# {title}", ""] + [f"::: {m}\n" for m in modules]
+        # a package's page shows its own docstring; its modules follow, each with its members
+        body = [f"# {title}", ""] + [f"::: {m}\n    options:\n      members: false\n" if _is_package(m) else f"::: {m}\n"
+                                     for m in modules]
         files.append(File.generated(config, f"api/{page}.md", content="\n".join(body)))
         index.append(f"| [{title}]({page}.md) | {', '.join(f'`{m}`' for m in modules)} |")
     files.append(File.generated(config, "api/index.md", content="\n".join(index) + "\n"))
@@ -66,9 +73,7 @@ def on_files(files: Files, config) -> Files:
 def _rewrite(text: str, source_dir: Path, page_dir: Path, where: str) -> str:
     """Links of ``text`` (written beside ``source_dir``) made right from ``page_dir``; those leaving the docs
     folder become ``repo:PATH`` and must exist."""
-    docs = Path(page_dir).resolve()
-    while docs.name != "docs" and docs != docs.parent:
-        docs = docs.parent
+    docs = DOCS
 
     def fix(m: re.Match) -> str:
         target = m.group(2)
