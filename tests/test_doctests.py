@@ -98,3 +98,16 @@ def test_a_failing_example_fails() -> None:
     for test in doctest.DocTestFinder().find(wrong, "wrong", globs={}):
         runner.run(test, out=lambda _: None)
     assert runner.failures == 2
+
+
+def test_the_readme_python_quickstart_runs() -> None:
+    """The README's first Python example (the method on one rendered pair) runs as printed (it needs no file)
+    and finds the renderer's roll."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
+    assert blocks, "the README has a Python quickstart"
+    scope: dict[str, object] = {}
+    exec(compile(blocks[0], "README.md", "exec"), scope)  # noqa: S102 - the project's own README
+    model, generated, sample = scope["model"], scope["generated"], scope["s"]
+    assert abs(model.roll_deg - sample.meta["roll_deg"]) < 0.05  # the fit finds the rig's true roll
+    assert generated.shape == sample.left.shape
