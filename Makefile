@@ -1,9 +1,10 @@
 # make demo: set up .venv if missing, then run the built-in demo.  make test: set up, then run the tests.
+# make docs: set up, then build the documentation site into site/ (strict: a broken link or reference fails).
 PYTHON ?= python3
 VENV   := .venv
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench clean
+.PHONY: demo test docs bench clean
 
 $(STAMP): pyproject.toml
 	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
@@ -17,6 +18,9 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q
 
+docs: $(STAMP)
+	$(VENV)/bin/python -m mkdocs build --strict --site-dir site
+
 bench: $(STAMP)
 	$(VENV)/bin/python bench/generate.py
 	$(VENV)/bin/python bench/synth.py
@@ -25,4 +29,4 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/infer.py
 
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache
+	rm -rf $(VENV) demo_out .pytest_cache site

@@ -12,7 +12,7 @@ E. Weights files are checked at load: meta, sparse, integer, boolean, complex an
    infinity and absurd magnitudes are refused in one line naming the file (and tensor) before any epoch;
    ``tu-NAME`` of no timm model, an empty value, a folder: one line with the flag; ``imagenet`` weights missing
    from the hub's cache fail at once (no network at run time), not after 30 s of retries.
-H. The README's ``reproduce … --encoder-name`` command takes networks that all have an encoder; no option value
+H. The manual's (docs/networks.md) ``reproduce … --encoder-name`` command takes networks that all have an encoder; no option value
    is empty (``--out ''`` is not the current folder, on the command line or in YAML); a folder given for a file
    (``--calib DIR``) is called a folder, not an input holding ``--out``; autolabel's failed fit does not blame
    a label it never read; argparse's own mistakes (a missing required option, an unknown command or choice)
@@ -393,13 +393,13 @@ def test_weights_missing_from_the_hub_cache_fail_at_once(tmp_path: Path) -> None
 
 
 # ------------------------------------------------------------------------------------------ H. small things
-def test_the_readme_reproduce_command_with_an_encoder_is_accepted() -> None:
+def test_the_manual_reproduce_command_with_an_encoder_is_accepted() -> None:
     from freespace.experiments.reproduce import parse_models
     from freespace.models import model_options
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[1] / "docs" / "networks.md").read_text()
     blocks = re.findall(r"freespace reproduce ((?:[^\n]*\\\n)*[^\n]*--encoder-name[^\n]*)", readme)
-    assert blocks, "the README shows reproduce with an encoder"
+    assert blocks, "docs/networks.md shows reproduce with an encoder"
     for block in blocks:
         models = re.search(r"--models (\S+)", block)
         assert models, f"the README's reproduce with --encoder-name lists its --models: {block}"

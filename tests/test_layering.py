@@ -1,4 +1,4 @@
-"""Imports follow the README's layering: no module imports a higher layer, and no modules import each
+"""Imports follow the layering of docs/architecture.md (its table is read here): no module imports a higher layer, and no modules import each
 other (directly or round a longer loop). Every ``import`` statement counts, also those inside functions
 (a lazy import is still a dependency)."""
 
@@ -13,19 +13,31 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "freespace"
 
-# Lowest layer first. A module may import modules of its own layer or of lower ones. A module belongs to
-# the entry that names it or its closest enclosing package; the root package's entry, "freespace", names its
-# __init__ only, so a new module at the root must be given a layer here.
-LAYERS: list[tuple[str, ...]] = [
-    ("freespace", "freespace.errors", "freespace.limits", "freespace.log", "freespace.parallel", "freespace.shard", "freespace.labels"),
-    ("freespace.io", "freespace.geometry", "freespace.models"),
-    ("freespace.data", "freespace.datagen", "freespace.evaluation"),
-    ("freespace.inference",),
-    ("freespace.engine",),
-    ("freespace.experiments",),
-    ("freespace.demo",),
-    ("freespace.cli",),
-]
+ARCHITECTURE = ROOT / "docs" / "architecture.md"
+
+
+def _read_layers(text: str) -> list[tuple[str, ...]]:
+    """The table under ``## Layers`` of docs/architecture.md, lowest layer first: rows ``| N | `module`, ... |``
+    with N = 0, 1, 2, ... in order. A module belongs to the entry that names it or its closest enclosing
+    package; the root package's entry, "freespace", names its __init__ only, so a new module at the root must be
+    given a layer there."""
+    section = re.search(r"^## Layers\n(.*?)(?=^## |\Z)", text, re.S | re.M)
+    if section is None:
+        raise ValueError("docs/architecture.md has no '## Layers' section")
+    layers: list[tuple[str, ...]] = []
+    for number, modules in re.findall(r"^\|\s*(\d+)\s*\|(.*)\|\s*$", section.group(1), re.M):
+        if int(number) != len(layers):
+            raise ValueError(f"docs/architecture.md: layer {number} where layer {len(layers)} was expected")
+        names = tuple(re.findall(r"`([\w.]+)`", modules))
+        if not names:
+            raise ValueError(f"docs/architecture.md: layer {number} names no module")
+        layers.append(names)
+    if not layers:
+        raise ValueError("docs/architecture.md's '## Layers' section has no table rows '| N | `module`, ... |'")
+    return layers
+
+
+LAYERS: list[tuple[str, ...]] = _read_layers(ARCHITECTURE.read_text())
 
 def _modules() -> dict[str, Path]:
     mods = {}
@@ -115,7 +127,7 @@ def _cycles(graph: dict[str, dict[str, int]]) -> list[frozenset[str]]:
 
 
 def test_every_module_has_a_layer() -> None:
-    assert [m for m in _modules() if _layer(m) is None] == [], "add new modules to LAYERS and to the README"
+    assert [m for m in _modules() if _layer(m) is None] == [], "give new modules a layer in docs/architecture.md's table"
 
 
 def test_no_upward_imports() -> None:
@@ -147,10 +159,19 @@ def test_checker_sees_a_cycle_and_an_upward_import() -> None:
     assert _layer("freespace.unplaced") is None and _layer("freespace") == 0  # a root module needs its own entry
 
 
-def test_readme_states_these_layers() -> None:
-    chain = " → ".join(", ".join(n.removeprefix("freespace.") for n in names if n != "freespace") for names in LAYERS)
-    if chain not in " ".join((ROOT / "README.md").read_text().split()):
-        pytest.fail(f"the README's Architecture section should state the layers: {chain}")
+def test_the_layer_table_is_read_as_written() -> None:
+    """The parser takes the rows in order, every backquoted module of a row, and refuses a table with a gap."""
+    text = "## Layers\n\n| layer | modules |\n|---:|---|\n| 0 | `freespace`, `freespace.errors` |\n| 1 | `freespace.io` |\n"
+    assert _read_layers(text) == [("freespace", "freespace.errors"), ("freespace.io",)]
+    with pytest.raises(ValueError, match="layer 2 where layer 1"):
+        _read_layers(text.replace("| 1 |", "| 2 |"))
+    with pytest.raises(ValueError, match="no '## Layers' section"):
+        _read_layers(text.replace("## Layers", "## Layering"))
+    assert LAYERS[0][0] == "freespace" and ("freespace.cli",) in LAYERS and ("freespace.geometry" in LAYERS[1])
+    every = [m for names in LAYERS for m in names]
+    assert len(every) == len(set(every)), "a module stands in two layers of docs/architecture.md"
+    mods = _modules()
+    assert [m for m in every if m not in mods] == [], "docs/architecture.md names modules that do not exist"
 
 
 # a flag may stand in a library string only inside a command the user is told to run

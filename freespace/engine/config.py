@@ -275,7 +275,7 @@ class TrainConfig:
     seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = _option("seed of the split, the data order, the augmentation "
                                                              "and the weights", 0)
     devices: Annotated[int, Field(ge=1, le=MAX_DEVICES)] = _option("processes or GPUs", 1)
-    num_nodes: Annotated[int, Field(ge=1, le=MAX_NODES)] = _option("machines, for multi-node DDP (see the README)", 1)
+    num_nodes: Annotated[int, Field(ge=1, le=MAX_NODES)] = _option("machines, for multi-node DDP (see docs/commands.md)", 1)
     strategy: str = _option("ddp: one process per device", "auto", choices=STRATEGIES)
     workers: Annotated[int, Field(ge=0, le=MAX_WORKERS)] = _option("data-loading processes (at most 4 per CPU core "
                                                                    "of the machine that trains)", 0)

@@ -96,6 +96,12 @@ def rig_from_kitti(calib: dict[str, np.ndarray], *, baseline: float | None = Non
     Raises:
         CorruptFileError: no ``left`` projection matrix. InvalidOptionError: a baseline ≤ 0, or P3 left
         of P2.
+
+    Example:
+        >>> P2 = np.array([[700.0, 0, 600, 0], [0, 700, 180, 0], [0, 0, 1, 0]])
+        >>> rig = rig_from_kitti({"P2": P2}, baseline=0.5)  # no P3 needed: a virtual right camera 0.5 m to the right
+        >>> rig.fx, rig.baseline, rig.road_plane is None
+        (700.0, 0.5, True)
     """
     if left not in calib:
         raise CorruptFileError(f"the calibration has no {left} (3×4 projection of the reference camera)")

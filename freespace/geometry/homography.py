@@ -45,6 +45,12 @@ def homography_from_pose(K_r: np.ndarray, K_t: np.ndarray, R_tr: np.ndarray, t_t
 
     Returns:
         ``H_tr`` (3×3 float64) mapping homogeneous reference pixels to target pixels of road points.
+
+    Example:
+        >>> K = np.array([[700.0, 0, 600], [0, 700, 180], [0, 0, 1]])
+        >>> H = homography_from_pose(K, K, np.eye(3), [-0.5, 0, 0], RoadPlane((0, 1, 0), 1.5))
+        >>> (H @ [600, 330, 1]).round(6).tolist()  # level camera 1.5 m up, B = 0.5 m: 150 rows below the horizon, d = 50
+        [550.0, 330.0, 1.0]
     """
     K_r = _as_matrix(K_r, (3, 3), "K_r")
     K_t = _as_matrix(K_t, (3, 3), "K_t")
@@ -89,6 +95,12 @@ class StereoCalibration:
         Raises:
             InvalidOptionError: ``P3`` is not to the right of ``P2``, or ``Tr_cam_to_road`` puts the
                 camera on the road plane.
+
+        Example:
+            >>> P2 = np.array([[700.0, 0, 600, 0], [0, 700, 180, 0], [0, 0, 1, 0]])
+            >>> P3 = P2 - [[0, 0, 0, 350.0], [0, 0, 0, 0], [0, 0, 0, 0]]  # P3 = K [I | −B·e₁] with B = 0.5 m
+            >>> StereoCalibration.from_kitti({"P2": P2, "P3": P3})
+            StereoCalibration(fx=700.0, fy=700.0, cx=600.0, cy=180.0, baseline=0.5, road_plane=None)
         """
         P_l, P_r = calib[left], calib[right]
         fx, fy, cx, cy = P_l[0, 0], P_l[1, 1], P_l[0, 2], P_l[1, 2]
@@ -125,6 +137,11 @@ class StereoCalibration:
 
         A road point satisfies ``n·X = h`` with ``X = Z K⁻¹ p̃``, so ``d = fx B / Z =
         (fx B / h) nᵀ K⁻¹ p̃``, an affine function of (u, v).
+
+        Example:
+            >>> rig = StereoCalibration(700.0, 700.0, 600.0, 180.0, 0.5, RoadPlane((0, 1, 0), 1.5))
+            >>> [round(x, 6) for x in rig.road_model().affine]  # d = (v − 180) / 3: zero on the horizon's row
+            [0.0, 0.333333, -60.0]
         """
         if self.road_plane is None:
             raise InvalidOptionError("this calibration has no road plane; give road_plane")
@@ -136,7 +153,13 @@ class StereoCalibration:
         return RoadModel.from_affine(a, b, c)
 
     def homography(self) -> np.ndarray:
-        """The road homography ``H_tr`` from the pose: left → right camera, ``t_tr = (−B, 0, 0)``."""
+        """The road homography ``H_tr`` from the pose: left → right camera, ``t_tr = (−B, 0, 0)``.
+
+        Example:
+            >>> rig = StereoCalibration(700.0, 700.0, 600.0, 180.0, 0.5, RoadPlane((0, 1, 0), 1.5))
+            >>> rig.homography().round(6).tolist()  # the road model's [[1 − a, −b, −c], [0, 1, 0], [0, 0, 1]]
+            [[1.0, -0.333333, 60.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+        """
         if self.road_plane is None:
             raise InvalidOptionError("this calibration has no road plane; give road_plane")
         return homography_from_pose(self.K, self.K, np.eye(3), np.array([-self.baseline, 0.0, 0.0]), self.road_plane)

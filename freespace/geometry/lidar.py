@@ -66,6 +66,13 @@ def velodyne_to_camera(points: np.ndarray, calib: dict[str, np.ndarray], camera:
 
     Returns:
         ``float64 N×3`` ``(p̃₀, p̃₁, p̃₂)``; ``u = p̃₀/p̃₂``, ``v = p̃₁/p̃₂``, depth ``Z = p̃₂`` (metres).
+
+    Example:
+        >>> calib = {"Tr_velo_to_cam": np.array([[0.0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0]]),  # x fwd, y left, z up
+        ...          "P2": np.array([[700.0, 0, 600, 0], [0, 700, 180, 0], [0, 0, 1, 0]])}
+        >>> p = velodyne_to_camera(np.array([[10.0, 0.0, -1.5]]), calib)  # 10 m ahead, 1.5 m below the scanner
+        >>> (p[:, :2] / p[:, 2:]).tolist(), float(p[0, 2])  # (u, v) and the depth Z
+        ([[600.0, 285.0]], 10.0)
     """
     pts = np.asarray(points)
     if pts.ndim != 2 or pts.shape[1] < 3:
@@ -90,6 +97,14 @@ def project_velodyne(points: np.ndarray, calib: dict[str, np.ndarray], shape: tu
     Returns:
         ``float32 H×W`` depth ``Z`` in metres along the optical axis, NaN where no point landed. Where
         several points land on one pixel, the nearest (smallest Z) wins.
+
+    Example:
+        >>> calib = {"Tr_velo_to_cam": np.array([[0.0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0]]),
+        ...          "P2": np.array([[700.0, 0, 600, 0], [0, 700, 180, 0], [0, 0, 1, 0]])}
+        >>> scan = np.array([[10.0, 0, -1.5], [20.0, 0, -3.0], [-5.0, 0, 0]])  # two on one pixel, one behind
+        >>> depth = project_velodyne(scan, calib, (375, 1242))
+        >>> float(depth[285, 600]), int(np.isfinite(depth).sum())  # the nearest point wins its pixel
+        (10.0, 1)
     """
     h, w = (int(x) for x in shape)
     if h < 1 or w < 1 or not (math.isfinite(min_depth) and min_depth >= 0):
@@ -128,6 +143,13 @@ def velodyne_to_disparity(points: np.ndarray, calib: dict[str, np.ndarray], shap
 
     Returns:
         ``float32 H×W`` disparity in pixels, NaN = no value.
+
+    Example:
+        >>> calib = {"Tr_velo_to_cam": np.array([[0.0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0]]),
+        ...          "P2": np.array([[700.0, 0, 600, 0], [0, 700, 180, 0], [0, 0, 1, 0]])}
+        >>> d = velodyne_to_disparity(np.array([[10.0, 0, -1.5]]), calib, (375, 1242), baseline=0.5)
+        >>> float(d[285, 600]), int(np.isfinite(d).sum())  # f·B/Z = 700 · 0.5 / 10
+        (35.0, 1)
     """
     rig = rig_from_kitti(calib, baseline=baseline)
     disparity = depth_to_disparity(project_velodyne(points, calib, shape, min_depth=min_depth), rig.fx, rig.baseline)
@@ -147,6 +169,13 @@ def densify_nearest(disparity: np.ndarray, max_gap_px: float) -> np.ndarray:
         ``float32 H×W``: the valid values unchanged, holes within reach filled (nearest neighbour
         by OpenCV's 5×5-mask distance transform, within about 2 % of the Euclidean distance; never
         interpolated across values), the rest NaN.
+
+    Example:
+        >>> d = np.full((5, 5), np.nan, np.float32)
+        >>> d[2, 2] = 7.0
+        >>> filled = densify_nearest(d, 1.5)  # the 8 neighbours are within 1.5 px, the corners are not
+        >>> int(np.isfinite(filled).sum()), float(filled[1, 1]), bool(np.isnan(filled[0, 0]))
+        (9, 7.0, True)
     """
     if not (math.isfinite(max_gap_px) and max_gap_px >= 0):
         raise InvalidOptionError(f"the densification gap must be ≥ 0 pixels, got {max_gap_px}")

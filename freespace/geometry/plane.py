@@ -111,6 +111,12 @@ class RoadPlane:
         Args:
             model: the fitted road model. fx, fy: focal lengths (px; ``fy`` defaults to ``fx``).
             baseline: metres (> 0). cx, cy: principal point (px).
+
+        Example:
+            >>> model = RoadModel.from_affine(0.0, 1 / 3, -60.0)  # d = (v − 180) / 3
+            >>> plane = RoadPlane.from_road_model(model, fx=700.0, baseline=0.5, cx=600.0, cy=180.0)
+            >>> [round(x, 6) for x in plane.normal], round(plane.height, 6)  # a level camera 1.5 m up
+            ([0.0, 1.0, 0.0], 1.5)
         """
         fy = fx if fy is None else fy
         if not (fx > 0 and fy > 0 and baseline > 0):

@@ -74,6 +74,11 @@ class RoadModel:
 
         Raises:
             RoadFitError: ``a = b = 0`` (the disparity does not vary over the image: no roll angle).
+
+        Example:
+            >>> m = RoadModel.from_affine(0.0, 0.5, -20.0)  # d = (v − 40) / 2: zero on row 40
+            >>> m.roll_deg == 0, m.kappa_hat, m.kappa
+            (True, 0.5, -40.0)
         """
         kappa_hat = math.hypot(a, b)
         if not (np.isfinite([a, b, c]).all() and kappa_hat > 1e-9):
@@ -85,7 +90,12 @@ class RoadModel:
 
     @classmethod
     def from_roll(cls, roll: float, kappa_hat: float, kappa: float) -> RoadModel:
-        """Build the model from the paper's parameters (Φ in radians, ϰ > 0, κ)."""
+        """Build the model from the paper's parameters (Φ in radians, ϰ > 0, κ).
+
+        Example:
+            >>> [round(x, 4) for x in RoadModel.from_roll(math.radians(2.0), 0.5, -40.0).affine]
+            [-0.0174, 0.4997, -20.0]
+        """
         return cls.from_affine(-kappa_hat * math.sin(roll), kappa_hat * math.cos(roll), kappa_hat * kappa)
 
     @property
@@ -104,7 +114,12 @@ class RoadModel:
         return np.array([[1.0 - a, -b, -c], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
 
     def disparity(self, shape: tuple[int, int]) -> np.ndarray:
-        """The model's disparity ``a u + b v + c`` over an image of ``shape = (H, W)`` (float32 H×W)."""
+        """The model's disparity ``a u + b v + c`` over an image of ``shape = (H, W)`` (float32 H×W).
+
+        Example:
+            >>> RoadModel.from_affine(0.0, 0.5, -20.0).disparity((43, 3))[40:].tolist()  # rows 40–42
+            [[0.0, 0.0, 0.0], [0.5, 0.5, 0.5], [1.0, 1.0, 1.0]]
+        """
         a, b, c = self.affine
         h, w = shape
         return (a * np.arange(w, dtype=np.float32)[None, :] + b * np.arange(h, dtype=np.float32)[:, None]
@@ -118,6 +133,16 @@ class RoadModel:
         (fitted models only); ``|Φ| ≤`` :data:`MAX_ROLL_DEG`; and ``camera_height``, when given (metres,
         e.g. the height of :meth:`freespace.geometry.RoadPlane.from_road_model`), within
         :data:`CAMERA_HEIGHT_RANGE_M`.
+
+        Example:
+            >>> m = RoadModel.from_affine(0.0, 0.5, -20.0)
+            >>> m.check_plausible(camera_height=1.65) is m
+            True
+            >>> try:
+            ...     RoadModel.from_roll(math.radians(30.0), 0.5, -40.0).check_plausible()
+            ... except RoadFitError as e:
+            ...     print(str(e).split(";")[0])
+            implausible road fit: roll +30.0° is 10.0° beyond the ±20° a stereo rig on a road can have
         """
         hint = ("check that the disparity (file, depth map or LiDAR scan) belongs to this reference image and is "
                 "the right way up (a PFM's rows run bottom to top), and that the label marks the road")
@@ -143,7 +168,13 @@ class RoadModel:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: ``roll_deg``, ``kappa_hat``, ``kappa``, ``affine``, ``homography``,
-        ``num_inliers``, ``num_valid``, ``rms_px`` (None when not fitted)."""
+        ``num_inliers``, ``num_valid``, ``rms_px`` (None when not fitted).
+
+        Example:
+            >>> d = RoadModel.from_affine(0.0, 0.5, -20.0).to_dict()
+            >>> d["kappa"], d["affine"], d["num_inliers"], d["rms_px"]  # made, not fitted: no inliers, no rms
+            (-40.0, [0.0, 0.5, -20.0], 0, None)
+        """
         return {
             "roll_deg": self.roll_deg,
             "kappa_hat": self.kappa_hat,
@@ -162,6 +193,11 @@ def road_pixels(disparity: np.ndarray, road_mask: np.ndarray) -> tuple[np.ndarra
 
     Raises:
         ShapeMismatchError: disparity and mask differ in size. InvalidOptionError: not 2-D.
+
+    Example:
+        >>> disparity = np.array([[np.nan, 2.0], [0.0, 3.0]])
+        >>> road_pixels(disparity, np.array([[True, True], [True, False]]))  # NaN and 0 are no value
+        (array([1.]), array([0.]), array([2.]))
     """
     disparity = np.asarray(disparity)
     road_mask = np.asarray(road_mask)
@@ -260,6 +296,14 @@ def fit_road_model(disparity: np.ndarray, road_mask: np.ndarray, *, robust: bool
         ShapeMismatchError: mask and disparity sizes differ.
         RoadFitError: fewer than ``min_pixels`` valid road pixels or inliers, collinear road pixels, or a
             plane with no disparity gradient.
+
+    Example:
+        >>> v, u = np.mgrid[0:60, 0:80].astype(np.float32)
+        >>> disparity = 0.02 * u + 0.3 * v + 5.0  # a road plane d = a·u + b·v + c
+        >>> disparity[40:45, 10:20] = 60.0  # a car on the road: 50 outliers
+        >>> m = fit_road_model(disparity, np.ones((60, 80), bool))
+        >>> [round(x, 4) for x in m.affine], m.num_inliers, round(m.roll_deg, 2)
+        ([0.02, 0.3, 5.0], 4750, -3.81)
     """
     if inlier_threshold <= 0 or max_iterations < 1 or num_hypotheses < 1 or sample_size < 3:
         raise InvalidOptionError("inlier_threshold must be > 0 and max_iterations, num_hypotheses ≥ 1, "
@@ -309,6 +353,12 @@ def road_energy(params: tuple[float, float, float] | np.ndarray, u: np.ndarray, 
     """The paper's energy ``E(Φ, ϰ, κ) = Σ (dᵢ − ϰ (vᵢ cos Φ − uᵢ sin Φ + κ))²`` (pixels²).
 
     ``params = (Φ [rad], ϰ, κ)``; ``u, v, d`` are equal-length vectors of road pixels.
+
+    Example:
+        >>> u, v = np.array([0.0, 10.0]), np.array([100.0, 100.0])
+        >>> d = 0.5 * (v + 4.0)  # Φ = 0, ϰ = 0.5, κ = 4
+        >>> road_energy((0.0, 0.5, 4.0), u, v, d), road_energy((0.0, 0.5, 6.0), u, v, d)  # κ off by 2: 1 px each
+        (0.0, 2.0)
     """
     roll, kappa_hat, kappa = params
     r = d - kappa_hat * (v * np.cos(roll) - u * np.sin(roll) + kappa)
@@ -324,6 +374,12 @@ def fit_road_model_closed_form(disparity: np.ndarray, road_mask: np.ndarray) -> 
     ``Φ = arctan(x₂ / x₁) + qπ``; of the two roots (q = 0, 1 — the authors' ``q = ±1``) the one with
     ϰ > 0 is kept. Then ϰ = cov(t, d) / var t and κ = mean(d) / ϰ − mean(t). This is the long way to
     the same optimum as :func:`fit_road_model` with ``robust=False``; it serves as a cross-check.
+
+    Example:
+        >>> v, u = np.mgrid[0:60, 0:80].astype(np.float64)
+        >>> m = fit_road_model_closed_form(0.02 * u + 0.3 * v + 5.0, np.ones((60, 80), bool))
+        >>> [round(x, 6) for x in m.affine], round(m.rms, 6)
+        ([0.02, 0.3, 5.0], 0.0)
     """
     u, v, d = road_pixels(disparity, road_mask)
     if d.size < 3:

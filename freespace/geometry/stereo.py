@@ -46,7 +46,12 @@ def check_search_range(max_disparity: int, width: int,
                        fix: str = "") -> int:
     """SGBM's search range for ``max_disparity`` (pixels, rounded up to a multiple of 16), or an
     :class:`InvalidOptionError` when it is not smaller than the image ``width`` (pixels); ``fix`` ends the
-    message (how else to get a disparity; default: give a disparity file)."""
+    message (how else to get a disparity; default: give a disparity file).
+
+    Example:
+        >>> check_search_range(100, 640)  # rounded up to a multiple of 16
+        112
+    """
     fix = fix or f"give the disparity ({param('disparity')}; {param('disparity_dir')} for a dataset)"
     num = int(np.ceil(max_disparity / 16.0)) * 16
     if num >= width:
@@ -76,6 +81,13 @@ def compute_disparity(left: np.ndarray, right: np.ndarray, *, max_disparity: int
 
     Returns:
         ``float32 H×W`` left disparity in pixels, NaN = invalid.
+
+    Example:
+        >>> left = np.random.default_rng(0).integers(0, 256, (64, 128), dtype=np.uint8)  # a textured image
+        >>> right = np.roll(left, -8, axis=1)  # the right camera sees every pixel 8 px further left
+        >>> d = compute_disparity(left, right, max_disparity=32)
+        >>> float(np.nanmedian(d))
+        8.0
     """
     gl, gr = _grey(left), _grey(right)
     if gl.shape != gr.shape:

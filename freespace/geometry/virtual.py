@@ -99,7 +99,12 @@ class VirtualPose:
         return np.asarray(self.shift, dtype=np.float64)
 
     def to_dict(self) -> dict[str, object]:
-        """JSON-ready ``{"shift": [dx, dy, dz], "roll", "pitch", "yaw"}``."""
+        """JSON-ready ``{"shift": [dx, dy, dz], "roll", "pitch", "yaw"}``.
+
+        Example:
+            >>> VirtualPose.parse("0.5,0,0", "0,2,-1").to_dict()
+            {'shift': [0.5, 0.0, 0.0], 'roll': 0.0, 'pitch': 2.0, 'yaw': -1.0}
+        """
         return {"shift": list(self.shift), "roll": self.roll, "pitch": self.pitch, "yaw": self.yaw}
 
 
@@ -123,6 +128,12 @@ def virtual_homography(K: np.ndarray, plane: RoadPlane, pose: VirtualPose) -> np
     Returns:
         3×3 float64, scaled by a positive factor so that ``H[2, 2] = ±1``: for a road point seen by
         both cameras the homogeneous scale ``(H p̃)[2]`` is positive (it is ``Z_virtual / Z_reference``).
+
+    Example:
+        >>> K = np.array([[700.0, 0, 600], [0, 700, 180], [0, 0, 1]])
+        >>> H = virtual_homography(K, RoadPlane((0, 1, 0), 1.5), VirtualPose(shift=(0.5, 0.0, 0.0)))
+        >>> (H @ [600, 330, 1]).round(6).tolist()  # 0.5 m to the right: the DS-Generator's right camera
+        [550.0, 330.0, 1.0]
     """
     K = _check_K(K)
     if not plane.height - float(plane.n @ pose.C) > 1e-6:

@@ -45,6 +45,12 @@ def valid_column_ranges(H: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarr
     Returns:
         ``(lo, hi)``: int64 arrays of length H; row ``v`` is valid on columns ``lo[v] ≤ u ≤ hi[v]``
         (empty when ``lo[v] > hi[v]``).
+
+    Example:
+        >>> H = np.array([[1.0, 0, -2], [0, 1, 0], [0, 0, 1]])  # every pixel 2 px to the left
+        >>> lo, hi = valid_column_ranges(H, (2, 6))
+        >>> lo.tolist(), hi.tolist()  # columns 0 and 1 would land left of the image
+        ([2, 2], [5, 5])
     """
     h, w = shape
     v = np.arange(h, dtype=np.float64)

