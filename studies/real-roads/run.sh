@@ -2,7 +2,8 @@
 # Real roads, no people (issue 45): the data, the variants' cells and their real-frame evaluation.
 #
 #   RAW=DIR WORK=DIR [SEEDS="0 1"] [MODELS="unet"] [VARIANTS="R-auto HA-R-auto R-auto-dup S S+R-auto"] \
-#   [JOBS=2] [FREESPACE=freespace] [PYTHON=python] bash studies/real-roads/run.sh
+#   [JOBS=2]  (MODELS: unet, deeplabv3plus with the ImageNet Lite0 encoder; fastscnn from scratch)
+#   [FREESPACE=freespace] [PYTHON=python] bash studies/real-roads/run.sh
 #
 # RAW: a KITTI raw root (date folders with calib_*.txt; drives with image_02/03, velodyne_points). WORK: the
 # study's working folder (autolabels, splits, rendered frames, run folders). Every step is skipped when its
@@ -17,8 +18,9 @@ FREESPACE=${FREESPACE:-freespace}
 PYTHON=${PYTHON:-python}
 HERE=$(cd "$(dirname "$0")" && pwd)
 SIZE=128x416
-COMMON=(--encoder-name efficientnet-lite0 --encoder-weights imagenet --image-size $SIZE --epochs 60 --patience 10
-        --val-window 3 --min-delta 0.001 --lr 0.01 --batch-size 4 --no-progress)
+COMMON=(--image-size $SIZE --epochs 60 --patience 10 --val-window 3 --min-delta 0.001 --lr 0.01 --batch-size 4
+        --no-progress)
+LITE0="--encoder-name efficientnet-lite0 --encoder-weights imagenet"  # the pretrained networks' encoder
 mkdir -p "$WORK"
 AL=$WORK/autolabels SYN=$WORK/syn MIX=$WORK/mix
 
@@ -54,13 +56,14 @@ cell() {  # model variant seed
     if [ -f "$run/checkpoints/last.ckpt" ] && [ ! -f "$run/metrics.json" ]; then
         OMP_NUM_THREADS=1 $FREESPACE train --out "$run" --resume > "$run.log" 2>&1 || return 1
     elif [ ! -f "$run/metrics.json" ]; then
+        [ "$model" = fastscnn ] || args+=($LITE0)  # Fast-SCNN: its own encoder, trained from scratch
         OMP_NUM_THREADS=1 $FREESPACE train "${args[@]}" --model "$model" --seed "$seed" "${COMMON[@]}" \
             --out "$run" > "$run.log" 2>&1 || return 1
     fi
     OMP_NUM_THREADS=1 "$PYTHON" "$HERE/evaluate.py" "$run" >> "$run.log" 2>&1
 }
 export -f cell
-export WORK RAW AL SYN MIX FREESPACE PYTHON HERE SIZE
+export WORK RAW AL SYN MIX FREESPACE PYTHON HERE SIZE LITE0
 export COMMON_TEXT="${COMMON[*]}"
 mkdir -p "$WORK/runs"
 for seed in $SEEDS; do for model in $MODELS; do for variant in $VARIANTS; do
