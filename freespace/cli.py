@@ -663,6 +663,9 @@ def _export_parser(p: argparse.ArgumentParser) -> None:
                                                        "calibrated on --calibration's frames")
     p.add_argument("--calibration", metavar="DIR", help="with --int8: a folder (or glob, or video) of real frames "
                                                         "like those the model will see")
+    p.add_argument("--fp16", action="store_true", help="onnx: weights and computation in float16 (about half the "
+                                                       "size; input and output stay float32), checked against the "
+                                                       "checkpoint's probabilities")
     p.add_argument("--out", required=True, help="output file")
     p.set_defaults(func=cmd_export)
 
@@ -671,10 +674,19 @@ def cmd_export(args: argparse.Namespace) -> int:
     """``freespace export``: ONNX or TorchScript, validated against PyTorch."""
     from freespace.inference.predict import export_model
 
+    if args.fp16 and args.int8:
+        raise InvalidOptionError("--fp16 and --int8 exclude each other: a model is exported in float16 or in int8; "
+                                 "leave out one of them")
     if args.int8 != (args.calibration is not None):
         raise InvalidOptionError("--int8 and --calibration DIR go together: int8 quantisation is calibrated on real "
                                  "frames" if args.int8 else "--calibration is for --int8: add --int8, or leave it out")
-    r = export_model(args.checkpoint, args.fmt, args.out, calibration=args.calibration)
+    r = export_model(args.checkpoint, args.fmt, args.out, calibration=args.calibration, fp16=args.fp16)
+    if "fp16" in r:
+        h = r["fp16"]
+        print(f"onnx float16 → {r['path']}  against the checkpoint: max probability difference "
+              f"{h['max_prob_diff']:.2e} (allowed {h['tolerance']}), masks agree on {100 * h['mask_agreement']:.2f} % "
+              f"of the pixels (sizes {', '.join('×'.join(map(str, s[2:])) for s in r['checked_sizes'])})")
+        return 0
     if "int8" in r:
         q = r["int8"]
         print(f"onnx int8 → {r['path']}  (float32 export: max abs difference to PyTorch {r['max_abs_diff']:.2e}); "
@@ -795,7 +807,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print()
         print(Path(result["results_md"]).read_text().rstrip())
     print(f"figures: {result['figures']}, {args.out}/experiment/figures   ({result['seconds']:.0f} s)")
-    return 1 if result["generate_failed"] else 0
+    from freespace.demo import published_lines
+
+    for line in published_lines(result["real"], result["models_folder"]):
+        print(line)
+    return 1 if result["generate_failed"] or any("error" in r for r in result["real"]) else 0
 
 
 # --- the command ---------------------------------------------------------------------------------------
