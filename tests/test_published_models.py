@@ -299,3 +299,33 @@ def test_demo_command_prints_one_line_per_published_model(files: dict[str, Path]
     assert main(["demo", "--out", str(tmp_path / "d2")]) == 1
     lines = capsys.readouterr().out.strip().splitlines()
     assert "model bad: failed: cannot load" in lines[-2] and "model good: 2 example frames" in lines[-1]
+
+
+def _repository_models() -> list[Path]:
+    from freespace.demo import published_models
+
+    import freespace
+
+    return published_models(Path(freespace.__file__).resolve().parents[1] / "models")
+
+
+@pytest.mark.parametrize("model", _repository_models(), ids=lambda p: p.parent.name)
+def test_every_published_model_is_complete(model: Path) -> None:
+    """Each model the repository publishes (issue 45 §4; none yet: no case): the ONNX file at most 25 MB,
+    loadable by the predictor with its training size in its metadata; a card naming the data's licence, the
+    input size and showing a picture; a few real example frames (PNG, at most 2 MB together) with their
+    licence."""
+    from freespace.inference.predictor import Predictor
+
+    folder = model.parent
+    assert model.stat().st_size <= 25 * 2**20
+    predictor = Predictor(onnx=model)
+    assert predictor.resize_to is not None
+    card = (folder / "README.md").read_text()
+    h, w = predictor.resize_to
+    assert "CC BY-NC-SA 3.0" in card and (f"{h}×{w}" in card or f"{h}x{w}" in card) and "![" in card
+    examples = sorted((folder / "examples").glob("*.png"))
+    assert examples and sum(p.stat().st_size for p in examples) <= 2 * 2**20
+    assert (folder / "examples" / "LICENSE").read_text().strip()
+    for path in examples:
+        assert read_image(path).ndim == 3
