@@ -16,7 +16,8 @@ import re
 import signal
 import sys
 import threading
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -199,6 +200,10 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
                    help="--disparity-source lidar: fill holes within PX pixels of a point with its value "
                         "(default: keep the sparse map, which is all the road fit needs)")
     g.add_argument("--cache-dir", metavar="DIR", help="SGBM disparity cache (default ~/.cache/freespace/sgbm)")
+    g.add_argument("--labels", metavar="TREE", help="the road labels to fit from a label tree (`freespace autolabel`'s "
+                                                    "output: TREE/<frame>.png) instead of the dataset's own, for a "
+                                                    "dataset without labels (KITTI raw); frames without one are "
+                                                    "skipped")
     g.add_argument("--shard", metavar="K/N", help="only the K-th of N disjoint parts of the frames (K from 1, "
                                                   "e.g. ${SLURM_ARRAY_TASK_ID}/N); totals go to "
                                                   "summary.shard-K-of-N.json and report.shard-K-of-N.csv")
@@ -224,7 +229,8 @@ _GENERATE_MODES = {
                                              "rotate", "label_out", "model_json"}),
                      ("reference", "road_mask", "calib", "label_out")),
     "dataset": _Mode("--dataset", frozenset({"dataset", "root", "split", "disparity_dir", "disparity_source",
-                                             "lidar_densify", "cache_dir", "shard", "workers", "overwrite"}),
+                                             "lidar_densify", "cache_dir", "shard", "workers", "overwrite",
+                                             "labels"}),
                      ("root",)),
 }
 
@@ -255,8 +261,113 @@ def cmd_generate(args: argparse.Namespace) -> int:
         return 0
     from freespace.datagen.generate import generate_dataset
 
-    return _run_dataset(args, generate_dataset, options, "generated",
-                        needs_right="the DS-Generator warps the right image")
+    def run(dataset: Any, out: str, **kwargs: Any) -> dict[str, Any]:
+        dataset, tree = _generate_labels(args, dataset)
+        with _label_record(out, tree, dataset.root, args.labels, args.overwrite):
+            return generate_dataset(dataset, out, **kwargs)
+
+    return _run_dataset(args, run, options, "generated", needs_right="the DS-Generator warps the right image")
+
+
+#: generate's record of the label tree its frames were fitted to (``--labels``), beside its settings.json
+LABELS_RECORD = "labels.json"
+
+
+def _generate_labels(args: argparse.Namespace, dataset: Any) -> tuple[Any, dict[str, Any] | None]:
+    """``generate --dataset``'s road labels: with ``--labels TREE`` the dataset's frames that have a label
+    there, labelled from it (the others skipped, in one warning line), and the tree's record (``path``,
+    ``sha256`` of its content, ``files``); without, the dataset as it is (refused in one line naming
+    ``--labels`` when none of its frames has a label) and None."""
+    import logging
+
+    from freespace.engine.config import check_label_tree, label_files, label_tree_sha256, resolved_path
+    from freespace.errors import DatasetError
+
+    if args.labels is None:
+        if not any(dataset.has_label(f) for f in dataset.frames):
+            raise DatasetError(f"{args.dataset} at {args.root} has no road labels, which the DS-Generator fits the road "
+                               f"model to; label it with `freespace autolabel --dataset {args.dataset} --root "
+                               f"{args.root} --out TREE` and give {param('labels')} TREE")
+        return dataset, None
+    check_label_tree(args.labels, args.dataset, args.root, args.split)
+    files = label_files(args.labels)
+    names = [f.name for f in dataset.frames if f.name in files]
+    if not names:
+        raise DatasetError(f"{param('labels')} {args.labels} labels none of the {len(dataset.frames)} frames of "
+                           f"{args.dataset} at {args.root} (e.g. {dataset.frames[0].name}); give the tree that "
+                           f"`freespace autolabel` wrote for this dataset")
+    skipped = [f.name for f in dataset.frames if f.name not in files]
+    if skipped:
+        logging.getLogger("freespace.cli").warning(
+            "%d of %d frames have no label in %s and are skipped (%s%s)", len(skipped), len(dataset.frames),
+            args.labels, skipped[0], ", …" if len(skipped) > 1 else "")
+    digest, count = label_tree_sha256(args.labels)
+    tree = {"path": resolved_path(args.labels), "sha256": digest, "files": count}
+    return dataset.subset(names).with_labels(args.labels, names), tree
+
+
+def _tree_text(tree: dict[str, Any] | None) -> str:
+    """A label tree's record (:func:`_generate_labels`) in words, for messages."""
+    return "the dataset's own labels" if tree is None else \
+        f"the label tree {tree.get('path')} (sha256 {str(tree.get('sha256'))[:12]}…)"
+
+
+@contextmanager
+def _label_record(out: str, tree: dict[str, Any] | None, root: Any, labels: str | None,
+                  overwrite: bool) -> Iterator[None]:
+    """Hold ``OUT/labels.json``, generate's record of the label tree (``tree``, None: the dataset's own labels)
+    that the frames in ``out`` were fitted to, around the run. An ``out`` made with another tree, or with the
+    dataset's own labels when a tree is given now (or the reverse), is refused in one line, unless
+    ``overwrite``: then every file of the earlier run goes, and every frame is made again. The record is
+    written before any frame, so that a run killed half-way resumes with the same tree, under a claim of the
+    folder by generate (:mod:`freespace.io.outdir`: shared, as the shards of one run share it); it is
+    removed again when the run fails before generating anything."""
+    import json
+
+    from freespace.io.files import check_outputs, check_writable, write_json
+    from freespace.io.outdir import claim_folder
+
+    folder_path = Path(out)
+    record, settings = folder_path / LABELS_RECORD, folder_path / "settings.json"
+    if tree is None and not record.exists():
+        yield  # the dataset's own labels, and no tree recorded: generate's own settings say it all
+        return
+    check_writable(out, folder=True)  # what generate checks first: nothing is written where it refuses to
+    check_outputs({"out": out}, {"root": root, **({"labels": labels} if labels else {})})
+    created = not folder_path.exists()
+    with claim_folder(out, "generate", shared=True) as folder:
+        started = settings.is_file()
+        if record.is_file():
+            try:
+                old = json.loads(record.read_text())["labels"]
+            except (OSError, ValueError, KeyError, TypeError):
+                old = "unreadable"
+        else:
+            old = None if started else tree  # frames of the dataset's own labels; or nothing made yet
+        if old != tree:
+            if not overwrite:
+                was = "an unreadable record of their labels" if old == "unreadable" else _tree_text(old)
+                raise InvalidOptionError(f"{param('out')} {out} holds frames fitted to {was}, not to "
+                                         f"{_tree_text(tree)}; choose another {param('out')}, or add "
+                                         f"{param('overwrite')} to make them again")
+            folder.forget(folder.entries())  # every frame of the other labels, whichever this run makes
+        if tree is None:
+            folder.forget({LABELS_RECORD} & folder.entries())
+        else:
+            folder.record({LABELS_RECORD})
+            write_json(record, {"labels": tree})
+    try:
+        yield
+    except BaseException:
+        if tree is not None and not started and not settings.exists():  # refused before any frame: leave no record
+            with claim_folder(out, "generate", shared=True) as folder:
+                folder.forget({LABELS_RECORD} & folder.entries())
+            if created:
+                try:
+                    folder_path.rmdir()  # empty again (its manifest went with the last entry)
+                except OSError:
+                    pass
+        raise
 
 
 # --- autolabel -----------------------------------------------------------------------------------------
@@ -663,6 +774,9 @@ def _export_parser(p: argparse.ArgumentParser) -> None:
                                                        "calibrated on --calibration's frames")
     p.add_argument("--calibration", metavar="DIR", help="with --int8: a folder (or glob, or video) of real frames "
                                                         "like those the model will see")
+    p.add_argument("--fp16", action="store_true", help="onnx: weights and computation in float16 (about half the "
+                                                       "size; input and output stay float32), checked against the "
+                                                       "checkpoint's probabilities")
     p.add_argument("--out", required=True, help="output file")
     p.set_defaults(func=cmd_export)
 
@@ -671,10 +785,19 @@ def cmd_export(args: argparse.Namespace) -> int:
     """``freespace export``: ONNX or TorchScript, validated against PyTorch."""
     from freespace.inference.predict import export_model
 
+    if args.fp16 and args.int8:
+        raise InvalidOptionError("--fp16 and --int8 exclude each other: a model is exported in float16 or in int8; "
+                                 "leave out one of them")
     if args.int8 != (args.calibration is not None):
         raise InvalidOptionError("--int8 and --calibration DIR go together: int8 quantisation is calibrated on real "
                                  "frames" if args.int8 else "--calibration is for --int8: add --int8, or leave it out")
-    r = export_model(args.checkpoint, args.fmt, args.out, calibration=args.calibration)
+    r = export_model(args.checkpoint, args.fmt, args.out, calibration=args.calibration, fp16=args.fp16)
+    if "fp16" in r:
+        h = r["fp16"]
+        print(f"onnx float16 → {r['path']}  against the checkpoint: max probability difference "
+              f"{h['max_prob_diff']:.2e} (allowed {h['tolerance']}), masks agree on {100 * h['mask_agreement']:.2f} % "
+              f"of the pixels (sizes {', '.join('×'.join(map(str, s[2:])) for s in r['checked_sizes'])})")
+        return 0
     if "int8" in r:
         q = r["int8"]
         print(f"onnx int8 → {r['path']}  (float32 export: max abs difference to PyTorch {r['max_abs_diff']:.2e}); "
@@ -795,7 +918,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print()
         print(Path(result["results_md"]).read_text().rstrip())
     print(f"figures: {result['figures']}, {args.out}/experiment/figures   ({result['seconds']:.0f} s)")
-    return 1 if result["generate_failed"] else 0
+    from freespace.demo import published_lines
+
+    for line in published_lines(result["real"], result["models_folder"]):
+        print(line)
+    return 1 if result["generate_failed"] or any("error" in r for r in result["real"]) else 0
 
 
 # --- the command ---------------------------------------------------------------------------------------

@@ -1,12 +1,19 @@
 """The built-in demo: render stereo road scenes, run the DS-Generator on them, then train a light network
-with and without the augmentation, evaluate both and compare (``full``: the six-network protocol).
+with and without the augmentation, evaluate both and compare (``full``: the six-network protocol); it ends
+by running every published real-road model on the real example frames shipped with it
+(:func:`run_published_models`).
 
 ``freespace demo`` (and ``make demo``) runs it end to end on a fresh machine, with no data files.
+
+A published model is a folder ``models/<name>/`` of the repository: ``model.onnx`` (``freespace export``),
+``README.md`` (its model card) and ``examples/`` (a few real frames, PNG, with their ``LICENSE``).
 """
 
 from __future__ import annotations
 
+import glob
 import logging
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -17,7 +24,7 @@ from freespace.data.kitti_road import KittiRoad
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.data.synthetic.dataset import MAX_FRAMES
 from freespace.datagen.generate import generate_dataset
-from freespace.errors import FreespaceError, InvalidOptionError, check_seed, param
+from freespace.errors import FreespaceError, InputFileError, InvalidOptionError, check_seed, param
 from freespace.evaluation.viz import caption, colorize_disparity, grid, overlay_road
 from freespace.geometry import compute_disparity, fit_road_model
 from freespace.io.codecs import read_disparity, read_image, read_road_label, write_image
@@ -26,10 +33,87 @@ from freespace.io.outdir import claim_folder
 
 log = logging.getLogger(__name__)
 
-__all__ = ["run_demo"]
+__all__ = ["run_demo", "models_folder", "published_models", "run_published_models", "published_lines"]
 
-#: what the demo writes into OUT (:mod:`freespace.io.outdir` entries)
-OUT_ENTRIES = ("dataset/", "generated/", "figures/", "experiment/", "demo_summary.json")
+#: what the demo writes into OUT (:mod:`freespace.io.outdir` entries); ``real/<name>/``: each published
+#: model's predictions on its example frames
+OUT_ENTRIES = ("dataset/", "generated/", "figures/", "experiment/", "real/", "demo_summary.json")
+
+#: the environment variable that names another folder of published models than the repository's ``models/``
+MODELS_ENV = "FREESPACE_MODELS"
+
+
+def models_folder() -> Path:
+    """The folder of published models: ``$FREESPACE_MODELS`` when set, else the repository's ``models/`` (next
+    to the ``freespace`` package; absent from an installed package, which has none)."""
+    env = os.environ.get(MODELS_ENV)
+    if env:
+        return Path(env)
+    import freespace
+
+    return Path(freespace.__file__).resolve().parents[1] / "models"
+
+
+def published_models(folder: PathLike | None = None) -> list[Path]:
+    """The published models of ``folder`` (default :func:`models_folder`): its ``<name>/model.onnx`` files,
+    sorted by name; none when the folder does not exist."""
+    folder = Path(folder) if folder is not None else models_folder()
+    return sorted(p for p in folder.glob("*/model.onnx") if p.is_file()) if folder.is_dir() else []
+
+
+def run_published_models(out: PathLike, folder: PathLike | None = None, batch_size: int = 4) -> list[dict[str, Any]]:
+    """Run every published model of ``folder`` (:func:`published_models`) on its ``examples/*.png`` as
+    ``freespace predict --onnx MODEL --input 'examples/*.png' --out OUT/real/<name>`` does (the same
+    :class:`~freespace.inference.predictor.Predictor` and :func:`~freespace.inference.predict.predict_folder`:
+    8-bit road confidence maps, ``overlays/`` and ``summary.json``).
+
+    Returns:
+        One entry per model, in name order: ``name``, ``model`` (its file), and either ``out`` (the folder
+        of confidence maps), ``overlays``, ``frames`` and ``frames_per_second`` (end to end, first frame read
+        to last written), or ``error`` (one line: the model or its examples cannot be read; the other models
+        still run).
+    """
+    from freespace.inference.predict import predict_folder
+    from freespace.inference.predictor import Predictor
+
+    results = []
+    for model in published_models(folder):
+        name = model.parent.name
+        target = Path(out) / "real" / name
+        entry: dict[str, Any] = {"name": name, "model": str(model)}
+        try:
+            examples = model.parent / "examples"
+            if not any(examples.glob("*.png")):
+                raise InputFileError(f"{examples} holds no example frames (*.png); a published model ships a few")
+            summary = predict_folder(Predictor(onnx=model), glob.escape(str(examples)) + "/*.png", target,
+                                     batch_size=batch_size, progress=False)
+            entry.update(out=str(target), overlays=str(target / "overlays"), frames=summary["frames"],
+                         frames_per_second=summary["frames_per_second"])
+        except FreespaceError as exc:
+            log.warning("published model %s: %s", name, exc)
+            entry["error"] = str(exc)
+        results.append(entry)
+    return results
+
+
+def published_lines(results: list[dict[str, Any]], folder: PathLike | None = None) -> list[str]:
+    """What the demo prints of :func:`run_published_models`' ``results``: one line per model (where its
+    overlays are, and its frame rate; or why it failed), or one line saying that ``folder`` (default
+    :func:`models_folder`) holds no published model."""
+    if not results:
+        where = Path(folder) if folder is not None else models_folder()
+        return [f"real frames: no published model in {where} (models/<name>/model.onnx with examples/*.png), "
+                f"nothing to show"]
+    lines = []
+    for r in results:
+        if "error" in r:
+            lines.append(f"real frames, model {r['name']}: failed: {r['error']}")
+        else:
+            fps = r["frames_per_second"]
+            lines.append(f"real frames, model {r['name']}: {r['frames']} example frames, overlays in {r['overlays']} "
+                         f"({fps:.1f} frames per second end to end)" if fps else
+                         f"real frames, model {r['name']}: {r['frames']} example frames, overlays in {r['overlays']}")
+    return lines
 
 
 def _mae(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
@@ -54,11 +138,11 @@ def run_demo(out: PathLike, num_frames: int = 60, seed: int = 0, config: SynthCo
 
     Writes under ``out``: ``dataset/`` (KITTI road tree), ``generated/`` (DS-Generator output and
     reports), ``figures/<frame>.jpg`` (left, right, disparity, label, generated view, for the first
-    ``figures`` frames), ``experiment/`` (runs, results.md/csv, prediction figures) and
-    ``demo_summary.json``. Returns the summary: per frame the true and fitted roll (from the exact and
-    from SGBM disparity) and the mean absolute difference to the left image on the road of the raw
-    right image and of the generated image; and the results table.
-    """
+    ``figures`` frames), ``experiment/`` (runs, results.md/csv, prediction figures), ``real/<name>/`` (each
+    published model on its real example frames: :func:`run_published_models`) and ``demo_summary.json``.
+    Returns the summary: per frame the true and fitted roll (from the exact and from SGBM disparity) and
+    the mean absolute difference to the left image on the road of the raw right image and of the generated
+    image; the results table; ``real`` (:func:`run_published_models`) and ``models_folder``."""
     config = config or SynthConfig(width=160, height=128, frames_per_scenario=4)
     check_seed(seed)
     least = _least_frames(config.frames_per_scenario, seed) if train else 1
@@ -131,6 +215,10 @@ def _demo(out: Path, num_frames: int, seed: int, config: SynthConfig, train: boo
                                variants=("X", "HA-X"))
         result["results"] = experiment["table"]
         result["results_md"] = str(out / "experiment" / "results.md")
+    log.info("running the published real-road models on their example frames")
+    folder = models_folder()
+    result["models_folder"] = str(folder)
+    result["real"] = run_published_models(out, folder)
     result["seconds"] = round(time.perf_counter() - t0, 2)
     write_json(out / "demo_summary.json", result)
     return result

@@ -33,7 +33,7 @@ from freespace.shard import select_shard
 
 log = logging.getLogger(__name__)
 
-__all__ = ["predict_folder", "predict_video", "export_model", "kitti_submit"]
+__all__ = ["predict_folder", "predict_video", "export_model", "to_float16", "kitti_submit"]
 
 #: the size (H, W) of the example input an export is traced and checked with when the checkpoint states no
 #: training size: KITTI road's
@@ -340,9 +340,18 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
     return _summary(predictor, stats, fps=source.fps, path=str(out))
 
 
-def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: PathLike | None = None) -> dict[str, Any]:
+def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: PathLike | None = None,
+                 fp16: bool = False) -> dict[str, Any]:
     """Export a checkpoint to ONNX (dynamic N, H, W; opset 17) or TorchScript (traced; dynamic H, W),
     validated against PyTorch at the training size and at an odd size. Returns the max abs differences.
+
+    With ``fp16`` (ONNX only) the file written is the float16 model (:func:`to_float16`: weights and
+    computation in float16, the ``image`` input and ``logits`` output kept float32, so that
+    :class:`Predictor` and ``freespace predict --onnx`` take it as any export; the metadata kept), about
+    half the size. Its road probabilities are compared with the checkpoint's (PyTorch, float32) on the
+    check inputs: the result's ``fp16`` entry gives the largest difference and the share of pixels whose
+    road/non-road decision (p ≥ 0.5) is the same; a difference above :data:`FP16_MAX_PROB_DIFF` (or not
+    finite: a float16 overflow) refuses the export and writes nothing.
 
     With ``calibration`` (ONNX only: a folder, glob or video of real frames) the file written is the int8
     model (:func:`freespace.inference.quantize.quantize_int8`, calibrated on up to
@@ -354,6 +363,12 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
         raise InvalidOptionError(f"{param('fmt')} must be onnx or torchscript, got {fmt!r}")
     if calibration is not None and fmt != "onnx":
         raise InvalidOptionError(f"int8 quantisation ({param('calibration')}) is for {param('fmt')} onnx")
+    if fp16 and fmt != "onnx":
+        raise InvalidOptionError(f"{param('fp16')} is for {param('fmt')} onnx (a float16 ONNX model); leave it out "
+                                 f"for {fmt}")
+    if fp16 and calibration is not None:
+        raise InvalidOptionError(f"{param('fp16')} and int8 quantisation ({param('calibration')}) exclude each other: "
+                                 f"a model is exported in float16 or in int8; leave out one of them")
     check_writable(out)
     check_outputs({"out": out}, {"checkpoint": checkpoint, **({"calibration": calibration} if calibration else {})})
     import torch
@@ -365,8 +380,9 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
         from freespace.inference.quantize import calibration_inputs
 
         calib_inputs = calibration_inputs(calibration, size)
-    example = torch.rand(1, 3, *size)
-    checks = [torch.rand(1, 3, *size), torch.rand(2, 3, size[0] - 7, size[1] - 13)]
+    gen = torch.Generator().manual_seed(0)  # the same check inputs every time: a refusal is repeatable
+    example = torch.rand(1, 3, *size, generator=gen)
+    checks = [torch.rand(1, 3, *size, generator=gen), torch.rand(2, 3, size[0] - 7, size[1] - 13, generator=gen)]
     out = Path(out)
     meta = {"model": hp["model"], "image_size": json.dumps(list(size)), "producer": "freespace"}
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
@@ -401,10 +417,15 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
                     return loaded(x).numpy()
         diffs = []
         with torch.no_grad():
-            for x in checks:
-                diffs.append(float(np.abs(run(x) - model(x).numpy()).max()))
+            references = [model(x).numpy() for x in checks]
+        for x, ref in zip(checks, references):
+            diffs.append(float(np.abs(run(x) - ref).max()))
     result = {"format": fmt, "path": str(out), "max_abs_diff": max(diffs),
               "checked_sizes": [list(x.shape) for x in checks]}
+    if fp16:
+        half = to_float16(data, {**meta, "precision": "float16 (weights and computation; image and logits float32)"})
+        result["fp16"] = _check_float16(half, [x.numpy() for x in checks], references, checkpoint)
+        data = half
     if calib_inputs is not None:
         from freespace.inference.quantize import compare_models, quantize_int8
 
@@ -414,6 +435,56 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
         data = quantized
     atomic_write_bytes(out, data)
     return result
+
+
+#: the largest road probability difference a float16 export may have from its checkpoint on the check inputs
+FP16_MAX_PROB_DIFF = 0.05
+
+
+def to_float16(model: bytes, metadata: dict[str, str]) -> bytes:
+    """The float16 version of the float32 ONNX ``model`` (onnxruntime's ``convert_float_to_float16``): weights
+    and computation in float16, the graph's input and output kept float32 (``keep_io_types``: a cast after
+    the input and before the output), so that it is called as the float32 model is; ``metadata`` is set on
+    it (replacing what it had)."""
+    import onnx
+    from onnxruntime.transformers.float16 import convert_float_to_float16
+
+    proto = convert_float_to_float16(onnx.load_from_string(model), keep_io_types=True)
+    del proto.metadata_props[:]
+    for k, v in metadata.items():
+        proto.metadata_props.add(key=k, value=v)
+    return proto.SerializeToString()
+
+
+def _road_probability(logits: np.ndarray) -> np.ndarray:
+    """Softmax road probability (``N×H×W``, float64) of ``N×C×H×W`` class scores."""
+    logits = logits.astype(np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):  # infinite logits (a float16 overflow) give NaN: refused
+        e = np.exp(logits - logits.max(1, keepdims=True))
+        return e[:, 1] / e.sum(1)
+
+
+def _check_float16(model: bytes, inputs: list[np.ndarray], references: list[np.ndarray],
+                   checkpoint: PathLike) -> dict[str, Any]:
+    """Run the float16 ONNX ``model`` on ``inputs`` (``float32 N×3×H×W``) and compare its road probabilities
+    with the checkpoint's logits ``references``: ``max_prob_diff`` and ``mask_agreement`` (p ≥ 0.5).
+
+    Raises:
+        InvalidOptionError: the difference exceeds :data:`FP16_MAX_PROB_DIFF` or is not finite.
+    """
+    import onnxruntime as ort
+
+    session = ort.InferenceSession(model, providers=["CPUExecutionProvider"])
+    diff, same, total = 0.0, 0, 0
+    for x, ref in zip(inputs, references):
+        a, b = _road_probability(ref), _road_probability(session.run(None, {"image": x})[0])
+        d = float(np.abs(a - b).max())
+        diff = d if not np.isfinite(d) else max(diff, d)
+        same, total = same + int(((a >= 0.5) == (b >= 0.5)).sum()), total + a.size
+    if not diff <= FP16_MAX_PROB_DIFF:  # NaN too: a float16 overflow
+        raise InvalidOptionError(f"{checkpoint}: in float16 the road probabilities differ from the checkpoint's by up to "
+                          f"{diff:.3g} (allowed {FP16_MAX_PROB_DIFF}); export it without {param('fp16')}")
+    return {"max_prob_diff": diff, "mask_agreement": same / total, "tolerance": FP16_MAX_PROB_DIFF}
 
 
 def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: bool = True) -> dict[str, Any]:
