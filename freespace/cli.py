@@ -712,7 +712,7 @@ REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "val_window", "min
 
 
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:
-    from freespace.experiments.reproduce import MAX_SEEDS
+    from freespace.experiments.protocol import MAX_SEEDS
 
     _add_config_options(p, REPRODUCE_OPTIONS, values={"dataset": None, "root": None})  # not with --tables
     p.add_argument("--models", help="all (the paper's six networks) or a comma-separated list (default all)")
@@ -739,7 +739,8 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """``freespace reproduce``: every network with and without the augmentation (and the control); tables,
     paired gains and figures; one cell with ``--only``, the tables alone with ``--tables``."""
-    from freespace.experiments.reproduce import parse_models, parse_variants, reproduce, write_tables
+    from freespace.experiments import parse_models, parse_variants, write_tables
+    from freespace.experiments.reproduce import reproduce
 
     if args.models is not None:  # names checked in every mode
         parse_models(args.models)

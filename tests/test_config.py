@@ -106,7 +106,7 @@ def _folders(tmp_path: Path) -> dict[str, str]:
 def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) -> None:
     """The recorded-settings check of reproduce passes for a cell written before this version, and the cell
     is written back in the same spellings (the disparity source's key renamed, the old key read too)."""
-    from freespace.experiments.reproduce import _check_cell
+    from freespace.experiments.cells import check_cell as _check_cell
 
     where = _folders(tmp_path)
     run = Path(where["out"])
