@@ -19,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig
+from freespace.engine.config import TrainConfig
 from freespace.errors import CorruptFileError, DatasetError, InvalidOptionError, param
 from freespace.experiments.protocol import (DEFAULT_TEST_SET, METRICS, MIX_HUMAN_SHARE, VARIANTS, TestRoots, Variant,
                                             parse_test_roots, run_name, run_of)
@@ -114,26 +114,15 @@ def check_inputs(out: Path, configs: list[TrainConfig]) -> None:
 
 def check_cell(config: TrainConfig) -> bool:
     """Refuse ``config`` when the cell in ``config.out`` was started with other settings (``key old → new``, in
-    config.yaml's spelling), but for a larger ``epochs`` or ``patience``
-    (:data:`~freespace.engine.train.GROWABLE`); return whether one of those grew. The cell's
-    config.yaml may be of any version (its spellings and renamed keys read as the values they were); ``root``
-    compares resolved; an ``image_size`` of :data:`~freespace.engine.config.FIRST_FRAME_SIZE` matches the
-    size it was resolved to."""
-    from freespace.engine.train import GROWABLE, WHERE_AND_HOW
-
+    config.yaml's spelling), but for a larger ``epochs`` or ``patience``; return whether one of those grew
+    (:meth:`~freespace.engine.config.TrainConfig.diff`: the cell's config.yaml may be of any version; paths
+    compare resolved; an ``image_size`` of :data:`~freespace.engine.config.FIRST_FRAME_SIZE` matches the size
+    it was resolved to)."""
     run_dir = Path(config.out)
     saved_path = run_dir / "config.yaml"
     if not saved_path.is_file():
         return False
-    recorded = TrainConfig.load(saved_path)
-    if config.image_size == FIRST_FRAME_SIZE:
-        config = replace(config, image_size=recorded.image_size)
-    saved, new = recorded.to_dict(), config.to_dict()
-    for d in (saved, new):
-        d["root"] = str(Path(d["root"]).expanduser().resolve())
-    grown = [k for k in GROWABLE if new[k] > saved[k]]
-    changes = [f"{k} {saved.get(k)!r} → {v!r}" for k, v in new.items()
-               if k not in (*WHERE_AND_HOW, *grown) and saved.get(k) != v]
+    changes, grown = config.diff(TrainConfig.load(saved_path))
     if changes:
         raise InvalidOptionError(f"{run_dir} was started with other settings ({'; '.join(changes)}); rerun with its "
                                  f"settings, or give another {param('out')} for the new ones")
