@@ -399,7 +399,7 @@ class TrainConfig:
         options, in :attr:`GROWABLE` order. An ``image_size`` of :data:`FIRST_FRAME_SIZE` here matches the size
         ``saved`` was resolved to.
 
-        ``train --resume`` and ``reproduce``'s cells refuse a run whose ``changed`` is not empty.
+        A resumed training run and a cell of ``reproduce`` refuse a run whose ``changed`` is not empty.
         """
         now, then = self.to_dict(), saved.to_dict()
         if self.image_size == FIRST_FRAME_SIZE:
