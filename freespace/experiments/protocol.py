@@ -228,14 +228,18 @@ class Protocol:
         """Read a protocol file (YAML, read as ``yaml.safe_load`` reads it; see the module docstring).
 
         Raises:
+            InputFileError: no such file.
             CorruptFileError: not readable, or not YAML.
             InvalidOptionError: an unknown key, variant, metric or test set name; a gain given twice; a primary
             endpoint that is not among the gains (one line naming the file and the key).
         """
+        from freespace.errors import InputFileError
         from freespace.io.codecs import load_yaml
 
-        data = load_yaml(path)
         where = f"{param('protocol')} {path}"
+        if not Path(path).is_file():
+            raise InputFileError(f"{where} not found; give a study's protocol.yaml")
+        data = load_yaml(path)
         if not isinstance(data, dict):
             raise InvalidOptionError(f"{where} is not a mapping of variants, gains, primary, test_sets and reference")
         unknown = sorted(set(map(str, data)) - {"variants", "gains", "primary", "test_sets", "reference"})

@@ -228,7 +228,7 @@ def write_tables(out: PathLike, *, figures: int = 3, statuses: dict[str, str] | 
     if not entries:
         raise InvalidOptionError(f"{out / 'runs'} holds no run folders of `freespace reproduce`; nothing to collect")
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
-        return _write_tables(out, entries, differ, figures, _STUDY if protocol is None else protocol)
+        return _write_tables(out, entries, differ, figures, Protocol() if protocol is None else protocol)
 
 
 def _write_tables(out: Path, entries: list[dict[str, Any]], differ: list[str], figures: int,
@@ -322,8 +322,3 @@ def _primary_lines(gains: list[dict[str, Any]], primary: Primary | None) -> list
             f"{METRIC_NAMES[primary.metric]} on `{primary.test_set}`, averaged over the networks: "
             f"{found['mean']:+.2f} points, 95 % t-interval [{found['ci_low']:+.2f}, {found['ci_high']:+.2f}] over "
             f"{found['n']} seeds; {verdict}."]
-
-
-#: (until the studies hold their protocols) the converged run's: its primary endpoint and the paper's gains
-_STUDY = Protocol(primary=Primary(("HA-X", "X-dup"), "f_score", "same-rigs", 1.0),
-                  reference="HA gain in the paper: F-score +1.5 to +5.0, IoU +2.8 to +7.3 points (HA-X − X)")
