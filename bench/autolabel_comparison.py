@@ -6,7 +6,7 @@ checkpoints), so it rebuilds the BENCHMARKS.md section from the committed result
 `--auto2 DIR` (default `res-auto2` beside `--res`, when it exists) it adds X-auto trained on the autolabels of
 the padded matcher (SGBM version 2), paired by seed with X and X-auto of `--res`:
 
-    .venv/bin/python bench/autolabel_comparison.py [--res docs/results/converged/res-final] [--auto2 DIR] [--write]
+    .venv/bin/python bench/autolabel_comparison.py [--res studies/converged/res-final] [--auto2 DIR] [--write]
 """
 
 from __future__ import annotations
@@ -108,7 +108,7 @@ def auto2_table(res: Path, auto2: Path) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--res", type=Path, default=Path("docs/results/converged/res-final"),
+    parser.add_argument("--res", type=Path, default=Path("studies/converged/res-final"),
                         help="a reproduce folder with its tables (results.csv, gains.csv, index.json)")
     parser.add_argument("--auto2", type=Path, help="a reproduce folder of X-auto cells trained on the padded "
                         "matcher's autolabels (default: res-auto2 beside --res, if there)")
@@ -136,10 +136,10 @@ human labels on 20 % of the training drives and autolabels on the rest. Validati
 labels; don't care pixels are ignored by the loss. Gains are paired by seed (the variants of a seed share the
 split and the initial weights), F-score points, 95 % Student t-intervals. The cells ran on 2-core Intel Xeon
 (AVX-512) and AMD EPYC machines, two cells at a time with one thread each; the rendered data of every machine
-pass `docs/results/converged/datacheck.py`.
+pass `studies/converged/datacheck.py`.
 
     NETS="unet dupsampling" VARIANTS="X X-auto X-mix" PATIENCE=20 CAP=200 LR=0.01 MIN_DELTA=0.001 \\
-        bash docs/results/converged/run.sh WORK          # or, for one cell:
+        bash studies/converged/run.sh WORK          # or, for one cell:
     freespace reproduce --dataset synth --root syn --autolabels autolabels --models unet,dupsampling \\
         --variants X,X-auto,X-mix \\
         --test-root shifted=shifted --test-root matched=matched --test-root same-rigs=same-rigs --seeds 10 \\

@@ -16,7 +16,7 @@ human non-road) and missed road (FN), in ‰ of all evaluated pixels (they add u
 probability threshold 0.5, summed over the frames and averaged over the seeds.
 
 Runs come from a `reproduce` folder (`WORK/RES/runs/<net>-<orig|auto|mix>-s<seed>/`, with their
-checkpoints), for example the converged run's working folder (docs/results/converged/run.sh). The test frames
+checkpoints), for example the converged run's working folder (studies/converged/run.sh). The test frames
 are autolabelled with the SGBM of the package that runs the script: to classify them as the training autolabels
 were made, run it with the package the cells' autolabels came from (the converged run's `autolabels`: SGBM
 version 1, `PYTHONPATH=` a worktree at f341a7f):

@@ -3,7 +3,7 @@
 Trains each configuration for ``--epochs`` epochs (``freespace train`` in a fresh process, one thread unless
 ``--threads``) on ``--root`` and reports the seconds of its last epoch (training and validation, from the
 run's metrics.csv) and the set-up time (data, DS-Generator views, first epoch's decoding). The plan of a
-long run (docs/results/converged/plan.md) is made from these figures.
+long run (studies/converged/plan.md) is made from these figures.
 
 With ``--before CHECKOUT`` (a source tree of the code before a speed-up, e.g. a git worktree) each
 configuration is also run with that code, alternately with this one, and the table gives both and their ratio.

@@ -835,7 +835,7 @@ REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "val_window", "min
 
 
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:
-    from freespace.experiments.reproduce import MAX_SEEDS
+    from freespace.experiments.protocol import MAX_SEEDS
 
     _add_config_options(p, REPRODUCE_OPTIONS, values={"dataset": None, "root": None})  # not with --tables
     p.add_argument("--models", help="all (the paper's six networks) or a comma-separated list (default all)")
@@ -844,7 +844,7 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
                    "X-dup (the control: X with HA-X's number of steps), X-long (X with twice the epochs and "
                    "patience), HV-X (road-plane virtual views), HAV-X (both), X-auto (training labels from "
                    "--autolabels), X-mix (the dataset's labels on 20%% of the training drives, --autolabels' on the "
-                   "rest) (default X,HA-X,X-dup)")
+                   "rest) (default: --protocol's, else X,HA-X,X-dup)")
     p.add_argument("--autolabels", metavar="DIR", help="for X-auto and X-mix: the label tree of --root that "
                    "`freespace autolabel --dataset` wrote")
     p.add_argument("--test-root", metavar="[NAME=]DIR", action="append",
@@ -854,6 +854,9 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
                    "seed in 0…--seeds−1), writing only its run folder (cluster array jobs); collect with --tables")
     p.add_argument("--tables", action="store_true", help="train nothing: rebuild index.json, the tables and the "
                    "figures from the run folders in --out")
+    p.add_argument("--protocol", metavar="FILE", help="a study's protocol (YAML: its variants, the gains it reports, "
+                   "its primary endpoint, named test sets and a reference line; see freespace.experiments.protocol); "
+                   "default: variants X,HA-X,X-dup, every gain of the variants run, no primary endpoint")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--out", required=True, metavar="DIR")
     p.set_defaults(func=cmd_reproduce)
@@ -862,8 +865,10 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """``freespace reproduce``: every network with and without the augmentation (and the control); tables,
     paired gains and figures; one cell with ``--only``, the tables alone with ``--tables``."""
-    from freespace.experiments.reproduce import parse_models, parse_variants, reproduce, write_tables
+    from freespace.experiments import Protocol, parse_models, parse_variants, write_tables
+    from freespace.experiments.reproduce import reproduce
 
+    protocol = Protocol.load(args.protocol) if args.protocol is not None else None
     if args.models is not None:  # names checked in every mode
         parse_models(args.models)
     if args.variants is not None:
@@ -874,14 +879,14 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         if unused:
             raise InvalidOptionError(f"--tables collects the finished cells in --out, whatever they are; it takes no "
                                      f"{', '.join(unused)}")
-        r = write_tables(args.out)
+        r = write_tables(args.out, protocol=protocol)
     else:
         if args.dataset is None or args.root is None:
             raise InvalidOptionError("reproduce needs --dataset and --root (only --tables does without)")
         options = _config_values(args, REPRODUCE_OPTIONS)
         r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=args.models, seeds=args.seeds,
                       progress=not args.no_progress, variants=args.variants, test_root=args.test_root,
-                      only=args.only, autolabels=args.autolabels, **options)
+                      only=args.only, autolabels=args.autolabels, protocol=protocol, **options)
         if args.only:
             print(f"{r['runs'][0]['run']}: {r['runs'][0]['status']} (collect the cells with --tables)")
             return 0

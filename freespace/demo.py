@@ -206,7 +206,8 @@ def _demo(out: Path, num_frames: int, seed: int, config: SynthConfig, train: boo
         "figures": str(out / "figures"),
     }
     if train:
-        from freespace.experiments.reproduce import PAPER_NETWORKS, reproduce
+        from freespace.experiments import PAPER_NETWORKS
+        from freespace.experiments.reproduce import reproduce
 
         log.info("training %s with and without the augmentation", "all six networks" if full else "U-Net")
         epochs = epochs if epochs is not None else 30 if full else 12

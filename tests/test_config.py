@@ -106,7 +106,7 @@ def _folders(tmp_path: Path) -> dict[str, str]:
 def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) -> None:
     """The recorded-settings check of reproduce passes for a cell written before this version, and the cell
     is written back in the same spellings (the disparity source's key renamed, the old key read too)."""
-    from freespace.experiments.reproduce import _check_cell
+    from freespace.experiments.cells import check_cell as _check_cell
 
     where = _folders(tmp_path)
     run = Path(where["out"])
@@ -127,6 +127,23 @@ def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) 
     TrainConfig.load(run / "config.yaml").save(tmp_path / "again.yaml")
     assert (tmp_path / "again.yaml").read_text() == \
         CAMPAIGN_YAML.format(**where).replace("disparity_mode:", "disparity_source:")
+
+
+def test_diff_lets_only_the_cap_and_patience_grow(tmp_path: Path) -> None:
+    """``TrainConfig.diff``: the one comparison of a run's recorded settings (resume, reproduce's cells)."""
+    (tmp_path / "data").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "data")
+    saved = TrainConfig(dataset="synth", root=str(tmp_path / "data"), out=str(tmp_path / "run"), image_size=(64, 96),
+                        epochs=10, patience=3)
+    same = dataclasses.replace(saved, root=str(tmp_path / "link"), image_size=FIRST_FRAME_SIZE, workers=2, devices=2,
+                               out=str(tmp_path / "elsewhere"))  # the same folder spelled otherwise; where and how
+    assert same.diff(saved) == ([], [])
+    assert dataclasses.replace(saved, patience=5).diff(saved) == ([], ["patience"])
+    assert dataclasses.replace(saved, epochs=20, patience=5).diff(saved) == ([], ["epochs", "patience"])
+    assert dataclasses.replace(saved, epochs=5).diff(saved) == (["epochs 10 → 5"], [])  # a smaller cap: changed
+    changed, grown = dataclasses.replace(saved, epochs=20, lr=0.01, image_size=(32, 48)).diff(saved)
+    assert changed == ["lr 0.001 → 0.01", "image_size [64, 96] → [32, 48]"] and grown == ["epochs"]
+    assert saved.diff(dataclasses.replace(saved, image_size=FIRST_FRAME_SIZE)) == (["image_size None → [64, 96]"], [])
 
 
 def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:

@@ -687,7 +687,7 @@ def test_reproduce_refuses_a_cell_with_other_settings(trained: dict[str, Path], 
     """A finished (or started) cell keeps its settings: a smaller --epochs, another --image-size or --root is
     refused (a larger epoch cap or patience extends it: test_reproduce)."""
     from freespace.engine.config import TrainConfig
-    from freespace.experiments.reproduce import OUT_ENTRIES
+    from freespace.experiments import OUT_ENTRIES
     from freespace.io.outdir import claim_folder
 
     out = tmp_path / "exp"
@@ -1285,7 +1285,7 @@ def test_onnx_failing_at_run_time(trained: dict[str, Path], tmp_path: Path, caps
 
 def _reproduce_folder(out: Path):
     """``out`` claimed as reproduce's output folder (its manifest), for run folders made by hand inside."""
-    from freespace.experiments.reproduce import OUT_ENTRIES
+    from freespace.experiments import OUT_ENTRIES
     from freespace.io.outdir import claim_folder
 
     return claim_folder(out, "reproduce", entries=OUT_ENTRIES)

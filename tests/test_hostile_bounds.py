@@ -394,7 +394,7 @@ def test_weights_missing_from_the_hub_cache_fail_at_once(tmp_path: Path) -> None
 
 # ------------------------------------------------------------------------------------------ H. small things
 def test_the_manual_reproduce_command_with_an_encoder_is_accepted() -> None:
-    from freespace.experiments.reproduce import parse_models
+    from freespace.experiments import parse_models
     from freespace.models import model_options
 
     readme = (Path(__file__).resolve().parents[1] / "docs" / "networks.md").read_text()

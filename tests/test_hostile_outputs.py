@@ -446,7 +446,7 @@ def test_a_nested_output_folder_is_never_touched_by_the_outer_command(tmp_path: 
     """The outer command replaces its own output (``reproduce --tables``'s folder here) beside another
     command's folder in it: the nested folder's files stay; a nested folder at or inside one of the outer
     command's entries is refused, named, before any work."""
-    from freespace.experiments.reproduce import OUT_ENTRIES
+    from freespace.experiments import OUT_ENTRIES
 
     out = tmp_path / "out"
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES) as folder, folder.staged() as stage:

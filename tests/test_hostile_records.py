@@ -10,7 +10,7 @@ C. A run's record says what it used (silent wrong):
    * C8: a YAML key given twice (config, freespace.yaml) and an option in its old and new spelling are refused;
      YAML merge keys still read, and no YAML tag makes an object.
    * C9: epochs are numbered from 1 in metrics.csv, metrics.json (`first_epoch: 1`) and index.json alike; the
-     0-based files of older runs read right, and the published study tables rebuild byte for byte.
+     0-based files of older runs read right (the studies' published tables rebuild byte for byte: studies/*/tests).
 D. Labels must belong to the frames (silent wrong):
    * D10: confidence maps, predictions and overlays given as a label tree are refused, naming what they look like.
    * D11: a label tree that autolabel made for another dataset root or split is refused (train --labels,
@@ -209,7 +209,8 @@ def test_reproduce_from_another_folder_and_cells_of_changed_labels(tiny: Path, l
 
 
 def test_tables_warn_of_runs_from_other_contents(tiny: Path, tmp_path: Path) -> None:
-    from freespace.experiments.reproduce import _collect, _config
+    from freespace.experiments.cells import cell_config as _config
+    from freespace.experiments.tables import collect as _collect
 
     for seed, digest in ((0, "a" * 64), (1, "b" * 64)):
         config = _config("synth", tiny, tmp_path, "unet", "X", seed, dict(epochs=1, patience=1, image_size=(64, 96)))
@@ -221,7 +222,8 @@ def test_tables_warn_of_runs_from_other_contents(tiny: Path, tmp_path: Path) -> 
 
 def test_weights_file_hash_and_a_changed_file_refused_for_reproduce_cells(tiny: Path, tmp_path: Path) -> None:
     from freespace.engine.config import changed_inputs, content_hashes
-    from freespace.experiments.reproduce import _check_inputs, _config
+    from freespace.experiments.cells import cell_config as _config
+    from freespace.experiments.cells import check_inputs as _check_inputs
 
     weights = tmp_path / "w.pth"
     weights.write_bytes(b"first")
@@ -289,26 +291,14 @@ def test_freespace_yaml_with_a_key_twice_is_refused(tiny: Path, tmp_path: Path) 
         get_dataset("generic", root)
 
 
-# --- C9: old numbering, published tables ------------------------------------------------------------------
+# --- C9: old numbering ------------------------------------------------------------------------------------
 
 
 def test_old_zero_based_metrics_read_right() -> None:
-    from freespace.experiments.reproduce import _convergence
+    from freespace.experiments.tables import _convergence
 
     assert _convergence({"best_epoch": 0, "epochs_run": 3}, {"epochs": 5})["best_epoch"] == 1  # older file
     assert _convergence({"best_epoch": 1, "first_epoch": 1, "epochs_run": 3}, {"epochs": 5})["best_epoch"] == 1
-
-
-def test_the_published_tables_rebuild_identically(tmp_path: Path) -> None:
-    from freespace.experiments.reproduce import _collect, _write_tables
-
-    published = Path(__file__).resolve().parents[1] / "docs" / "results" / "gpu" / "res-paper"
-    out = tmp_path / "res"
-    shutil.copytree(published, out, symlinks=True)
-    entries, differ = _collect(out)
-    _write_tables(out, entries, differ, figures=0)
-    for name in ("index.json", "results.csv", "gains.csv", "results.md"):
-        assert (out / name).read_bytes() == (published / name).read_bytes(), name
 
 
 # --- D10–D12: label trees ---------------------------------------------------------------------------------

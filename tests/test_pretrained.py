@@ -264,7 +264,7 @@ def test_bad_encoder_options_fail_before_any_work(tiny: Path, tmp_path: Path, co
 
 
 def test_reproduce_passes_the_encoder_to_every_run(tiny: Path, tmp_path: Path) -> None:
-    from freespace.experiments.reproduce import _config
+    from freespace.experiments.cells import cell_config as _config
 
     config = _config("synth", tiny, tmp_path / "out", "dupsampling", "X", 0,
                      {"epochs": 1, "patience": 1, "encoder_name": LITE0, "encoder_weights": None})

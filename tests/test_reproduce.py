@@ -268,7 +268,7 @@ def test_reproduce_tables_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture
 def _fake_run(out: Path, data: Path, model: str, variant: str, seed: int, f: float, best: int, run: int,
               size: tuple[int, int] = (64, 96)) -> None:
     """A finished run folder as ``reproduce`` writes it (config.yaml, metrics.json), without training."""
-    from freespace.experiments.reproduce import _config
+    from freespace.experiments.cells import cell_config as _config
 
     config = _config("synth", data, out, model, variant, seed, dict(epochs=10, patience=3, val_window=1,
                                                                     batch_size=4, image_size=size))
@@ -279,7 +279,9 @@ def _fake_run(out: Path, data: Path, model: str, variant: str, seed: int, f: flo
 
 
 def test_x_long_budget_and_convergence_in_the_index(data: Path, tmp_path: Path) -> None:
-    from freespace.experiments.reproduce import _collect, _config, _convergence_lines
+    from freespace.experiments.cells import cell_config as _config
+    from freespace.experiments.tables import _convergence_lines
+    from freespace.experiments.tables import collect as _collect
 
     long = _config("synth", data, tmp_path, "unet", "X-long", 0, dict(epochs=10, patience=3, lr=0.01))
     assert (long.augment, long.epochs, long.patience, long.lr, Path(long.out).name) == \
@@ -304,7 +306,7 @@ def test_virtual_pose_ranges_reach_only_the_virtual_variants(data: Path, tmp_pat
     """``reproduce --virtual-shift`` (e.g. HV-X covering a shifted test set's camera heights) sets the pose ranges
     of HV-X and HAV-X; X's cells keep the defaults, so a campaign's finished X cells are not refused as changed."""
     from freespace.engine.config import TrainConfig
-    from freespace.experiments.reproduce import _config
+    from freespace.experiments.cells import cell_config as _config
 
     options = dict(epochs=2, patience=1, virtual_shift="0,-3.1:1.25,0", virtual_rotate="12,6,0")
     hv, x = (_config("synth", data, tmp_path, "unet", v, 0, options) for v in ("HV-X", "X"))
@@ -320,6 +322,7 @@ def test_preset_reaches_the_cells(data: Path, tmp_path: Path, monkeypatch: pytes
     """``reproduce --preset paper`` (the paper's backbones, for a GPU) reaches every cell's configuration, and a
     cell started with another preset is refused, not mixed in."""
     import freespace.experiments.reproduce as rep
+    from freespace.experiments.cells import check_cell
 
     seen = []
     monkeypatch.setattr(rep, "run_cell", lambda config, **_: seen.append(config) or "done")
@@ -329,11 +332,12 @@ def test_preset_reaches_the_cells(data: Path, tmp_path: Path, monkeypatch: pytes
     assert [(c.preset, c.model_options()) for c in seen] == [("paper", {"preset": "paper"})]
     seen[0].save(Path(seen[0].out, "config.yaml"))  # as a started cell holds it
     with pytest.raises(InvalidOptionError, match="preset 'paper' → 'light'"):
-        rep._check_cell(replace(seen[0], preset="light"))
+        check_cell(replace(seen[0], preset="light"))
 
 
 def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
-    from freespace.experiments.reproduce import ALL_NETWORKS, _gains, _primary_lines
+    from freespace.experiments.protocol import ALL_NETWORKS, GAINS, Primary
+    from freespace.experiments.tables import _gains, _primary_lines
 
     rng = np.random.default_rng(0)
     entries = []
@@ -344,18 +348,22 @@ def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
             for variant, shift in (("X", 0.0), ("HA-X", 0.02), ("X-dup", dup), ("X-long", 0.015)):
                 m = {k: base + shift for k in METRICS}
                 entries.append({"model": model, "variant": variant, "seed": seed, "metrics": m,
-                                "test_sets": {"same-rigs": m}})
-    gains = _gains(entries)
+                                "test_sets": {"fixed": m}})
+    gains = _gains(entries, GAINS)
     avg = [g for g in gains if g["network"] == ALL_NETWORKS and g["versus"] == "HA-X - X-dup"
-           and g["metric"] == "f_score" and g["test_set"] == "same-rigs"]
+           and g["metric"] == "f_score" and g["test_set"] == "fixed"]
     assert len(avg) == 1 and avg[0]["n"] == 6
     per_seed = [100 * np.mean([next(e["metrics"]["f_score"] for e in entries if e["model"] == m and e["seed"] == s
                                     and e["variant"] == v) for m in ("unet", "segnet")]) for s in range(6)
                 for v in ("HA-X", "X-dup")]
     expected = paired_gain(per_seed[0::2], per_seed[1::2])
     assert avg[0]["mean"] == pytest.approx(expected.mean) and avg[0]["ci_low"] == pytest.approx(expected.ci_low)
-    line = "\n".join(_primary_lines(gains))
+    primary = Primary(("HA-X", "X-dup"), "f_score", "fixed", 1.0)
+    line = "\n".join(_primary_lines(gains, primary))
     assert "Primary endpoint" in line and "inside ±1" in line  # the two differ by noise of 0.2 points
+    assert "`fixed`" in line and f"{avg[0]['mean']:+.2f} points" in line
+    assert _primary_lines(gains, None) == []  # a protocol without one: no line
+    assert _primary_lines(gains, Primary(("HA-X", "X-dup"), "f_score", "other", 1.0)) == []  # not measured
     ha_x = [g for g in gains if g["network"] == ALL_NETWORKS and g["versus"] == "HA-X - X" and g["metric"] == "f_score"
             and g["test_set"] == "test"]
     assert ha_x[0]["mean"] == pytest.approx(2.0) and ha_x[0]["excludes_zero"]

@@ -83,7 +83,7 @@ def test_the_reproduce_index_holds_each_runs_record(trained: dict[str, Path], tm
     metrics = json.loads((old / "metrics.json").read_text())
     del metrics["record"]
     (old / "metrics.json").write_text(json.dumps(metrics))
-    from freespace.experiments.reproduce import _collect  # the index's entries
+    from freespace.experiments.tables import collect as _collect  # the index's entries
 
     index = {e["run"]: e for e in _collect(out)[0]}
     assert index["runs/segnet-orig-s0"]["record"]["data_root"] == str(trained["data"].resolve())

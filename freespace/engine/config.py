@@ -385,6 +385,30 @@ class TrainConfig:
             raise CorruptFileError(f"{path} is not a freespace training config (no {', '.join(missing)})")
         return cls(**values)
 
+    #: the options a run may raise when it goes on: it goes on exactly as a run started with the larger values would
+    GROWABLE = ("epochs", "patience")
+    #: the options a run may change freely when it goes on: where its files go and how the work is spread
+    WHERE_AND_HOW = ("out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
+
+    def diff(self, saved: TrainConfig) -> tuple[list[str], list[str]]:
+        """Compare the configuration a run was started with, ``saved`` (its config.yaml, :meth:`load`: of any
+        version, its spellings and renamed keys read as the values they were), with this one, to go on with the
+        run: ``(changed, grown)``. ``changed``: every option that differs, as ``"key old → new"`` in config.yaml's
+        spelling (:meth:`to_dict`: paths compare resolved), but where the files go and how the work is spread
+        (:attr:`WHERE_AND_HOW`) and the options of :attr:`GROWABLE` that are larger here; ``grown``: those larger
+        options, in :attr:`GROWABLE` order. An ``image_size`` of :data:`FIRST_FRAME_SIZE` here matches the size
+        ``saved`` was resolved to.
+
+        A resumed training run and a cell of ``reproduce`` refuse a run whose ``changed`` is not empty.
+        """
+        now, then = self.to_dict(), saved.to_dict()
+        if self.image_size == FIRST_FRAME_SIZE:
+            now["image_size"] = then["image_size"]
+        grown = [k for k in self.GROWABLE if now[k] > then[k]]
+        changed = [f"{k} {then[k]!r} → {v!r}" for k, v in now.items()
+                   if k not in (*self.WHERE_AND_HOW, *grown) and then[k] != v]
+        return changed, grown
+
 
 def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None) -> None:
     """Refuse ``encoder_name``/``encoder_weights`` that the network does not take or that cannot be

@@ -162,13 +162,6 @@ class _EarlyStopping(EarlyStopping):
             self._evaluate_stopping_criteria(torch.tensor(current, dtype=torch.get_default_dtype()))
 
 
-#: the options a resumed run may raise: it goes on exactly as a run started with the larger values would
-GROWABLE = ("epochs", "patience")
-
-#: the options a resumed run may change freely: where its files go and how the work is spread
-WHERE_AND_HOW = ("out", "devices", "num_nodes", "strategy", "workers", "tensorboard")
-
-
 #: what a run writes into its folder, as :mod:`freespace.io.outdir` entries (removed when a plain rerun takes
 #: over a start that never checkpointed)
 RUN_ENTRIES = ("config.yaml", "inputs.json", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/",
@@ -369,11 +362,9 @@ def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> TrainConfig
     resumed = RunCheckpointIO(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
     if config.image_size == FIRST_FRAME_SIZE:
         config = replace(config, image_size=saved.image_size)
-    now = config.to_dict()
-    changed = [k for k, v in saved.to_dict().items()
-               if k not in WHERE_AND_HOW and now[k] != v and not (k in GROWABLE and now[k] > v)]
+    changed = config.diff(saved)[0]
     if changed:
-        raise InvalidOptionError(f"{param('resume')} with other options than the run's ({', '.join(changed)}); "
+        raise InvalidOptionError(f"{param('resume')} with other options than the run's ({'; '.join(changed)}); "
                                  f"resume with the same options (only {param('epochs')} and {param('patience')} "
                                  f"may grow)")
     from freespace.models import create_model  # the run's network, named as in RoadModule: before any work

@@ -1,1 +1,19 @@
-"""The paper's experiments: every network trained with and without the augmentation, tables, figures."""
+"""The paper's experiments: every network trained with and without the augmentation, tables, figures.
+
+:func:`freespace.experiments.reproduce.reproduce` runs a campaign (its module keeps the name: the function is
+not re-exported here, where it would hide the module); :mod:`~freespace.experiments.protocol` names its
+variants and gains and
+reads a study's :class:`Protocol`; :mod:`~freespace.experiments.cells` runs one cell;
+:mod:`~freespace.experiments.tables` collects the run folders into the tables
+(:func:`write_tables`); :mod:`~freespace.experiments.figures` draws them.
+"""
+
+from freespace.experiments.cells import evaluate_test_set, run_cell
+from freespace.experiments.protocol import (DEFAULT_VARIANTS, GAINS, MAX_SEEDS, METRICS, PAPER_NETWORKS, VARIANTS,
+                                            Primary, Protocol, TestRoots, Variant, parse_cell, parse_models,
+                                            parse_test_roots, parse_variants)
+from freespace.experiments.tables import OUT_ENTRIES, write_tables
+
+__all__ = ["run_cell", "write_tables", "evaluate_test_set", "parse_models", "parse_variants",
+           "parse_cell", "parse_test_roots", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "GAINS", "METRICS",
+           "MAX_SEEDS", "PAPER_NETWORKS", "OUT_ENTRIES", "Primary", "Protocol", "TestRoots"]

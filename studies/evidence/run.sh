@@ -8,6 +8,7 @@
 # +-1.5 points was out of reach on it; it evaluates the same checkpoints and changes no training.
 # Usage: bash run.sh WORK_DIR   (with the project's .venv active, or FREESPACE=/path/to/.venv/bin/freespace)
 set -euo pipefail
+DIR=$(cd "$(dirname "$0")" && pwd)  # this script's folder (protocol.yaml: the variants, gains and reference line)
 FS=${FREESPACE:-freespace}
 SEEDS=${SEEDS:-10}
 mkdir -p "$1" && cd "$1" && mkdir -p logs
@@ -16,7 +17,7 @@ mkdir -p "$1" && cd "$1" && mkdir -p logs
     --workers 2 --max-roll 6 --camera-heights 1.0,2.6 --pitches=-5,5 --baselines 0.2,2.0
 [ -d same-rigs ] || $FS synth --out same-rigs --num 200 --width 320 --height 240 --frames-per-scenario 5 --seed 2 \
     --workers 2
-OPTS="--dataset synth --root syn --test-root shifted --seeds $SEEDS --epochs 10 --patience 5 --batch-size 2 --image-size 96x128 --no-progress --out res"
+OPTS="--dataset synth --root syn --protocol $DIR/protocol.yaml --test-root shifted --seeds $SEEDS --epochs 10 --patience 5 --batch-size 2 --image-size 96x128 --no-progress --out res"
 for s in $(seq 0 $((SEEDS - 1))); do for n in unet segnet dupsampling; do for v in X HA-X X-dup HV-X; do
     echo "$n,$v,$s"; done; done; done |
   OMP_NUM_THREADS=1 xargs -P 2 -I{} sh -c "$FS reproduce $OPTS --only {} > logs/\$(echo {} | tr , _).log 2>&1 \

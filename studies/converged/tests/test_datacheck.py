@@ -1,4 +1,4 @@
-"""The converged run's data check (docs/results/converged/datacheck.py): a CPU's rounding passes, a change of
+"""The converged run's data check (studies/converged/datacheck.py): a CPU's rounding passes, a change of
 the data does not."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "docs" / "results" / "converged" / "datacheck.py"
+SCRIPT = Path(__file__).resolve().parents[1] / "datacheck.py"
 spec = importlib.util.spec_from_file_location("datacheck", SCRIPT)
 datacheck = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(datacheck)

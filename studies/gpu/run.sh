@@ -8,7 +8,7 @@
 # cells at a time, each started only while more than MIN_LEFT seconds are left; cells still training at the
 # deadline are stopped and kept unfinished (their per-epoch CSV tells the epoch cost).
 #
-# Usage, in the repository root of the GPU machine: OUT=DIR BUDGET=SECONDS bash docs/results/gpu/run.sh
+# Usage, in the repository root of the GPU machine: OUT=DIR BUDGET=SECONDS bash studies/gpu/run.sh
 #   OUT: where the results go (log.txt, infer_*.md, datacheck.txt, cells.tgz: every run folder's small files,
 #   never checkpoints); BUDGET: seconds from the start to the end of the script (default 540). Optional:
 #   WHEELS (default .whl: wheels of the packages the machine lacks, installed into /tmp/site; empty: none),
@@ -60,12 +60,11 @@ for preset in paper light; do
 done
 wait $DATA || { say "data failed"; exit 1; }
 say "data made"
-$PY "$REPO/docs/results/converged/datacheck.py" . "$REPO/docs/results/converged" > "$OUT/datacheck.txt" 2>&1
+$PY "$REPO/studies/converged/datacheck.py" . "$REPO/studies/converged" > "$OUT/datacheck.txt" 2>&1
 say "datacheck exit $?: $(tail -1 "$OUT/datacheck.txt")"
 
 PRESET=${PRESET:-paper}
-COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root matched=matched
-        --test-root same-rigs=same-rigs --seeds 20 --epochs ${CAP:-200} --patience ${PATIENCE:-20} --val-window 3
+COMMON="--dataset synth --root syn --protocol $REPO/studies/gpu/protocol.yaml --seeds 20 --epochs ${CAP:-200} --patience ${PATIENCE:-20} --val-window 3
         --min-delta 0.001 --lr 0.01 --batch-size 2 --image-size 320x416 --preset $PRESET --workers 2 --no-progress"
 say "smoke: one epoch of deeplabv3plus HA-X on 25 frames"
 if ! $FS reproduce $COMMON --max-frames 25 --epochs 1 --only deeplabv3plus,HA-X,0 --out smoke > "$OUT/smoke.txt" 2>&1
@@ -93,7 +92,7 @@ done
 while [ ${#PIDS[@]} -gt 0 ] && [ "$(date +%s)" -lt $((DEADLINE - 25)) ]; do sleep 2; reap; done
 for c in "${!PIDS[@]}"; do say "stopped at the deadline: $c"; kill "${PIDS[$c]}"; done
 [ ${#PIDS[@]} -eq 0 ] || wait "${PIDS[@]}"
-$FS reproduce --tables --out res > logs/tables.log 2>&1 || say "tables failed: $(tail -1 logs/tables.log)"
+$FS reproduce --tables --protocol "$REPO/studies/gpu/protocol.yaml" --out res > logs/tables.log 2>&1 || say "tables failed: $(tail -1 logs/tables.log)"
 tar czf "$OUT/cells.tgz" --exclude='checkpoints' --exclude='generated' --exclude='*lock*' --exclude='*.tmp' \
   res/runs res/results.md res/results.csv res/gains.csv res/index.json logs 2>/dev/null
 say "done"

@@ -1,4 +1,4 @@
-"""The converged run's seed forecast (docs/results/converged/forecast.py): the SD it recovers from gains.csv is
+"""The converged run's seed forecast (studies/converged/forecast.py): the SD it recovers from gains.csv is
 the paired SD, and the seeds it names are the fewest that reach the target."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 
 from freespace.experiments.stats import paired_gain
 
-SCRIPT = Path(__file__).resolve().parents[1] / "docs" / "results" / "converged" / "forecast.py"
+SCRIPT = Path(__file__).resolve().parents[1] / "forecast.py"
 spec = importlib.util.spec_from_file_location("forecast", SCRIPT)
 forecast = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(forecast)

@@ -1,4 +1,4 @@
-"""The converged run's control of pretraining (docs/results/converged/pretraining.py): X with ImageNet weights
+"""The converged run's control of pretraining (studies/converged/pretraining.py): X with ImageNet weights
 against X from scratch, paired by seed over the seeds both finished, beside HA's gains."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import pytest
 
 from freespace.experiments.stats import paired_gain
 
-SCRIPT = Path(__file__).resolve().parents[1] / "docs" / "results" / "converged" / "pretraining.py"
+SCRIPT = Path(__file__).resolve().parents[1] / "pretraining.py"
 spec = importlib.util.spec_from_file_location("pretraining", SCRIPT)
 pretraining = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(pretraining)

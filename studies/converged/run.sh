@@ -70,8 +70,8 @@ NETS=${NETS:-"unet dupsampling segnet denseaspp deeplabv3plus"}
 VARIANTS=${VARIANTS:-"X HA-X X-dup X-long"}
 SEEDS=${SEEDS:-10}
 export FS WORK HERE STOP_AT RES WEIGHTS
-COMMON="--dataset synth --root syn --test-root shifted=shifted --test-root matched=matched
-        --test-root same-rigs=same-rigs --autolabels ${AUTOLABELS:-autolabels} --seeds $SEEDS
+# the variants' gains, the primary endpoint and the test sets (shifted, matched, same-rigs): protocol.yaml
+COMMON="--dataset synth --root syn --protocol $DIR/protocol.yaml --autolabels ${AUTOLABELS:-autolabels} --seeds $SEEDS
         --epochs ${CAP:-100} --patience ${PATIENCE:-10} --val-window 3 --min-delta ${MIN_DELTA:-0}
         --lr ${LR:-0.001} --batch-size 2 --no-progress --out $RES"
 export COMMON
@@ -109,6 +109,6 @@ else
 fi | xargs -P "${JOBS:-2}" -I{} bash -c 'cell {}'
 
 # the tables of every finished cell, copied beside this script
-$FS reproduce --tables --out "$RES" > "logs/$RES-tables.log" 2>&1 || { tail -3 "logs/$RES-tables.log"; exit 1; }
+$FS reproduce --tables --protocol "$DIR/protocol.yaml" --out "$RES" > "logs/$RES-tables.log" 2>&1 || { tail -3 "logs/$RES-tables.log"; exit 1; }
 cp "$RES"/results.md "$RES"/results.csv "$RES"/gains.csv "$RES"/index.json "$HERE/"
 mkdir -p "$HERE/figures" && cp "$RES"/figures/gains_*.png "$HERE/figures/" 2>/dev/null || true
