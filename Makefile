@@ -19,7 +19,7 @@ test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q
 
 docs: $(STAMP)
-	$(VENV)/bin/python -m mkdocs build --strict --site-dir site
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/python -m mkdocs build --strict --site-dir site
 
 bench: $(STAMP)
 	$(VENV)/bin/python bench/generate.py
