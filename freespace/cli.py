@@ -149,7 +149,7 @@ def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], o
     """The dataset mode of ``generate`` and ``autolabel``: ``run`` (``generate_dataset``, ``autolabel_dataset``)
     over the dataset the options name, then one line of counts (``summary[done]`` frames made) and one per
     failed frame; exit code 1 when a frame failed."""
-    from freespace.shard import parse_shard
+    from freespace.runtime.shard import parse_shard
 
     shard = parse_shard(args.shard) if args.shard is not None else None
     summary = run(_open_dataset(args, needs_right), args.out, workers=args.workers, options=options, overwrite=args.overwrite,
@@ -628,7 +628,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     from freespace.inference.predict import Predictor, predict_folder, predict_video
     from freespace.io.files import check_outputs, check_writable
     from freespace.io.video import is_video_path
-    from freespace.shard import parse_shard
+    from freespace.runtime.shard import parse_shard
 
     check_writable(args.out, folder=not is_video_path(args.out))  # before the model is loaded
     check_outputs({"out": args.out}, {"input": args.input, "checkpoint": args.checkpoint, "onnx": args.onnx})
@@ -909,7 +909,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     Ctrl-C ends a command with "interrupted" and exit code 130, ``SIGTERM`` (SLURM's time limit, ``kill``)
     with "terminated" and 143; both after the command's clean-ups (``finally`` blocks) have run.
     """
-    from freespace.log import setup_logging
+    from freespace.runtime.log import setup_logging
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)  # the global options take no value

@@ -17,7 +17,7 @@ PACKAGE = ROOT / "freespace"
 # the entry that names it or its closest enclosing package; the root package's entry, "freespace", names its
 # __init__ only, so a new module at the root must be given a layer here.
 LAYERS: list[tuple[str, ...]] = [
-    ("freespace", "freespace.errors", "freespace.limits", "freespace.log", "freespace.parallel", "freespace.shard", "freespace.labels"),
+    ("freespace", "freespace.errors", "freespace.limits", "freespace.runtime", "freespace.labels"),
     ("freespace.io", "freespace.geometry", "freespace.models"),
     ("freespace.data", "freespace.datagen", "freespace.evaluation"),
     ("freespace.inference",),

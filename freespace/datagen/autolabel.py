@@ -606,7 +606,7 @@ def autolabel_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
         writes its own way: :meth:`~freespace.errors.FreespaceError.render`).
     """
     from freespace.datagen.generate import frames_folder
-    from freespace.shard import select_shard
+    from freespace.runtime.shard import select_shard
 
     options.check()
     if workers < 1:

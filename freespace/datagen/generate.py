@@ -51,7 +51,7 @@ from freespace.io.files import (PathLike, check_outputs, check_writable, check_w
 from freespace.io.kitti import read_kitti_calib
 from freespace.io.outdir import check_settings, claim_folder
 from freespace.labels import RoadLabel
-from freespace.shard import select_shard
+from freespace.runtime.shard import select_shard
 
 log = logging.getLogger(__name__)
 
@@ -373,7 +373,7 @@ def _process_frame(dataset: Any, index: int, out: Path, report: Path, options: F
 def _init_worker(dataset: Any, parent: int) -> None:
     import cv2
 
-    from freespace.parallel import init_worker
+    from freespace.runtime.parallel import init_worker
 
     init_worker(parent)
     global _DATASET
@@ -442,7 +442,7 @@ def generate_dataset(dataset: Any, out_dir: PathLike, *, workers: int = 1,
         workers: processes; 1 runs in this process.
         options: fit options.
         shard: ``(K, N)``: only the K-th of N disjoint parts of the frames (1-based,
-            :func:`freespace.shard.select_shard`), with its totals in ``summary.shard-K-of-N.json`` and
+            :func:`freespace.runtime.shard.select_shard`), with its totals in ``summary.shard-K-of-N.json`` and
             ``report.shard-K-of-N.csv``; the shards of one run share ``out_dir`` (``settings.json`` holds
             no shard). A run without ``shard`` afterwards skips every frame and writes the totals.
 
@@ -574,7 +574,7 @@ def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool, pro
               desc: str = "generate") -> dict[str, dict[str, Any]]:
     """Run ``process(dataset, *job)`` (a module-level function returning the frame's record, default
     :func:`_process_frame`) over ``jobs`` in this process or in ``workers`` processes."""
-    from freespace.log import progress_bar
+    from freespace.runtime.log import progress_bar
 
     records: dict[str, dict[str, Any]] = {}
     bar = progress_bar(None, total=len(jobs), desc=desc, unit="frame", enabled=progress and bool(jobs))
@@ -584,7 +584,7 @@ def _run_jobs(dataset: Any, jobs: list[tuple], workers: int, progress: bool, pro
             records[record["frame"]] = record
             bar.update()
     else:
-        from freespace.parallel import worker_pool
+        from freespace.runtime.parallel import worker_pool
 
         with worker_pool(workers, _init_worker, (dataset, os.getpid())) as pool:  # ends at once on Ctrl-C
             for future in as_completed([pool.submit(_in_worker, process, *job) for job in jobs]):

@@ -46,7 +46,7 @@ class _LoaderProcess(multiprocessing.context.ForkProcess):
     the signal reaches the trainer just after the fork. In the worker, ``SIGTERM`` ends the process at once and
     silently (the default action: a forked worker would otherwise run the command's handler and print a
     traceback), the worker ends with its parent even on ``SIGKILL``
-    (:func:`~freespace.parallel.die_with_parent`), and then the signals are unblocked."""
+    (:func:`~freespace.runtime.parallel.die_with_parent`), and then the signals are unblocked."""
 
     def start(self) -> None:
         self._freespace_parent = os.getpid()
@@ -57,7 +57,7 @@ class _LoaderProcess(multiprocessing.context.ForkProcess):
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
     def run(self) -> None:
-        from freespace.parallel import die_with_parent
+        from freespace.runtime.parallel import die_with_parent
 
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         die_with_parent(self._freespace_parent)

@@ -9,7 +9,7 @@ name and every entry it wrote (``"name"`` a file, ``"name/"`` a whole subtree, e
 * it replaces or deletes only entries of its manifest, ``overwrite`` included, so a file it did not
   write is never touched;
 * a lock (``OUT/.freespace/lock``, ``flock``) keeps two runs out of one folder: a whole run takes it
-  alone, the shards of one run (:mod:`freespace.shard`) and the cells of one ``reproduce`` share it;
+  alone, the shards of one run (:mod:`freespace.runtime.shard`) and the cells of one ``reproduce`` share it;
 * staged output (:meth:`OwnedFolder.staged`) is written under ``OUT/.freespace/stage-<pid>-…`` and moved
   into place file by file (one atomic rename each) when the block ends; an interrupted stage
   (SIGINT, SIGTERM, or SIGKILL) is removed by the next run that claims the folder.
