@@ -238,7 +238,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     _refuse_folders(args, ("reference", "target", "road_mask", "disparity", "calib"))
     options = FitOptions(robust=args.robust, inlier_threshold=args.inlier_threshold, max_disparity=args.max_disparity)
     if mode == "virtual":
-        from freespace.datagen.generate import generate_virtual_pair
+        from freespace.datagen.virtual import generate_virtual_pair
 
         print(generate_virtual_pair(args.reference, args.road_mask, args.calib, args.disparity, shift=args.shift,
                                     rotate=args.rotate, out=args.out, label_out=args.label_out,
