@@ -476,13 +476,24 @@ def _config_flag(name: str) -> str:
     return CONFIG_FLAGS.get(name, "--" + name.replace("_", "-"))
 
 
+class _FromFile:
+    """The default of an option that ``--config`` gave: its typed ``value``, checked when the file was read
+    (and not again: :meth:`~freespace.engine.config.TrainConfig.from_checked`), and its ``text`` for the help."""
+
+    def __init__(self, value: Any, text: Any) -> None:
+        self.value, self.text = value, text
+
+    def __str__(self) -> str:
+        return str(self.text)
+
+
 def _add_config_options(p: argparse.ArgumentParser, names: Collection[str] | None = None,
-                        values: Mapping[str, Any] | None = None) -> None:
+                        values: Mapping[str, Any] | None = None, *, checked: bool = False) -> None:
     """An option for each :class:`~freespace.engine.config.TrainConfig` field in ``names`` (default: all), its
     ``dest`` the field's name (so that an error naming the parameter names this flag), with the field's help,
-    choices and default; ``values`` (from ``--config``) replace the defaults, and a field given there is no
-    longer required. The values are passed on as given (numbers converted); TrainConfig parses and checks
-    them, so that flags and YAML files are checked alike."""
+    choices and default; ``values`` (typed) replace the defaults, and a field given there is no longer required
+    (``checked``: they are ``--config``'s, whose file checked them: :class:`_FromFile`). Flags are passed on as
+    given (numbers converted); TrainConfig parses and checks them, as the file's values were."""
     from freespace.engine.config import options
 
     for o in options(names, values):
@@ -491,7 +502,8 @@ def _add_config_options(p: argparse.ArgumentParser, names: Collection[str] | Non
             text += f"; one of {', '.join(o.choices)}"
         if o.default is not None and o.default is not False:
             text += "; default %(default)s"
-        kwargs: dict[str, Any] = {"dest": o.name, "default": o.default, "help": text}
+        default = _FromFile(values[o.name], o.default) if checked and values and o.name in values else o.default
+        kwargs: dict[str, Any] = {"dest": o.name, "default": default, "help": text}
         if o.kind is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         else:
@@ -510,7 +522,7 @@ def _config_values(args: argparse.Namespace, names: Collection[str] | None = Non
 def _train_parser(p: argparse.ArgumentParser, config: Mapping[str, Any] | None = None) -> None:
     p.add_argument("--config", metavar="YAML", help="options from a YAML file, e.g. a run's config.yaml; "
                                                     "flags given as well override it")
-    _add_config_options(p, values=config)
+    _add_config_options(p, values=config, checked=True)
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_train)
@@ -539,7 +551,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     from freespace.engine.config import TrainConfig
     from freespace.engine.train import run_training
 
-    config = TrainConfig(**_config_values(args))  # parsed and checked; run_training checks the files
+    values = _config_values(args)
+    config = TrainConfig.from_checked({k: v.value for k, v in values.items() if isinstance(v, _FromFile)},
+                                      **{k: v for k, v in values.items() if not isinstance(v, _FromFile)})
     metrics = run_training(config, resume=args.resume, progress=not args.no_progress)
     from freespace.engine.data import is_rank_zero
 

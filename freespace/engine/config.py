@@ -23,6 +23,7 @@ import os
 import re
 import types
 from collections.abc import Callable, Iterable, Mapping
+from contextvars import ContextVar
 from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin, get_type_hints
@@ -53,6 +54,9 @@ FIRST_FRAME_SIZE: Final = "first-frame"
 #: the options that name files or folders (config.yaml keeps them resolved); ``encoder_weights`` is one when it
 #: is a path, not a name of weights (:func:`weights_path`)
 PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir", "labels", "encoder_weights")
+
+#: the fields whose values the :class:`TrainConfig` being made takes as they are (:meth:`TrainConfig.from_checked`)
+_CHECKED: ContextVar[frozenset[str]] = ContextVar("checked", default=frozenset())
 
 # config.yaml keys of runs made before the names said which split and which disparity source they mean
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_source", "disparity_mode": "disparity_source"}
@@ -304,11 +308,14 @@ class TrainConfig:
                                                                 f"each epoch", 0.5, metavar="P")
 
     def __post_init__(self) -> None:
+        checked = _CHECKED.get()
         for f in fields(self):
-            try:
-                value = _typed(f.name, getattr(self, f.name))
-            except ValueError as exc:
-                raise InvalidOptionError(f"{param(f.name)} {exc}") from None
+            value = getattr(self, f.name)
+            if f.name not in checked:
+                try:
+                    value = _typed(f.name, value)
+                except ValueError as exc:
+                    raise InvalidOptionError(f"{param(f.name)} {exc}") from None
             if f.name in PATH_OPTIONS and isinstance(value, str) and value.startswith("~") and \
                     (f.name != "encoder_weights" or weights_path(value)):
                 value = os.path.expanduser(value)  # as a shell would (a YAML file's ~/data too)
@@ -383,7 +390,18 @@ class TrainConfig:
         missing = [f.name for f in fields(cls) if f.default is MISSING and f.name not in values]
         if missing:
             raise CorruptFileError(f"{path} is not a freespace training config (no {', '.join(missing)})")
-        return cls(**values)
+        return cls.from_checked(values)
+
+    @classmethod
+    def from_checked(cls, checked: Mapping[str, Any], **values: Any) -> TrainConfig:
+        """The configuration of ``checked``, typed values that :func:`read_config_yaml` has parsed and checked
+        (taken as they are: each value of a file is checked once), and ``values`` (parsed and checked as by the
+        constructor; a field in both takes its value from ``values``)."""
+        token = _CHECKED.set(frozenset(checked) - frozenset(values))
+        try:
+            return cls(**{**checked, **values})
+        finally:
+            _CHECKED.reset(token)
 
 
 def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None) -> None:
@@ -752,10 +770,17 @@ def _bounded(hint: Any) -> type | Bounded:
     return kind
 
 
+@functools.lru_cache(maxsize=None)
+def _default_text(name: str) -> Any:
+    """The default of the field ``name`` as config.yaml spells it (None: none), typed once per process."""
+    default = TrainConfig.__dataclass_fields__[name].default
+    return None if default is MISSING or default is None else _adapters()[name].dump_python(_typed(name, default))
+
+
 def options(names: Iterable[str] | None = None, values: Mapping[str, Any] | None = None) -> list[Option]:
     """The :class:`TrainConfig` fields ``names`` (default: all), in their order, as :class:`Option` objects;
-    ``values`` (e.g. from :func:`read_config_yaml`) replace the fields' defaults, and a field given there is
-    no longer required."""
+    ``values``, typed (e.g. from :func:`read_config_yaml`), replace the fields' defaults, and a field given
+    there is no longer required."""
     wanted = set(names) if names is not None else None
     values = values or {}
     found = []
@@ -763,8 +788,10 @@ def options(names: Iterable[str] | None = None, values: Mapping[str, Any] | None
         if wanted is not None and f.name not in wanted:
             continue
         given = f.name in values
-        default = values[f.name] if given else None if f.default is MISSING else f.default
-        plain = _adapters()[f.name].dump_python(_typed(f.name, default)) if default is not None else None
+        if given:  # typed already: spelled, not checked again
+            plain = _adapters()[f.name].dump_python(values[f.name]) if values[f.name] is not None else None
+        else:
+            plain = _default_text(f.name)
         found.append(Option(f.name, f.metadata["help"], plain, f.default is MISSING and not given, _choices(f.name),
                             f.metadata.get("metavar"), _bounded(_hint(f.name))))
     return found
