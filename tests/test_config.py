@@ -296,3 +296,22 @@ def test_train_config_checks_each_yaml_value_once(tmp_path: Path, monkeypatch: p
     assert TrainConfig.load(tmp_path / "c.yaml") == made and sorted(calls) == sorted(in_file)
     with pytest.raises(InvalidOptionError, match="epochs must be in"):  # a flag is no file's value: checked
         TrainConfig.from_checked(read_config_yaml(tmp_path / "c.yaml"), epochs=0)
+
+
+def test_the_first_frame_size_is_resolved_in_one_place(tmp_path: Path) -> None:
+    """TrainConfig.with_size: a config asking for the first frame's size takes the one given (read only then);
+    one that names its size keeps it."""
+    reads: list[int] = []
+
+    def first_frame() -> tuple[int, int]:
+        reads.append(1)
+        return (64, 96)
+
+    asks = TrainConfig(dataset="synth", root=str(tmp_path), out="o")
+    assert asks.image_size == FIRST_FRAME_SIZE
+    assert asks.with_size(first_frame) == dataclasses.replace(asks, image_size=(64, 96)) and reads == [1]
+    assert asks.with_size([48, 80]).image_size == (48, 80)
+    named = TrainConfig(dataset="synth", root=str(tmp_path), out="o", image_size="32x64")
+    assert named.with_size(first_frame) is named and named.with_size((48, 80)) is named and reads == [1]
+    with pytest.raises(InvalidOptionError, match="image_size must be HxW"):
+        asks.with_size((8, 8))

@@ -24,7 +24,7 @@ import re
 import types
 from collections.abc import Callable, Iterable, Mapping
 from contextvars import ContextVar
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin, get_type_hints
 
@@ -365,6 +365,14 @@ class TrainConfig:
         checkpoint rebuilds the network from these and then loads all its tensors."""
         return {"preset": self.preset, **({"encoder_name": self.encoder_name} if self.encoder_name else {})}
 
+    def with_size(self, size: tuple[int, int] | Callable[[], tuple[int, int]]) -> TrainConfig:
+        """This configuration with its image size resolved: itself when ``image_size`` names one; for
+        :data:`FIRST_FRAME_SIZE` one with ``image_size`` ``size`` (H, W): the first labelled frame's (a function
+        that reads it, called only then), or the size a run's config.yaml recorded it resolved to."""
+        if self.image_size != FIRST_FRAME_SIZE:
+            return self
+        return replace(self, image_size=tuple(size() if callable(size) else size))
+
     def to_dict(self) -> dict[str, Any]:
         """The values as config.yaml spells them (``augment`` ``"homography,virtual"``, ``virtual_shift``
         ``"0.5,0.2,0"``, ``image_size`` ``[H, W]`` or ``None`` for :data:`FIRST_FRAME_SIZE`), paths
@@ -383,16 +391,6 @@ class TrainConfig:
         atomic_write_text(path, yaml.safe_dump(self.to_dict(), sort_keys=False))
 
     @classmethod
-    def load(cls, path: PathLike) -> TrainConfig:
-        """Read a config.yaml written by :meth:`save` (also one written before a field was renamed; see
-        :func:`read_config_yaml`)."""
-        values = read_config_yaml(path)
-        missing = [f.name for f in fields(cls) if f.default is MISSING and f.name not in values]
-        if missing:
-            raise CorruptFileError(f"{path} is not a freespace training config (no {', '.join(missing)})")
-        return cls.from_checked(values)
-
-    @classmethod
     def from_checked(cls, checked: Mapping[str, Any], **values: Any) -> TrainConfig:
         """The configuration of ``checked``, typed values that :func:`read_config_yaml` has parsed and checked
         (taken as they are: each value of a file is checked once), and ``values`` (parsed and checked as by the
@@ -403,11 +401,22 @@ class TrainConfig:
         finally:
             _CHECKED.reset(token)
 
+    @classmethod
+    def load(cls, path: PathLike) -> TrainConfig:
+        """Read a config.yaml written by :meth:`save` (also one written before a field was renamed; see
+        :func:`read_config_yaml`)."""
+        values = read_config_yaml(path)
+        missing = [f.name for f in fields(cls) if f.default is MISSING and f.name not in values]
+        if missing:
+            raise CorruptFileError(f"{path} is not a freespace training config (no {', '.join(missing)})")
+        return cls.from_checked(values)
+
 
 def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None) -> None:
     """Refuse ``encoder_name``/``encoder_weights`` that the network does not take or that cannot be
-    built and loaded (unknown encoder, missing extra, no network, a file that does not fit), before any
-    work: the network is built once per combination (and weight file version) in a process."""
+    built and loaded (unknown encoder, missing extra, weights not in the cache, a file that does not fit or
+    holds no weights), before any work: once per combination (and weight file version) in a process, on the
+    meta device (:func:`_build_once`)."""
     from freespace.models import list_models, model_options
 
     for name, value in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)):
@@ -423,11 +432,22 @@ def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_we
 @functools.lru_cache(maxsize=8)
 def _build_once(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None,
                 stamp: tuple[int, int] | None) -> None:
-    """Build the network (``stamp``, the weight file's mtime and size, only keys the cache)."""
+    """Build the network on the meta device, ``encoder_weights`` loaded into it (``stamp``, the weight file's
+    mtime and size, only keys the cache). Its tensors have shapes but no memory and no initial values, so this
+    costs a fraction of a real build (none of a large network's allocation and random initialisation), while
+    the weights take the one path of training: the file is read (on the CPU) and its tensors' names, shapes
+    and values checked against the encoder the network builds (:func:`freespace.models.weights.apply_state`);
+    copying them into the meta tensors is a no-op."""
+    import warnings
+
+    import torch
+
     from freespace.models import create_model
 
     options = {k: v for k, v in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)) if v is not None}
-    create_model(model, preset=preset, **options)
+    with warnings.catch_warnings(), torch.device("meta"):
+        warnings.filterwarnings("ignore", message=".*meta parameter.*no-op")
+        create_model(model, preset=preset, **options)
 
 
 # --- what a run read: content hashes, the label tree -------------------------------------------------------
