@@ -150,7 +150,7 @@ def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], o
     """The dataset mode of ``generate`` and ``autolabel``: ``run`` (``generate_dataset``, ``autolabel_dataset``)
     over the dataset the options name, then one line of counts (``summary[done]`` frames made) and one per
     failed frame; exit code 1 when a frame failed."""
-    from freespace.shard import parse_shard
+    from freespace.runtime.shard import parse_shard
 
     shard = parse_shard(args.shard) if args.shard is not None else None
     summary = run(_open_dataset(args, needs_right), args.out, workers=args.workers, options=options, overwrite=args.overwrite,
@@ -244,7 +244,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     _refuse_folders(args, ("reference", "target", "road_mask", "disparity", "calib"))
     options = FitOptions(robust=args.robust, inlier_threshold=args.inlier_threshold, max_disparity=args.max_disparity)
     if mode == "virtual":
-        from freespace.datagen.generate import generate_virtual_pair
+        from freespace.datagen.virtual import generate_virtual_pair
 
         print(generate_virtual_pair(args.reference, args.road_mask, args.calib, args.disparity, shift=args.shift,
                                     rotate=args.rotate, out=args.out, label_out=args.label_out,
@@ -587,13 +587,24 @@ def _config_flag(name: str) -> str:
     return CONFIG_FLAGS.get(name, "--" + name.replace("_", "-"))
 
 
+class _FromFile:
+    """The default of an option that ``--config`` gave: its typed ``value``, checked when the file was read
+    (and not again: :meth:`~freespace.engine.config.TrainConfig.from_checked`), and its ``text`` for the help."""
+
+    def __init__(self, value: Any, text: Any) -> None:
+        self.value, self.text = value, text
+
+    def __str__(self) -> str:
+        return str(self.text)
+
+
 def _add_config_options(p: argparse.ArgumentParser, names: Collection[str] | None = None,
-                        values: Mapping[str, Any] | None = None) -> None:
+                        values: Mapping[str, Any] | None = None, *, checked: bool = False) -> None:
     """An option for each :class:`~freespace.engine.config.TrainConfig` field in ``names`` (default: all), its
     ``dest`` the field's name (so that an error naming the parameter names this flag), with the field's help,
-    choices and default; ``values`` (from ``--config``) replace the defaults, and a field given there is no
-    longer required. The values are passed on as given (numbers converted); TrainConfig parses and checks
-    them, so that flags and YAML files are checked alike."""
+    choices and default; ``values`` (typed) replace the defaults, and a field given there is no longer required
+    (``checked``: they are ``--config``'s, whose file checked them: :class:`_FromFile`). Flags are passed on as
+    given (numbers converted); TrainConfig parses and checks them, as the file's values were."""
     from freespace.engine.config import options
 
     for o in options(names, values):
@@ -602,7 +613,8 @@ def _add_config_options(p: argparse.ArgumentParser, names: Collection[str] | Non
             text += f"; one of {', '.join(o.choices)}"
         if o.default is not None and o.default is not False:
             text += "; default %(default)s"
-        kwargs: dict[str, Any] = {"dest": o.name, "default": o.default, "help": text}
+        default = _FromFile(values[o.name], o.default) if checked and values and o.name in values else o.default
+        kwargs: dict[str, Any] = {"dest": o.name, "default": default, "help": text}
         if o.kind is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         else:
@@ -621,7 +633,7 @@ def _config_values(args: argparse.Namespace, names: Collection[str] | None = Non
 def _train_parser(p: argparse.ArgumentParser, config: Mapping[str, Any] | None = None) -> None:
     p.add_argument("--config", metavar="YAML", help="options from a YAML file, e.g. a run's config.yaml; "
                                                     "flags given as well override it")
-    _add_config_options(p, values=config)
+    _add_config_options(p, values=config, checked=True)
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_train)
@@ -650,7 +662,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     from freespace.engine.config import TrainConfig
     from freespace.engine.train import run_training
 
-    config = TrainConfig(**_config_values(args))  # parsed and checked; run_training checks the files
+    values = _config_values(args)
+    config = TrainConfig.from_checked({k: v.value for k, v in values.items() if isinstance(v, _FromFile)},
+                                      **{k: v for k, v in values.items() if not isinstance(v, _FromFile)})
     metrics = run_training(config, resume=args.resume, progress=not args.no_progress)
     from freespace.engine.data import is_rank_zero
 
@@ -739,7 +753,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     from freespace.inference.predict import Predictor, predict_folder, predict_video
     from freespace.io.files import check_outputs, check_writable
     from freespace.io.video import is_video_path
-    from freespace.shard import parse_shard
+    from freespace.runtime.shard import parse_shard
 
     check_writable(args.out, folder=not is_video_path(args.out))  # before the model is loaded
     check_outputs({"out": args.out}, {"input": args.input, "checkpoint": args.checkpoint, "onnx": args.onnx})
@@ -1041,7 +1055,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     Ctrl-C ends a command with "interrupted" and exit code 130, ``SIGTERM`` (SLURM's time limit, ``kill``)
     with "terminated" and 143; both after the command's clean-ups (``finally`` blocks) have run.
     """
-    from freespace.log import setup_logging
+    from freespace.runtime.log import setup_logging
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)  # the global options take no value

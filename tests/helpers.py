@@ -106,6 +106,29 @@ def write_velodyne(path: Path, points: np.ndarray) -> Path:
     return path
 
 
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (exists and is no zombie)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def outlived(pids: list[int], seconds: float) -> list[int]:
+    """The processes of ``pids`` still running after up to ``seconds`` of waiting for them to end; each is killed
+    (SIGKILL), so that no test leaves one behind."""
+    import signal
+    import time
+
+    deadline = time.time() + seconds
+    while time.time() < deadline and any(alive(p) for p in pids):
+        time.sleep(0.1)
+    left = [p for p in pids if alive(p)]
+    for p in left:
+        os.kill(p, signal.SIGKILL)
+    return left
+
+
 def refused(capsys: pytest.CaptureFixture, argv: list[str], *, match: str | None = None) -> str:
     """Run the command in-process; assert exit 2 and exactly one line on stderr; return that line."""
     capsys.readouterr()

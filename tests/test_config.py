@@ -285,3 +285,50 @@ def test_generate_and_the_geometry_do_not_import_pydantic() -> None:
             "freespace.cli.build_parser({'generate'}); print('pydantic' in sys.modules, 'torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.split() == ["False", "False"]
+
+
+def test_train_config_checks_each_yaml_value_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`train --config`: each value of the file is parsed and checked once (when the file is read), not again
+    for the options' defaults nor when the TrainConfig is made; a flag given as well still is checked, and wins."""
+    import freespace.engine.config as config_module
+    import freespace.engine.train as train_module
+
+    calls: list[str] = []
+    typed = config_module._typed
+    monkeypatch.setattr(config_module, "_typed", lambda name, value: (calls.append(name), typed(name, value))[1])
+    seen: list[TrainConfig] = []
+    monkeypatch.setattr(train_module, "run_training", lambda config, **_: (
+        seen.append(config), dict.fromkeys(("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"), 0.5))[1])
+    made = TrainConfig(dataset="synth", root=str(tmp_path), out=str(tmp_path / "a"), epochs=7, image_size=(64, 96),
+                       augment=("homography", "virtual"), virtual_shift=((-1.0, 1.0), (-3.0, 0.9), (0.0, 0.0)))
+    made.save(tmp_path / "c.yaml")
+    in_file = set(yaml.safe_load((tmp_path / "c.yaml").read_text()))
+    options()  # the fields' own defaults are typed once per process: not the file's values
+    calls.clear()
+    assert main(["train", "--config", str(tmp_path / "c.yaml"), "--epochs", "3", "--no-progress"]) == 0
+    counts = {name: calls.count(name) for name in in_file}
+    assert seen == [dataclasses.replace(made, epochs=3)]
+    assert counts == {**dict.fromkeys(in_file, 1), "epochs": 2}, counts
+    calls.clear()
+    assert TrainConfig.load(tmp_path / "c.yaml") == made and sorted(calls) == sorted(in_file)
+    with pytest.raises(InvalidOptionError, match="epochs must be in"):  # a flag is no file's value: checked
+        TrainConfig.from_checked(read_config_yaml(tmp_path / "c.yaml"), epochs=0)
+
+
+def test_the_first_frame_size_is_resolved_in_one_place(tmp_path: Path) -> None:
+    """TrainConfig.with_size: a config asking for the first frame's size takes the one given (read only then);
+    one that names its size keeps it."""
+    reads: list[int] = []
+
+    def first_frame() -> tuple[int, int]:
+        reads.append(1)
+        return (64, 96)
+
+    asks = TrainConfig(dataset="synth", root=str(tmp_path), out="o")
+    assert asks.image_size == FIRST_FRAME_SIZE
+    assert asks.with_size(first_frame) == dataclasses.replace(asks, image_size=(64, 96)) and reads == [1]
+    assert asks.with_size([48, 80]).image_size == (48, 80)
+    named = TrainConfig(dataset="synth", root=str(tmp_path), out="o", image_size="32x64")
+    assert named.with_size(first_frame) is named and named.with_size((48, 80)) is named and reads == [1]
+    with pytest.raises(InvalidOptionError, match="image_size must be HxW"):
+        asks.with_size((8, 8))

@@ -24,7 +24,7 @@ from freespace.cli import main
 from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.io.codecs import write_disparity, write_image
 
-from helpers import refused, synthetic_pair
+from helpers import outlived, refused, synthetic_pair
 
 SMALL = SynthConfig(width=160, height=128, frames_per_scenario=2)
 
@@ -421,26 +421,12 @@ def test_killed_generate_leaves_no_workers(tmp_path: Path) -> None:
     assert len(children) >= 2, "the workers never started"
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    deadline = time.time() + 15
-    while time.time() < deadline and any(_alive(c) for c in children):
-        time.sleep(0.2)
-    alive = [c for c in children if _alive(c)]
-    for c in alive:
-        os.kill(c, signal.SIGKILL)
-    assert not alive, "worker processes outlived the killed command"
+    assert not outlived(children, 15), "worker processes outlived the killed command"
 
 
 def _children(pid: int) -> list[int]:
     out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True).stdout
     return [int(p) for p in out.split()]
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().split()[2] != "Z"
-    except FileNotFoundError:
-        return False
 
 
 # ------------------------------------------------------------------------ 10. output when not on a terminal
@@ -1502,11 +1488,7 @@ def test_generate_workers_stop_at_once(sig: int, tmp_path: Path) -> None:
     _ended_by_signal(code, err, sig)
     assert seconds < 5, f"took {seconds:.1f} s to stop"
     assert len(list((tmp_path / "gen").glob("*.png"))) < 40, "every frame was still generated"
-    time.sleep(0.5)
-    alive = [c for c in workers if _alive(c)]
-    for c in alive:
-        os.kill(c, signal.SIGKILL)
-    assert not alive, "workers outlived the command"
+    assert not outlived(workers, 0.5), "workers outlived the command"
 
 
 @pytest.mark.parametrize("command,sig", [("train", signal.SIGINT), ("train", signal.SIGTERM),

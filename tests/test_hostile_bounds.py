@@ -39,7 +39,7 @@ from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.io.codecs import write_disparity, write_image
 from freespace.limits import Bounded, max_workers
 
-from helpers import refused, synthetic_pair
+from helpers import outlived, refused, synthetic_pair
 
 SMALL = SynthConfig(width=160, height=128, frames_per_scenario=2)
 HOSTILE_NUMBERS = ["99999999999999999999", "-99999999999999999999", "nan", "inf", "-inf", "1e400", "x", "1,2"]
@@ -189,13 +189,6 @@ def _descendants(pid: int) -> list[int]:
     return found
 
 
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
 def _comm(pid: int) -> str:
     try:
         return Path(f"/proc/{pid}/comm").read_text().strip()
@@ -221,12 +214,7 @@ def test_sigterm_stops_training_and_its_loader_workers(tmp_path: Path) -> None:
     proc.send_signal(signal.SIGTERM)
     seen = sorted(set(seen) | set(_descendants(proc.pid)))
     _, err = proc.communicate(timeout=120)
-    deadline = time.time() + 10
-    while time.time() < deadline and any(_alive(c) for c in seen):
-        time.sleep(0.1)
-    left = [c for c in seen if _alive(c)]
-    for c in left:
-        os.kill(c, signal.SIGKILL)
+    left = outlived(seen, 10)
     assert proc.returncode == 143, (proc.returncode, err[-2000:])
     assert err.strip().splitlines() == ["freespace: terminated (SIGTERM)"], err[-2000:]
     assert not left, f"processes outlived the command: {[(c, _comm(c)) for c in left]}"

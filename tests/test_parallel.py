@@ -1,4 +1,4 @@
-"""freespace.parallel: worker pools that end with the command."""
+"""freespace.runtime.parallel: worker pools that end with the command."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from concurrent.futures import process
 
 import pytest
 
-from freespace import parallel
+from freespace.runtime import parallel
 
 
 def _sleep(seconds: float) -> None:

@@ -244,6 +244,35 @@ def test_the_initial_encoder_is_the_file(tmp_path: Path) -> None:
     assert all(torch.equal(v, module.net.net.encoder.state_dict()[k]) for k, v in saved.items())
 
 
+def test_the_config_checks_the_weights_file_on_no_real_network(tiny: Path, tmp_path: Path,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """TrainConfig.check reads encoder_weights and checks its tensors against the encoder, on a network whose
+    tensors live on the meta device (no memory, no initial values): a file that fits passes, one that does not
+    is refused as when training builds the network."""
+    import freespace.models as models
+    from freespace.engine.config import TrainConfig
+
+    built: list[set[str]] = []
+
+    def create(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        net = create_model(*args, **kwargs)
+        built.append({t.device.type for t in net.state_dict().values()})
+        return net
+
+    monkeypatch.setattr(models, "create_model", create)
+    torch.save(LiteEncoder().state_dict(), tmp_path / "w.pth")
+    torch.save({"stem.conv.weight": torch.zeros(1)}, tmp_path / "bad.pth")
+    for name, fits in (("w.pth", True), ("bad.pth", False)):
+        config = TrainConfig(dataset="synth", root=str(tiny), out=str(tmp_path / "out"), model="unet",
+                             encoder_name=LITE0, encoder_weights=str(tmp_path / name))
+        if fits:
+            config.check()
+        else:
+            with pytest.raises(PretrainedWeightsError, match=f"{tmp_path / name} does not fit encoder"):
+                config.check()
+    assert built == [{"meta"}]  # the file that does not fit stops the build in its encoder
+
+
 @pytest.mark.parametrize("command", ["train", "reproduce"])
 def test_bad_encoder_options_fail_before_any_work(tiny: Path, tmp_path: Path, command: str,
                                                   capsys: pytest.CaptureFixture) -> None:

@@ -7,7 +7,7 @@ import random
 import pytest
 
 from freespace.errors import InvalidOptionError
-from freespace.shard import parse_shard, select_shard
+from freespace.runtime.shard import parse_shard, select_shard
 
 
 @pytest.mark.parametrize("text, expected", [("1/1", (1, 1)), ("2/4", (2, 4)), ("4/4", (4, 4)),

@@ -38,7 +38,7 @@ def check_dataset(dataset: StereoRoadDataset, progress: bool = False) -> list[Pr
 
 def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[list[Problem], dict[str, tuple[int, int]]]:
     """:func:`check_dataset`, plus the ``(H, W)`` of every readable left image by frame name."""
-    from freespace.log import progress_bar
+    from freespace.runtime.log import progress_bar
 
     problems = list(dataset.orphans())
     left_sizes: dict[str, tuple[int, int]] = {}

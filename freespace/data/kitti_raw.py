@@ -93,6 +93,15 @@ class _TreeProblem(Exception):
         self.error = error
 
 
+
+def _unpaired(name: str, stems: list[str], side: tuple[str, Path], partner: tuple[str, Path], fix: str) -> _TreeProblem:
+    """The images ``stems`` of drive ``name`` on one ``side`` (``("left", folder)``) whose ``partner`` image (the
+    other side's, in its folder) is missing; ``fix``: what to do."""
+    n, first = len(stems), stems[0]
+    return _TreeProblem(f"{name}/{first}", f"{partner[1] / (first + '.png')} not found: {n} {side[0]} "
+                                           f"image{'s' if n > 1 else ''} of {side[1]} {'have' if n > 1 else 'has'} no "
+                                           f"{partner[0]} image (first {first}); {fix}")
+
 @register_dataset("kitti-raw", "kitti_raw")
 class KittiRaw(StereoRoadDataset):
     """KITTI raw drives (``*_sync``: rectified, synchronised); see the module docstring for the tree.
@@ -209,17 +218,12 @@ class KittiRaw(StereoRoadDataset):
             no_right = sorted(set(lefts) - set(rights))
             no_left = sorted(set(rights) - set(lefts))
             if no_right:
-                problems.append(_TreeProblem(f"{name}/{no_right[0]}", f"{right_dir / (no_right[0] + '.png')} not "
-                                             f"found: {len(no_right)} left image{'s' if len(no_right) > 1 else ''} of "
-                                             f"{drive / LEFT_DIR} {'have' if len(no_right) > 1 else 'has'} no right "
-                                             f"image (first {no_right[0]}); copy the missing right images, or move "
-                                             f"image_03 away to use the drive without them"))
+                problems.append(_unpaired(name, no_right, ("left", drive / LEFT_DIR), ("right", right_dir),
+                                          "copy the missing right images, or move image_03 away to use the drive "
+                                          "without them"))
             if no_left:
-                problems.append(_TreeProblem(f"{name}/{no_left[0]}", f"{drive / LEFT_DIR / (no_left[0] + '.png')} not "
-                                             f"found: {len(no_left)} right image{'s' if len(no_left) > 1 else ''} of "
-                                             f"{right_dir} {'have' if len(no_left) > 1 else 'has'} no left image "
-                                             f"(first {no_left[0]}); copy the missing left images or delete those "
-                                             f"right images"))
+                problems.append(_unpaired(name, no_left, ("right", right_dir), ("left", drive / LEFT_DIR),
+                                          "copy the missing left images or delete those right images"))
         width, height = (int(x) for x in calib["S_rect_02"]) if calib is not None else (0, 0)
         wrong = []
         for stem, path in (list(lefts.items()) + [(s, p) for s, p in rights.items() if s in lefts]

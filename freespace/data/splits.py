@@ -19,10 +19,10 @@ from __future__ import annotations
 from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from freespace.data.base import StereoRoadDataset
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, check_seed, param
 from freespace.io.files import PathLike, atomic_write_text
 
@@ -151,7 +151,7 @@ def check_split_by(by: str, gap: int = 0) -> None:
         raise InvalidOptionError(f"{param('gap')} is for {param('by')} time (frames left out between time blocks)")
 
 
-def split_frames(dataset: Any, by: str = "scenario", *, seed: int = 0, fractions: Sequence[float] | None = None,
+def split_frames(dataset: StereoRoadDataset, by: str = "scenario", *, seed: int = 0, fractions: Sequence[float] | None = None,
                  gap: int = 0) -> dict[str, list[str]]:
     """Train/val/test lists of a dataset's frames: the labelled ones, or every frame for a layout without
     labels of its own (KITTI raw, ``has_labels = False``: its labels come from ``freespace autolabel``).

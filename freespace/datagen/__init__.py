@@ -1,3 +1,9 @@
-"""Training data from stereo files: :mod:`freespace.datagen.generate` (the DS-Generator over files:
-``freespace generate``) and :mod:`freespace.datagen.autolabel` (road labels from disparity alone:
-``freespace autolabel``). Never imports torch."""
+"""Training data from stereo files; never imports torch.
+
+* :mod:`freespace.datagen.generate`: the DS-Generator over files (``freespace generate``);
+* :mod:`freespace.datagen.virtual`: a reference image seen from a virtual camera pose;
+* :mod:`freespace.datagen.labeller`: road labels from disparity alone; :mod:`freespace.datagen.autolabel`: the
+  same over files and datasets (``freespace autolabel``);
+* :mod:`freespace.datagen.runner`: the resumable, sharded per-frame dataset runner both commands use, and
+  :mod:`freespace.datagen.inputs`: the dataset settings and checks they share.
+"""

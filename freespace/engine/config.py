@@ -23,7 +23,8 @@ import os
 import re
 import types
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import MISSING, dataclass, field, fields
+from contextvars import ContextVar
+from dataclasses import MISSING, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin, get_type_hints
 
@@ -53,6 +54,9 @@ FIRST_FRAME_SIZE: Final = "first-frame"
 #: the options that name files or folders (config.yaml keeps them resolved); ``encoder_weights`` is one when it
 #: is a path, not a name of weights (:func:`weights_path`)
 PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir", "labels", "encoder_weights")
+
+#: the fields whose values the :class:`TrainConfig` being made takes as they are (:meth:`TrainConfig.from_checked`)
+_CHECKED: ContextVar[frozenset[str]] = ContextVar("checked", default=frozenset())
 
 # config.yaml keys of runs made before the names said which split and which disparity source they mean
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_source", "disparity_mode": "disparity_source"}
@@ -304,11 +308,14 @@ class TrainConfig:
                                                                 f"each epoch", 0.5, metavar="P")
 
     def __post_init__(self) -> None:
+        checked = _CHECKED.get()
         for f in fields(self):
-            try:
-                value = _typed(f.name, getattr(self, f.name))
-            except ValueError as exc:
-                raise InvalidOptionError(f"{param(f.name)} {exc}") from None
+            value = getattr(self, f.name)
+            if f.name not in checked:
+                try:
+                    value = _typed(f.name, value)
+                except ValueError as exc:
+                    raise InvalidOptionError(f"{param(f.name)} {exc}") from None
             if f.name in PATH_OPTIONS and isinstance(value, str) and value.startswith("~") and \
                     (f.name != "encoder_weights" or weights_path(value)):
                 value = os.path.expanduser(value)  # as a shell would (a YAML file's ~/data too)
@@ -358,6 +365,14 @@ class TrainConfig:
         checkpoint rebuilds the network from these and then loads all its tensors."""
         return {"preset": self.preset, **({"encoder_name": self.encoder_name} if self.encoder_name else {})}
 
+    def with_size(self, size: tuple[int, int] | Callable[[], tuple[int, int]]) -> TrainConfig:
+        """This configuration with its image size resolved: itself when ``image_size`` names one; for
+        :data:`FIRST_FRAME_SIZE` one with ``image_size`` ``size`` (H, W): the first labelled frame's (a function
+        that reads it, called only then), or the size a run's config.yaml recorded it resolved to."""
+        if self.image_size != FIRST_FRAME_SIZE:
+            return self
+        return replace(self, image_size=tuple(size() if callable(size) else size))
+
     def to_dict(self) -> dict[str, Any]:
         """The values as config.yaml spells them (``augment`` ``"homography,virtual"``, ``virtual_shift``
         ``"0.5,0.2,0"``, ``image_size`` ``[H, W]`` or ``None`` for :data:`FIRST_FRAME_SIZE`), paths
@@ -376,6 +391,17 @@ class TrainConfig:
         atomic_write_text(path, yaml.safe_dump(self.to_dict(), sort_keys=False))
 
     @classmethod
+    def from_checked(cls, checked: Mapping[str, Any], **values: Any) -> TrainConfig:
+        """The configuration of ``checked``, typed values that :func:`read_config_yaml` has parsed and checked
+        (taken as they are: each value of a file is checked once), and ``values`` (parsed and checked as by the
+        constructor; a field in both takes its value from ``values``)."""
+        token = _CHECKED.set(frozenset(checked) - frozenset(values))
+        try:
+            return cls(**{**checked, **values})
+        finally:
+            _CHECKED.reset(token)
+
+    @classmethod
     def load(cls, path: PathLike) -> TrainConfig:
         """Read a config.yaml written by :meth:`save` (also one written before a field was renamed; see
         :func:`read_config_yaml`)."""
@@ -383,7 +409,7 @@ class TrainConfig:
         missing = [f.name for f in fields(cls) if f.default is MISSING and f.name not in values]
         if missing:
             raise CorruptFileError(f"{path} is not a freespace training config (no {', '.join(missing)})")
-        return cls(**values)
+        return cls.from_checked(values)
 
     #: the options a run may raise when it goes on: it goes on exactly as a run started with the larger values would
     GROWABLE = ("epochs", "patience")
@@ -412,8 +438,9 @@ class TrainConfig:
 
 def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None) -> None:
     """Refuse ``encoder_name``/``encoder_weights`` that the network does not take or that cannot be
-    built and loaded (unknown encoder, missing extra, no network, a file that does not fit), before any
-    work: the network is built once per combination (and weight file version) in a process."""
+    built and loaded (unknown encoder, missing extra, weights not in the cache, a file that does not fit or
+    holds no weights), before any work: once per combination (and weight file version) in a process, on the
+    meta device (:func:`_build_once`)."""
     from freespace.models import list_models, model_options
 
     for name, value in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)):
@@ -429,11 +456,22 @@ def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_we
 @functools.lru_cache(maxsize=8)
 def _build_once(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None,
                 stamp: tuple[int, int] | None) -> None:
-    """Build the network (``stamp``, the weight file's mtime and size, only keys the cache)."""
+    """Build the network on the meta device, ``encoder_weights`` loaded into it (``stamp``, the weight file's
+    mtime and size, only keys the cache). Its tensors have shapes but no memory and no initial values, so this
+    costs a fraction of a real build (none of a large network's allocation and random initialisation), while
+    the weights take the one path of training: the file is read (on the CPU) and its tensors' names, shapes
+    and values checked against the encoder the network builds (:func:`freespace.models.weights.apply_state`);
+    copying them into the meta tensors is a no-op."""
+    import warnings
+
+    import torch
+
     from freespace.models import create_model
 
     options = {k: v for k, v in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)) if v is not None}
-    create_model(model, preset=preset, **options)
+    with warnings.catch_warnings(), torch.device("meta"):
+        warnings.filterwarnings("ignore", message=".*meta parameter.*no-op")
+        create_model(model, preset=preset, **options)
 
 
 # --- what a run read: content hashes, the label tree -------------------------------------------------------
@@ -776,10 +814,17 @@ def _bounded(hint: Any) -> type | Bounded:
     return kind
 
 
+@functools.lru_cache(maxsize=None)
+def _default_text(name: str) -> Any:
+    """The default of the field ``name`` as config.yaml spells it (None: none), typed once per process."""
+    default = TrainConfig.__dataclass_fields__[name].default
+    return None if default is MISSING or default is None else _adapters()[name].dump_python(_typed(name, default))
+
+
 def options(names: Iterable[str] | None = None, values: Mapping[str, Any] | None = None) -> list[Option]:
     """The :class:`TrainConfig` fields ``names`` (default: all), in their order, as :class:`Option` objects;
-    ``values`` (e.g. from :func:`read_config_yaml`) replace the fields' defaults, and a field given there is
-    no longer required."""
+    ``values``, typed (e.g. from :func:`read_config_yaml`), replace the fields' defaults, and a field given
+    there is no longer required."""
     wanted = set(names) if names is not None else None
     values = values or {}
     found = []
@@ -787,8 +832,10 @@ def options(names: Iterable[str] | None = None, values: Mapping[str, Any] | None
         if wanted is not None and f.name not in wanted:
             continue
         given = f.name in values
-        default = values[f.name] if given else None if f.default is MISSING else f.default
-        plain = _adapters()[f.name].dump_python(_typed(f.name, default)) if default is not None else None
+        if given:  # typed already: spelled, not checked again
+            plain = _adapters()[f.name].dump_python(values[f.name]) if values[f.name] is not None else None
+        else:
+            plain = _default_text(f.name)
         found.append(Option(f.name, f.metadata["help"], plain, f.default is MISSING and not given, _choices(f.name),
                             f.metadata.get("metavar"), _bounded(_hint(f.name))))
     return found

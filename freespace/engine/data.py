@@ -20,7 +20,7 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import make_splits, read_splits, write_splits
 from freespace.data.torch_dataset import Item, VirtualAugment
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, ranges_text
+from freespace.engine.config import TrainConfig, ranges_text
 from freespace.errors import DatasetError, InvalidOptionError, param
 
 log = logging.getLogger(__name__)
@@ -46,7 +46,7 @@ class _LoaderProcess(multiprocessing.context.ForkProcess):
     the signal reaches the trainer just after the fork. In the worker, ``SIGTERM`` ends the process at once and
     silently (the default action: a forked worker would otherwise run the command's handler and print a
     traceback), the worker ends with its parent even on ``SIGKILL``
-    (:func:`~freespace.parallel.die_with_parent`), and then the signals are unblocked."""
+    (:func:`~freespace.runtime.parallel.die_with_parent`), and then the signals are unblocked."""
 
     def start(self) -> None:
         self._freespace_parent = os.getpid()
@@ -57,7 +57,7 @@ class _LoaderProcess(multiprocessing.context.ForkProcess):
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
     def run(self) -> None:
-        from freespace.parallel import die_with_parent
+        from freespace.runtime.parallel import die_with_parent
 
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         die_with_parent(self._freespace_parent)
@@ -115,8 +115,9 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
 
     Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`; ``train`` starts with the
     training frames themselves, ``"frames"`` of them, and the views or duplicates follow), ``"size"``
-    (H, W: ``config.image_size``, or the first labelled frame's for :data:`FIRST_FRAME_SIZE`) and
-    ``"virtual"`` (a :class:`VirtualAugment`, or None).
+    (H, W: ``config.image_size``, or the first labelled frame's for
+    :data:`~freespace.engine.config.FIRST_FRAME_SIZE`: :meth:`TrainConfig.with_size`) and ``"virtual"`` (a
+    :class:`VirtualAugment`, or None).
     """
     ds = get_dataset(config.dataset, config.root, config.split, disparity_source=config.disparity_source,
                      cache_dir=config.cache_dir)
@@ -176,8 +177,7 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     elif "duplicate" in config.augment:  # the control: the same frames again, their own left images
         views = _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
         items["train"] += [Item(it.index, it.name) for it in views]
-    size = config.image_size if config.image_size != FIRST_FRAME_SIZE else \
-        tuple(int(x) for x in ds.load(index[names[0]], right=False, disparity=False).left.shape[:2])
+    size = config.with_size(lambda: ds.load(index[names[0]], right=False, disparity=False).left.shape[:2]).image_size
     return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
 
 

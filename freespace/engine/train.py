@@ -17,7 +17,6 @@ import io as _io
 import logging
 import os
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -28,14 +27,14 @@ from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from freespace.data.torch_dataset import RoadSegmentationDataset
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, changed_inputs, content_hashes
+from freespace.engine.config import TrainConfig, changed_inputs, content_hashes
 from freespace.engine.data import EpochSampler, is_rank_zero, loader_context, prepare_data
 from freespace.engine.record import run_record
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, Terminated, TrainingError, param
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
 from freespace.io.outdir import claim_folder
-from freespace.log import on_terminal, quiet_lightning
+from freespace.runtime.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
 
 log = logging.getLogger(__name__)
@@ -351,7 +350,7 @@ def _check_restart(run_dir: Path) -> None:
 def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> TrainConfig:
     """Refuse to resume a folder with no checkpoint, a damaged one, or other options than the run's (its
     config.yaml, in the spelling of any version); return ``config`` with the run's image size when it asks
-    for :data:`FIRST_FRAME_SIZE` (resolved when the run started)."""
+    for :data:`~freespace.engine.config.FIRST_FRAME_SIZE` (resolved when the run started)."""
     if (run_dir / "config.yaml").is_file() and not last.is_file():
         raise InvalidOptionError(f"{run_dir} never reached its first checkpoint, so there is nothing to resume; "
                                  f"run the same command without {param('resume')} to start it again")
@@ -360,8 +359,7 @@ def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> TrainConfig
                                  f"{run_dir} has none")
     saved = TrainConfig.load(run_dir / "config.yaml")
     resumed = RunCheckpointIO(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
-    if config.image_size == FIRST_FRAME_SIZE:
-        config = replace(config, image_size=saved.image_size)
+    config = config.with_size(saved.image_size)
     changed = config.diff(saved)[0]
     if changed:
         raise InvalidOptionError(f"{param('resume')} with other options than the run's ({'; '.join(changed)}); "
@@ -382,7 +380,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     last = run_dir / "checkpoints" / "last.ckpt"
     pl.seed_everything(config.seed, workers=True, verbose=False)
     data = prepare_data(config, run_dir)
-    config = replace(config, image_size=tuple(data["size"]))  # resolved
+    config = config.with_size(data["size"])  # resolved
     if is_rank_zero():
         config.save(run_dir / "config.yaml")
     ds, size = data["dataset"], tuple(data["size"])

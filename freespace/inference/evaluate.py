@@ -43,7 +43,7 @@ def evaluate_frames(predictor: Predictor, ds: StereoRoadDataset, names: list[str
     Returns the filled :class:`RoadEvaluator` and the seconds spent in the network; with ``overlays``,
     writes ``<overlays>/<frame>.png`` (TP green, FN red, FP blue) too.
     """
-    from freespace.log import progress_bar
+    from freespace.runtime.log import progress_bar
 
     evaluator, seconds = RoadEvaluator(), 0.0
     for name in progress_bar(names, desc="evaluate", unit="frame", enabled=progress):

@@ -29,7 +29,7 @@ from freespace.io.files import PathLike, atomic_write_bytes, check_outputs, chec
 from freespace.io.kitti import read_kitti_calib
 from freespace.io.outdir import claim_folder
 from freespace.io.video import FrameSource, VideoFrame, VideoWriter, open_frames
-from freespace.shard import select_shard
+from freespace.runtime.shard import select_shard
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,7 @@ def _input_paths(source: FrameSource) -> dict[str, Path]:
 
 
 def _shard_source(source: FrameSource, shard: tuple[int, int]) -> FrameSource:
-    """The images of shard ``K/N`` of an image source, by file stem (:func:`freespace.shard.select_shard`)."""
+    """The images of shard ``K/N`` of an image source, by file stem (:func:`freespace.runtime.shard.select_shard`)."""
     if source.kind == "video":
         raise InvalidOptionError(f"{param('shard')} splits folders and globs of images by file name; a video is one "
                                  f"output: predict it without {param('shard')} (or split it into frames first)")
@@ -249,7 +249,7 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
         out: the output folder (:mod:`freespace.io.outdir`), written all or nothing: it replaces the files of
             an earlier ``predict`` output there. With ``shard`` only that shard's frames are written, beside
             the other shards' in the same folder, and its summary is ``summary.shard-K-of-N.json``.
-        batch_size: frames per network call (≥ 1). shard: ``(K, N)``, 1-based (:mod:`freespace.shard`);
+        batch_size: frames per network call (≥ 1). shard: ``(K, N)``, 1-based (:mod:`freespace.runtime.shard`);
             images only.
         overlays: also write ``overlays/`` (an RGB PNG per frame: its encoding costs about three times the
             mask's; leave them out for real time).
@@ -284,7 +284,7 @@ def _summary(predictor: Predictor, stats: RunStats, **extra: Any) -> dict[str, A
 
 def _predict_into(predictor: Predictor, source: FrameSource, out: Path, batch_size: int, progress: bool,
                   shard: tuple[int, int] | None, overlays: bool = True, pipeline: bool = True) -> dict[str, Any]:
-    from freespace.log import progress_bar
+    from freespace.runtime.log import progress_bar
 
     bar = progress_bar(None, total=len(source), desc="predict", unit="frame", enabled=progress)
 
@@ -318,7 +318,7 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
         ``frames``, ``seconds_per_frame`` (the network), ``frames_per_second`` (end to end: decoding,
         network, encoding), ``network_share``, ``fps`` (the video's frame rate), ``model``, ``image_size``.
     """
-    from freespace.log import progress_bar
+    from freespace.runtime.log import progress_bar
 
     if batch_size < 1:
         raise InvalidOptionError(f"{param('batch_size')} must be ≥ 1")
@@ -511,7 +511,7 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
 
 def _submit_into(predictor: Predictor, ds: Any, calibs: list[dict[str, np.ndarray]], out: Path,
                  progress: bool) -> list[str]:
-    from freespace.log import progress_bar
+    from freespace.runtime.log import progress_bar
 
     from freespace.evaluation.bev import to_bev
 

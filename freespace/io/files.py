@@ -36,8 +36,9 @@ from freespace.errors import InputFileError, InvalidOptionError, OutputError, pa
 PathLike = str | os.PathLike[str]
 
 __all__ = ["PathLike", "atomic_write_bytes", "write_files_together", "atomic_write_text", "encode_json", "write_json",
-           "write_csv", "check_outputs", "check_writable", "check_writable_files", "missing_input", "read_bytes",
-           "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "unfollowable_link", "META"]
+           "write_csv", "check_outputs", "check_writable", "check_output_kind", "check_writable_files", "missing_input",
+           "read_bytes", "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "unfollowable_link",
+           "META"]
 
 # ---------------------------------------------------------------------------------------------------
 # atomic writes
@@ -241,20 +242,10 @@ def encode_json(obj: Any) -> bytes:
     return (json.dumps(obj, indent=2, allow_nan=False) + "\n").encode("utf-8")
 
 
-def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -> Path:
-    """Refuse, before any work, an output that cannot be written where it is named.
-
-    Args:
-        path: the output file (``folder=False``) or folder (``folder=True``); it need not exist.
-        name: the parameter that named it, for the message (:func:`freespace.errors.param`).
-
-    Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
-    folder is, is (or leads by a link to) a device, pipe, socket or other special file, or lies inside a
-    ``.freespace`` folder; :class:`OutputError` when a file output may not be replaced
-    (:func:`replaceable`: read-only, on ``/proc``, …), a folder on the way to it is a file, or the nearest
-    existing folder is not writable (folders on the way are created by the writers). Nothing is created.
-    """
-    path, flag = Path(os.path.expanduser(os.fspath(path))), param(name)
+def check_output_kind(path: Path, flag: str, folder: bool) -> None:
+    """Refuse an output ``path`` (a folder with ``folder``, else a file) that is a link which cannot be followed,
+    a device, pipe, socket or other special file (or a link to one), a file where a folder is wanted or a folder
+    where a file is: :class:`InvalidOptionError`, one line that starts with ``flag`` (the parameter that named it)."""
     unfollowable = unfollowable_link(path, folder)
     if unfollowable is not None:
         raise InvalidOptionError(f"{flag} {path} {unfollowable}")
@@ -271,6 +262,23 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -
         raise InvalidOptionError(f"{flag} {path} is a file; give a folder")
     if not folder and path.is_dir():
         raise InvalidOptionError(f"{flag} {path} is a folder; give a file name")
+
+
+def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -> Path:
+    """Refuse, before any work, an output that cannot be written where it is named.
+
+    Args:
+        path: the output file (``folder=False``) or folder (``folder=True``); it need not exist.
+        name: the parameter that named it, for the message (:func:`freespace.errors.param`).
+
+    Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
+    folder is, is (or leads by a link to) a device, pipe, socket or other special file, or lies inside a
+    ``.freespace`` folder; :class:`OutputError` when a file output may not be replaced
+    (:func:`replaceable`: read-only, on ``/proc``, …), a folder on the way to it is a file, or the nearest
+    existing folder is not writable (folders on the way are created by the writers). Nothing is created.
+    """
+    path, flag = Path(os.path.expanduser(os.fspath(path))), param(name)
+    check_output_kind(path, flag, folder)
     meta = inside_meta(path)
     if meta is not None:
         raise InvalidOptionError(f"{flag} {path} lies inside {meta}, where freespace keeps an output folder's "

@@ -9,7 +9,7 @@ name and every entry it wrote (``"name"`` a file, ``"name/"`` a whole subtree, e
 * it replaces or deletes only entries of its manifest, ``overwrite`` included, so a file it did not
   write is never touched;
 * a lock (``OUT/.freespace/lock``, ``flock``) keeps two runs out of one folder: a whole run takes it
-  alone, the shards of one run (:mod:`freespace.shard`) and the cells of one ``reproduce`` share it;
+  alone, the shards of one run (:mod:`freespace.runtime.shard`) and the cells of one ``reproduce`` share it;
 * staged output (:meth:`OwnedFolder.staged`) is written under ``OUT/.freespace/stage-<pid>-…`` and moved
   into place file by file (one atomic rename each) when the block ends; an interrupted stage
   (SIGINT, SIGTERM, or SIGKILL) is removed by the next run that claims the folder.
@@ -59,8 +59,8 @@ from pathlib import Path
 from typing import Any
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError, param
-from freespace.io.files import (META, inside_meta, keep_mode, on_pseudo_fs, replaceable, special_kind,
-    unfollowable_link, write_files_together)
+from freespace.io.files import (META, check_output_kind, inside_meta, keep_mode, on_pseudo_fs, replaceable,
+                                special_kind, write_files_together)
 
 PathLike = str | os.PathLike[str]
 
@@ -422,17 +422,7 @@ def claim_folder(out: PathLike, command: str, *, entries: Iterable[str] = (), sh
         OutputError: it cannot be created or written.
     """
     out, flag = Path(out), param(name)
-    unfollowable = unfollowable_link(out, folder=True)
-    if unfollowable is not None:
-        raise InvalidOptionError(f"{flag} {out} {unfollowable}")
-    try:
-        kind = special_kind(os.stat(out).st_mode)
-    except OSError:
-        kind = None
-    if kind is not None:
-        raise InvalidOptionError(f"{flag} {out} is {kind}, not a folder; give a folder")
-    if out.exists() and not out.is_dir():
-        raise InvalidOptionError(f"{flag} {out} is a file; give a folder")
+    check_output_kind(out, flag, folder=True)
     meta_above = inside_meta(out)
     if meta_above is not None:
         raise InvalidOptionError(f"{flag} {out} lies inside {meta_above}, where freespace keeps an output folder's "

@@ -94,7 +94,7 @@ def _render_and_write(job: tuple[int, int, SynthConfig, str]) -> tuple[dict[str,
 def _init_worker(parent: int) -> None:
     import cv2
 
-    from freespace.parallel import init_worker
+    from freespace.runtime.parallel import init_worker
 
     init_worker(parent)
     cv2.setNumThreads(1)
@@ -150,7 +150,7 @@ def write_dataset(out: PathLike, num: int, *, seed: int = 0, config: SynthConfig
 def _render_frames(out: Path, num: int, seed: int, config: SynthConfig, settings: dict[str, Any], workers: int,
                    progress: bool) -> list[dict[str, Any]]:
     """Render frames ``0 … num−1`` into ``out`` and write ``index.csv`` and ``synth.json``."""
-    from freespace.log import progress_bar
+    from freespace.runtime.log import progress_bar
 
     jobs = ((i, seed, config, str(out)) for i in range(num))
     bar = progress_bar(None, total=num, desc="synth", unit="frame", enabled=progress)
@@ -167,7 +167,7 @@ def _render_frames(out: Path, num: int, seed: int, config: SynthConfig, settings
         for job in jobs:
             done(_render_and_write(job))
     else:
-        from freespace.parallel import worker_pool
+        from freespace.runtime.parallel import worker_pool
 
         with worker_pool(workers, _init_worker, (os.getpid(),)) as pool:  # ends at once on Ctrl-C
             for result in pool.map(_render_and_write, jobs, chunksize=max(1, min(64, num // (4 * workers)))):

@@ -1,0 +1,8 @@
+"""How a command runs, apart from what it computes: the foundation layer beside :mod:`freespace.errors`.
+
+* :mod:`freespace.runtime.log`: logging set-up and progress bars;
+* :mod:`freespace.runtime.parallel`: worker processes that end with the command;
+* :mod:`freespace.runtime.shard`: the shard ``K/N`` of a list of frames (work split over machines).
+
+The standard library only (the progress bars import tqdm when shown); never torch.
+"""
