@@ -427,9 +427,7 @@ class TrainConfig:
 
         A resumed training run and a cell of ``reproduce`` refuse a run whose ``changed`` is not empty.
         """
-        now, then = self.to_dict(), saved.to_dict()
-        if self.image_size == FIRST_FRAME_SIZE:
-            now["image_size"] = then["image_size"]
+        now, then = self.with_size(saved.image_size).to_dict(), saved.to_dict()
         grown = [k for k in self.GROWABLE if now[k] > then[k]]
         changed = [f"{k} {then[k]!r} → {v!r}" for k, v in now.items()
                    if k not in (*self.WHERE_AND_HOW, *grown) and then[k] != v]
