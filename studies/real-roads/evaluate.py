@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 VARIANT_TAGS = {"s": "S", "r-auto": "R-auto", "ha-r-auto": "HA-R-auto", "r-auto-dup": "R-auto-dup",
                 "s_r-auto": "S+R-auto"}
-_RUN = re.compile(r"(?P<model>[a-z0-9]+)-(?P<tag>[a-z_-]+)-s(?P<seed>\d+)$")
+_RUN = re.compile(r"(?P<model>[a-z0-9]+(?:-\d+x\d+)?)-(?P<tag>[a-z_-]+)-s(?P<seed>\d+)$")
 THRESHOLD = 0.5
 
 

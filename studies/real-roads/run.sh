@@ -3,7 +3,7 @@
 #
 #   RAW=DIR WORK=DIR [SEEDS="0 1"] [MODELS="unet"] [VARIANTS="R-auto HA-R-auto R-auto-dup S S+R-auto"] \
 #   [JOBS=2]  (MODELS: unet, deeplabv3plus with the ImageNet Lite0 encoder; fastscnn from scratch)
-#   [FREESPACE=freespace] [PYTHON=python] bash studies/real-roads/run.sh
+#   [SIZE=128x416] [FREESPACE=freespace] [PYTHON=python] bash studies/real-roads/run.sh
 #
 # RAW: a KITTI raw root (date folders with calib_*.txt; drives with image_02/03, velodyne_points). WORK: the
 # study's working folder (autolabels, splits, rendered frames, run folders). Every step is skipped when its
@@ -17,7 +17,7 @@ JOBS=${JOBS:-2}
 FREESPACE=${FREESPACE:-freespace}
 PYTHON=${PYTHON:-python}
 HERE=$(cd "$(dirname "$0")" && pwd)
-SIZE=128x416
+SIZE=${SIZE:-128x416}  # the network input, HxW (another size names its run folders <model>-<size>-<tag>-s<seed>)
 COMMON=(--image-size $SIZE --epochs 60 --patience 10 --val-window 3 --min-delta 0.001 --lr 0.01 --batch-size 4
         --no-progress)
 LITE0="--encoder-name efficientnet-lite0 --encoder-weights imagenet"  # the pretrained networks' encoder
@@ -42,6 +42,7 @@ cell() {  # model variant seed
     local model=$1 variant=$2 seed=$3 tag run
     tag=$(echo "$variant" | tr 'A-Z+' 'a-z_')
     run=$WORK/runs/$model-$tag-s$seed
+    [ "$SIZE" = 128x416 ] || run=$WORK/runs/$model-$SIZE-$tag-s$seed
     [ -f "$run/real.json" ] && return 0
     case $variant in
         S) args=(--dataset synth --root "$SYN") ;;
