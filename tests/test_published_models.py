@@ -18,7 +18,7 @@ import pytest
 from freespace.cli import main
 from freespace.io.codecs import read_image, write_image
 
-from helpers import textured_image
+from helpers import road_frame, tiny_road_checkpoint
 
 ort = pytest.importorskip("onnxruntime")
 
@@ -26,47 +26,12 @@ TRAIN_SIZE = (32, 96)
 FRAME = (75, 250)
 
 
-def _frame(shape: tuple[int, int], seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """A generated frame and its road mask: the road is a dark noisy band below a random horizon."""
-    rng = np.random.default_rng(seed)
-    h, w = shape
-    image = textured_image(shape, seed=seed).astype(np.int16) // 2 + 128
-    top = int(h * rng.uniform(0.45, 0.65))
-    rows, cols = np.arange(h)[:, None], np.arange(w)[None, :]
-    road = (rows >= top) & (np.abs(cols - w / 2) <= (rows - top + 4) * w / h * 1.2)
-    grey = rng.normal(60, 12, size=(h, w, 1)).clip(0, 255)
-    return np.ascontiguousarray(np.where(road[:, :, None], grey, image).clip(0, 255).astype(np.uint8)), road
-
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The checkpoint, its float32 and float16 ONNX exports (through the command) and the export's output."""
-    import torch
-
-    from freespace.models import create_model
-
     base = tmp_path_factory.mktemp("published")
-    torch.manual_seed(0)
-    net = create_model("fastscnn", width=0.5)
-    pairs = [_frame(TRAIN_SIZE, 100 + i) for i in range(32)]
-    x = torch.from_numpy(np.stack([p[0] for p in pairs])).permute(0, 3, 1, 2).float() / 255
-    y = torch.from_numpy(np.stack([p[1] for p in pairs])).long()
-    opt = torch.optim.Adam(net.parameters(), lr=0.01)
-    net.train()
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # tiny operations: a second thread only waits for the first
-    try:
-        for step in range(60):
-            idx = torch.arange(8) + 8 * (step % 4)
-            loss = net.loss(net(x[idx]), y[idx])["total"]
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-    finally:
-        torch.set_num_threads(threads)
-    ckpt = base / "model.ckpt"
-    hyper = {"model": "fastscnn", "model_options": {"num_classes": 2, "width": 0.5}, "image_size": list(TRAIN_SIZE)}
-    torch.save({"hyper_parameters": hyper, "state_dict": {f"net.{k}": v for k, v in net.state_dict().items()}}, ckpt)
+    ckpt = tiny_road_checkpoint(base / "model.ckpt", TRAIN_SIZE, width=0.5)
     f32, f16 = base / "f32.onnx", base / "f16.onnx"
     assert main(["export", "--checkpoint", str(ckpt), "--format", "onnx", "--out", str(f32)]) == 0
     assert main(["export", "--checkpoint", str(ckpt), "--format", "onnx", "--fp16", "--out", str(f16)]) == 0
@@ -98,7 +63,7 @@ def test_fp16_export_is_half_the_size_and_agrees_with_float32(files: dict[str, P
     assert f16.resize_to == TRAIN_SIZE and f16.name == "fastscnn"
     same = total = road = 0
     for i in range(8):
-        image, truth = _frame(FRAME, 700 + i)
+        image, truth = road_frame(FRAME, 700 + i)
         a, b = f32.predict([image])[0], f16.predict([image])[0]
         assert a.dtype == b.dtype == np.float32
         same, total, road = same + int(((a >= 0.5) == (b >= 0.5)).sum()), total + a.size, road + int((a >= 0.5).sum())
@@ -120,7 +85,7 @@ def test_fp16_export_prints_its_check(files: dict[str, Path], tmp_path: Path, ca
 def test_predict_onnx_runs_the_fp16_model(files: dict[str, Path], tmp_path: Path, capsys) -> None:
     frames, out = tmp_path / "frames", tmp_path / "masks"
     for i in range(3):
-        write_image(frames / f"f{i}.png", _frame(FRAME, 900 + i)[0])
+        write_image(frames / f"f{i}.png", road_frame(FRAME, 900 + i)[0])
     assert main(["predict", "--onnx", str(files["f16"]), "--input", str(frames), "--out", str(out),
                  "--no-progress"]) == 0
     assert "3 frames in" in capsys.readouterr().out
@@ -133,7 +98,7 @@ def test_predict_onnx_runs_the_fp16_model(files: dict[str, Path], tmp_path: Path
 def test_fp16_mistakes_are_one_line_and_write_nothing(files: dict[str, Path], tmp_path: Path, capsys) -> None:
     out = tmp_path / "m.onnx"
     cal = tmp_path / "cal"
-    write_image(cal / "a.png", _frame(FRAME, 1)[0])
+    write_image(cal / "a.png", road_frame(FRAME, 1)[0])
     base = ["export", "--checkpoint", str(files["ckpt"]), "--fp16", "--out", str(out)]
     for extra, message in ((["--format", "onnx", "--int8", "--calibration", str(cal)], "--fp16 and --int8 exclude"),
                            (["--format", "onnx", "--int8"], "--fp16 and --int8 exclude"),
@@ -189,7 +154,7 @@ def _publish(folder: Path, name: str, onnx: Path, frames: int = 2) -> Path:
     (model / "README.md").write_text(f"# {name}\n")
     (model / "examples" / "LICENSE").write_text("generated frames, no licence needed\n")
     for i in range(frames):
-        write_image(model / "examples" / f"frame{i}.png", _frame(FRAME, 300 + i)[0])
+        write_image(model / "examples" / f"frame{i}.png", road_frame(FRAME, 300 + i)[0])
     return model
 
 

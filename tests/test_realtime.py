@@ -25,7 +25,7 @@ from freespace.inference.predictor import Predictor
 from freespace.io.codecs import read_image, write_image
 from freespace.io.video import VideoWriter, open_frames
 
-from helpers import textured_image
+from helpers import road_frame, tiny_road_checkpoint
 
 ort = pytest.importorskip("onnxruntime")
 
@@ -33,53 +33,18 @@ TRAIN_SIZE = (32, 96)     # the model's internal size
 FRAME = (75, 250)         # the frames': not a multiple of it, odd height
 
 
-def _frame(shape: tuple[int, int], seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """A generated frame and its road mask: the road is a dark noisy band below a random horizon."""
-    rng = np.random.default_rng(seed)
-    h, w = shape
-    image = textured_image(shape, seed=seed).astype(np.int16) // 2 + 128
-    top = int(h * rng.uniform(0.45, 0.65))
-    rows = np.arange(h)[:, None]
-    cols = np.arange(w)[None, :]
-    road = (rows >= top) & (np.abs(cols - w / 2) <= (rows - top + 4) * w / h * 1.2)
-    grey = rng.normal(60, 12, size=(h, w, 1)).clip(0, 255)
-    image = np.where(road[:, :, None], grey, image).clip(0, 255).astype(np.uint8)
-    return np.ascontiguousarray(image), road
 
 
 def _frames(n: int, shape: tuple[int, int] = FRAME, seed: int = 0) -> list[np.ndarray]:
-    return [_frame(shape, seed + i)[0] for i in range(n)]
+    return [road_frame(shape, seed + i)[0] for i in range(n)]
 
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    import torch
-
     from freespace.inference.predict import export_model
-    from freespace.models import create_model
 
     base = tmp_path_factory.mktemp("realtime")
-    torch.manual_seed(0)
-    net = create_model("fastscnn", width=0.25)
-    pairs = [_frame(TRAIN_SIZE, 100 + i) for i in range(32)]
-    x = torch.from_numpy(np.stack([p[0] for p in pairs])).permute(0, 3, 1, 2).float() / 255
-    y = torch.from_numpy(np.stack([p[1] for p in pairs])).long()
-    opt = torch.optim.Adam(net.parameters(), lr=0.01)
-    net.train()
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # tiny operations: a second thread only waits for the first (for ever on a busy machine)
-    try:
-        for step in range(60):  # measured: a loss of 0.03, 5 CPU seconds
-            idx = torch.arange(8) + 8 * (step % 4)
-            loss = net.loss(net(x[idx]), y[idx])["total"]
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-    finally:
-        torch.set_num_threads(threads)
-    ckpt = base / "model.ckpt"
-    hyper = {"model": "fastscnn", "model_options": {"num_classes": 2, "width": 0.25}, "image_size": list(TRAIN_SIZE)}
-    torch.save({"hyper_parameters": hyper, "state_dict": {f"net.{k}": v for k, v in net.state_dict().items()}}, ckpt)
+    ckpt = tiny_road_checkpoint(base / "model.ckpt", TRAIN_SIZE, width=0.25)
     for i, frame in enumerate(_frames(9)):
         write_image(base / "frames" / f"f{i}.png", frame)
     for i, frame in enumerate(_frames(12, seed=500)):
@@ -112,7 +77,7 @@ def test_trained_fixture_finds_the_road(files: dict[str, Path]) -> None:
     predictor = Predictor(onnx=files["onnx"])
     tp = fp = fn = 0
     for i in range(6):
-        image, road = _frame(FRAME, 900 + i)
+        image, road = road_frame(FRAME, 900 + i)
         pred = predictor.predict([image])[0] >= 0.5
         tp, fp, fn = tp + (pred & road).sum(), fp + (pred & ~road).sum(), fn + (~pred & road).sum()
     assert 2 * tp / (2 * tp + fp + fn) > 0.85
@@ -314,7 +279,7 @@ def test_int8_export_is_within_its_tolerance_of_float32(files: dict[str, Path], 
     same = total = 0
     counts = {"f32": [0, 0, 0], "i8": [0, 0, 0]}
     for i in range(8):
-        image, road = _frame(FRAME, 700 + i)
+        image, road = road_frame(FRAME, 700 + i)
         a, b = f32.predict([image])[0] >= 0.5, i8.predict([image])[0] >= 0.5
         same, total = same + int((a == b).sum()), total + a.size
         for key, pred in (("f32", a), ("i8", b)):
