@@ -107,6 +107,9 @@ def test_each_cell_trains_on_its_variants_data(study: Path, env: Path, tmp_path:
     # the tables from the run folders alone, with the protocol's names
     assert main(["reproduce", "--tables", "--out", str(out), "--protocol", str(study / "p.yaml")]) == 0
     assert "| segnet | A-dup − A | F-score | test | 1 |" in capsys.readouterr().out
+    # without the file, the folders are none of the built-in variants' (segnet-a-dup-s0 is no X-dup of "segnet-a")
+    assert main(["reproduce", "--tables", "--out", str(out)]) == 2
+    assert "holds no run folders" in capsys.readouterr().err
     # the data moved under a finished cell: refused in one line, naming the setting
     shutil.copytree(env / "first", tmp_path / "moved")
     monkeypatch.setenv("FS_FIRST", str(tmp_path / "moved"))
@@ -262,7 +265,8 @@ def test_the_real_roads_protocol_gives_run_sh_options(tmp_path: Path, monkeypatc
     """studies/real-roads/protocol.yaml: run.sh's cell() data, augment and run folder names, variant by variant
     (run.sh's tag: ``tr 'A-Z+' 'a-z_'``; its --cache-dir for HA-R-auto and R-auto-dup only)."""
     raw, work = tmp_path / "raw", tmp_path / "work"
-    for folder in (raw, work / "autolabels", work / "sgbm-cache", work / "syn", work / "splits-raw", work / "mix/splits"):
+    for folder in (raw, work / "autolabels", work / "sgbm-cache", work / "syn", work / "splits-raw",
+                   work / "mix/splits"):
         folder.mkdir(parents=True)
     for part in ("train", "val", "test"):
         for lists in (work / "splits-raw", work / "mix/splits"):

@@ -21,7 +21,7 @@ method's own defaults hold (:data:`DEFAULT_VARIANTS`, :data:`GAINS`, no primary 
     reference: "..."                        # optional: a sentence under the gains table (published gains)
 
 A study whose arms train on *other data* declares them, each with its training data (:class:`DataSource`,
-:meth:`Protocol.variant_data`); ``reproduce`` then takes no ``--dataset``/``--root``::
+:attr:`Protocol.declared`); ``reproduce`` then takes no ``--dataset``/``--root``::
 
     data:                                   # named training sources (paths: ${VAR} from the environment,
       real: {dataset: kitti-raw, root: "${RAW}", labels: "${WORK}/autolabels", splits: "${WORK}/splits",
@@ -40,8 +40,8 @@ literal (no ``X`` for the network); its run folders' tag is the name in lower ca
 
 from __future__ import annotations
 
-import re
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -49,9 +49,9 @@ from typing import Any
 from freespace.errors import InvalidOptionError, param
 from freespace.io.files import PathLike
 
-__all__ = ["Variant", "DataSource", "VARIANTS", "DEFAULT_VARIANTS", "GAINS", "METRICS", "GAIN_METRICS", "Primary", "Protocol",
-           "TestRoots", "parse_models", "parse_variants", "parse_cell", "parse_test_roots", "run_name", "run_of",
-           "variant_tag"]
+__all__ = ["Variant", "DataSource", "DATA_KEYS", "VARIANTS", "DEFAULT_VARIANTS", "GAINS", "METRICS", "GAIN_METRICS",
+           "Primary", "Protocol", "TestRoots", "parse_models", "parse_variants", "parse_cell", "parse_test_roots",
+           "run_name", "run_of", "variant_tag"]
 
 
 @dataclass(frozen=True)

@@ -54,7 +54,8 @@ from freespace.io.outdir import claim_folder
 __all__ = ["reproduce"]
 
 
-def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, models: str | list[str] | None = None, seeds: int = 3,
+def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, models: str | list[str] | None = None,
+              seeds: int = 3,
               epochs: int = 50, image_size: tuple[int, int] | str = FIRST_FRAME_SIZE, patience: int = 10,
               val_window: int = 1,
               min_delta: float = 0.0,
@@ -100,7 +101,8 @@ def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, mode
     protocol = Protocol() if protocol is None else protocol
     vocabulary = protocol.vocabulary
     if protocol.data and (dataset is not None or root is not None or autolabels is not None):
-        given = [param(k) for k, v in (("dataset", dataset), ("root", root), ("autolabels", autolabels)) if v is not None]
+        given = [param(k) for k, v in (("dataset", dataset), ("root", root), ("autolabels", autolabels))
+                 if v is not None]
         raise InvalidOptionError(f"{param('protocol')} gives each variant its training data (its data); leave "
                                  f"{' and '.join(given)} out")
     if not protocol.data and (dataset is None or root is None):
