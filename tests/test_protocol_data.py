@@ -180,7 +180,7 @@ BAD = [
     ("data: {a: {dataset: kitty, root: r}}\nvariants: {A: {data: a}}\ngains: []\n", "data a: unknown dataset 'kitty'"),
     ("data: {a: {dataset: synth, root: $RAW/x}}\nvariants: {A: {data: a}}\ngains: []\n",
      "write an environment variable as ${NAME}"),
-    ("data: {a: {dataset: synth, root: 3}}\nvariants: {A: {data: a}}\ngains: []\n", "data a: root must be a path"),
+    ("data: {a: {dataset: synth, root: 3}}\nvariants: {A: {data: a}}\ngains: []\n", "data a: root must be text"),
     ("data: {A: {dataset: synth, root: r}}\nvariants: {A: {data: A}}\ngains: []\n", "data name 'A'"),
     ("data: {a: {dataset: synth, root: r}, b: {dataset: synth, root: r}}\nvariants: {A: {data: a}, B: {data: a}}\n"
      "gains: [A - B]\n", "data b is the data of no variant"),

@@ -470,7 +470,7 @@ def _data(data: Any, base: Path, file: str) -> dict[str, DataSource]:
                                      f"cache_dir (nothing else)")
         for key, value in spec.items():
             if not isinstance(value, str) or not value.strip():
-                raise InvalidOptionError(f"data {name}: {key} must be a path (text), got {value!r}")
+                raise InvalidOptionError(f"data {name}: {key} must be text (a name or a path), got {value!r}")
             if "$" in _ENV.sub("", value):
                 raise InvalidOptionError(f"data {name}: {key} {value}: write an environment variable as ${{NAME}}, "
                                          f"and no other $")
