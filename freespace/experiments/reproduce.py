@@ -7,6 +7,8 @@ views' content) — or any variants of :data:`~freespace.experiments.protocol.VA
 with the same seeds and budget, and tested on the test split (``test_set = test``) and, with
 ``test_root``, on every labelled frame of further datasets (``test_set = shifted`` for a bare folder, e.g.
 other rigs, or the name given as ``NAME=DIR``, e.g. a large fixed set rendered with the training rigs).
+A study's protocol file may instead declare its own variants, each training on its own data
+(:attr:`~freespace.experiments.protocol.Protocol.declared`; then no ``dataset`` and ``root`` are given).
 For one network and seed all variants share the split and the initial weights; HA-X and X-dup also share
 the data order and the conventional augmentation's draws (same number of samples).
 
