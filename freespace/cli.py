@@ -869,7 +869,8 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tables", action="store_true", help="train nothing: rebuild index.json, the tables and the "
                    "figures from the run folders in --out")
     p.add_argument("--protocol", metavar="FILE", help="a study's protocol (YAML: its variants, the gains it reports, "
-                   "its primary endpoint, named test sets and a reference line; see freespace.experiments.protocol); "
+                   "its primary endpoint, named test sets and a reference line; or variants of its own, each with "
+                   "its training data, which replace --dataset and --root; see freespace.experiments.protocol); "
                    "default: variants X,HA-X,X-dup, every gain of the variants run, no primary endpoint")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--out", required=True, metavar="DIR")
@@ -886,7 +887,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.models is not None:  # names checked in every mode
         parse_models(args.models)
     if args.variants is not None:
-        parse_variants(args.variants)
+        parse_variants(args.variants, protocol.vocabulary if protocol is not None else None)
     if args.tables:
         unused = [flag for flag, value in (("--only", args.only), ("--models", args.models),
                                            ("--variants", args.variants), ("--test-root", args.test_root)) if value]
@@ -895,8 +896,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
                                      f"{', '.join(unused)}")
         r = write_tables(args.out, protocol=protocol)
     else:
-        if args.dataset is None or args.root is None:
-            raise InvalidOptionError("reproduce needs --dataset and --root (only --tables does without)")
+        if (args.dataset is None or args.root is None) and not (protocol is not None and protocol.data):
+            raise InvalidOptionError("reproduce needs --dataset and --root (only --tables, and a --protocol with "
+                                     "data, do without)")
         options = _config_values(args, REPRODUCE_OPTIONS)
         r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=args.models, seeds=args.seeds,
                       progress=not args.no_progress, variants=args.variants, test_root=args.test_root,

@@ -10,10 +10,10 @@ reads a study's :class:`Protocol`; :mod:`~freespace.experiments.cells` runs one 
 
 from freespace.experiments.cells import evaluate_test_set, run_cell
 from freespace.experiments.protocol import (DEFAULT_VARIANTS, GAINS, MAX_SEEDS, METRICS, PAPER_NETWORKS, VARIANTS,
-                                            Primary, Protocol, TestRoots, Variant, parse_cell, parse_models,
+                                            DataSource, Primary, Protocol, TestRoots, Variant, parse_cell, parse_models,
                                             parse_test_roots, parse_variants)
 from freespace.experiments.tables import OUT_ENTRIES, write_tables
 
 __all__ = ["run_cell", "write_tables", "evaluate_test_set", "parse_models", "parse_variants",
            "parse_cell", "parse_test_roots", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "GAINS", "METRICS",
-           "MAX_SEEDS", "PAPER_NETWORKS", "OUT_ENTRIES", "Primary", "Protocol", "TestRoots"]
+           "MAX_SEEDS", "PAPER_NETWORKS", "OUT_ENTRIES", "Primary", "Protocol", "DataSource", "TestRoots"]

@@ -21,8 +21,8 @@ from typing import Any
 
 from freespace.engine.config import TrainConfig
 from freespace.errors import CorruptFileError, DatasetError, InvalidOptionError, param
-from freespace.experiments.protocol import (DEFAULT_TEST_SET, METRICS, MIX_HUMAN_SHARE, VARIANTS, TestRoots, Variant,
-                                            parse_test_roots, run_name, run_of)
+from freespace.experiments.protocol import (DEFAULT_TEST_SET, METRICS, MIX_HUMAN_SHARE, VARIANTS, Protocol, TestRoots,
+                                            Variant, parse_test_roots, run_name, run_of)
 from freespace.io.files import PathLike, write_json
 from freespace.io.outdir import claim_folder
 
@@ -54,16 +54,29 @@ def check_test_roots(dataset: str, roots: dict[str, Path], train_root: PathLike)
                                      f"{shared[0]}); a further test set must be other data than the training set")
 
 
-def cell_config(dataset: str, root: PathLike, out: Path, model: str, variant: str, seed: int,
-                options: dict[str, Any], autolabels: PathLike | None = None) -> TrainConfig:
-    """The training configuration of one cell (``variant``: a table name; its budget scales the epoch cap
-    and the patience; X-auto and X-mix read ``autolabels``; the ``virtual_*`` options go to the variants with
-    virtual views only, so that the others' cells keep their settings whatever pose ranges are asked for)."""
-    spec = VARIANTS[variant]
+def cell_config(dataset: str | None, root: PathLike | None, out: Path, model: str, variant: str, seed: int,
+                options: dict[str, Any], autolabels: PathLike | None = None,
+                protocol: Protocol | None = None) -> TrainConfig:
+    """The training configuration of one cell (``variant``: a table name of ``protocol``'s
+    :attr:`~freespace.experiments.protocol.Protocol.vocabulary`, by default :data:`VARIANTS`; its budget scales
+    the epoch cap and the patience; X-auto and X-mix read ``autolabels``; the ``virtual_*`` options go to the
+    variants with virtual views only, so that the others' cells keep their settings whatever pose ranges are
+    asked for). A variant the protocol declares trains on its own data
+    (:meth:`~freespace.experiments.protocol.DataSource.training`: dataset, root, labels, splits_dir and, with
+    an augment, cache_dir), not on ``dataset`` and ``root`` (then None)."""
+    vocabulary = protocol.vocabulary if protocol is not None else VARIANTS
+    spec = vocabulary[variant]
     options = {**options, "epochs": options["epochs"] * spec.budget, "patience": options["patience"] * spec.budget}
     if "virtual" not in spec.augment:
         options = {k: v for k, v in options.items() if not k.startswith("virtual_")}
-    if spec.labels != "human":
+    if spec.data is not None:
+        sources = protocol.data if protocol is not None else {}  # (only a protocol declares variants with data)
+        source = {k: v for k, v in sources[spec.data].training(spec.augment).items() if v is not None}
+        dataset, root = source.pop("dataset"), source.pop("root")
+        options.update(source)
+    elif dataset is None or root is None:
+        raise InvalidOptionError(f"{variant} trains on {param('dataset')} and {param('root')}: give both")
+    elif spec.labels != "human":
         if autolabels is None:
             raise InvalidOptionError(f"{variant} trains on labels nobody drew: give {param('autolabels')} DIR, the "
                                      f"label tree of {root} that `freespace autolabel` wrote")
@@ -71,8 +84,9 @@ def cell_config(dataset: str, root: PathLike, out: Path, model: str, variant: st
 
         check_label_tree(autolabels, dataset, root, options.get("split"), option="autolabels")  # named as given
         options.update(labels=str(autolabels), human_share=MIX_HUMAN_SHARE if spec.labels == "mix" else 0.0)
-    config = TrainConfig(dataset=dataset, root=str(root), out=str(out / "runs" / run_name(model, variant, seed)),
-                         model=model, augment=spec.augment, seed=seed, **options)
+    config = TrainConfig(dataset=dataset, root=str(root),
+                         out=str(out / "runs" / run_name(model, variant, seed, vocabulary)), model=model,
+                         augment=spec.augment, seed=seed, **options)
     config.check()
     return config
 
@@ -87,27 +101,35 @@ def check_autolabels_used(autolabels: PathLike | None, variants: list[str] | tup
                                  f"{param('autolabels')} out")
 
 
-def check_inputs(out: Path, configs: list[TrainConfig]) -> None:
+def check_inputs(out: Path, configs: list[TrainConfig], variants: dict[str, Variant] | None = None) -> None:
     """Refuse, before any work, cells whose weights file or label tree (by content:
     :func:`~freespace.engine.config.content_hashes`, computed once) differ from what the protocol's other cells
-    in ``OUT/runs`` were trained from: their scores would be averaged as one setting."""
+    in ``OUT/runs`` were trained from: their scores would be averaged as one setting. With a protocol's declared
+    ``variants``, a cell is compared with the cells of the variants of its own training data only."""
     from freespace.engine.config import content_hashes
     from freespace.engine.train import read_inputs
 
-    now: dict[str, dict[str, Any]] = {}
+    def source(folder: str) -> str | None:  # the training data of a run folder's variant (None: reproduce's)
+        cell = run_of(folder, variants)
+        return cell[1].data if cell else None
+
+    groups: dict[str | None, dict[str, dict[str, Any]]] = {}
     for config in configs:
+        now = groups.setdefault(source(Path(config.out).name), {})
         for key, value in content_hashes(config).items():
             now.setdefault(key, value)
-    if not now or not (out / "runs").is_dir():
+    if not any(groups.values()) or not (out / "runs").is_dir():
         return
     for run_dir in sorted(p.parent for p in (out / "runs").glob("*/inputs.json")):
         recorded = read_inputs(run_dir)
-        for key, value in now.items():
+        group = source(run_dir.name)
+        for key, value in groups.get(group, {}).items():
             old = recorded.get(key)
             if isinstance(old, dict) and old.get("sha256") != value["sha256"]:
-                option = "autolabels" if key == "labels" else key  # reproduce's name of the label tree
+                option = (f"the {key} of the protocol's data {group}" if group is not None else
+                          param("autolabels") if key == "labels" else param(key))  # reproduce's name of the tree
                 raise InvalidOptionError(
-                    f"{run_dir} was trained from other contents of {param(option)} than {value['path']} holds now "
+                    f"{run_dir} was trained from other contents of {option} than {value['path']} holds now "
                     f"(sha256 {str(old.get('sha256'))[:12]}… then, {value['sha256'][:12]}… now): the cells would "
                     f"average two settings; restore the files, or give another {param('out')}")
 
@@ -129,7 +151,8 @@ def check_cell(config: TrainConfig) -> bool:
     return bool(grown)
 
 
-def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool = True) -> str:
+def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool = True,
+             variants: dict[str, Variant] | None = None) -> str:
     """Train and test one cell of the protocol (one network, variant and seed) in ``config.out`` — unless
     its ``metrics.json`` is there — and test it on every labelled frame of each further test set
     (:func:`parse_test_roots`; ``RUN/<name>/metrics.json``). Writes nothing outside the run folder.
@@ -139,12 +162,15 @@ def run_cell(config: TrainConfig, *, test_root: TestRoots = None, progress: bool
     epoch cap or patience extends the cell instead: it resumes from its last checkpoint, exactly as a cell
     started with them would have gone on, and is tested again.
 
+    ``variants``: the table names the run folders' tags stand for (a protocol's
+    :attr:`~freespace.experiments.protocol.Protocol.vocabulary`; default :data:`VARIANTS`).
+
     Returns the status: ``"done"`` or ``"done (skipped)"``.
     """
     from freespace.engine.train import run_training
 
     run_dir = Path(config.out)
-    _continue_base_run(config)
+    _continue_base_run(config, variants)
     grown = check_cell(config)
     finished = (run_dir / "metrics.json").is_file()
     tests = parse_test_roots(test_root)
@@ -174,7 +200,7 @@ def _base_variant(spec: Variant) -> Variant | None:
                 None)
 
 
-def _continue_base_run(config: TrainConfig) -> None:
+def _continue_base_run(config: TrainConfig, variants: dict[str, Variant] | None = None) -> None:
     """Start a new cell of a variant with a larger budget (X-long) as its base variant's run (X's, same network
     and seed) continued: X's config, splits, per-epoch CSV and checkpoints are copied into the new run folder,
     which :func:`run_cell` then extends from X's ``last.ckpt`` with the larger cap and patience. Its epochs up to
@@ -189,7 +215,7 @@ def _continue_base_run(config: TrainConfig) -> None:
     from freespace.engine.train import RUN_ENTRIES
 
     run_dir = Path(config.out)
-    cell = run_of(run_dir.name)
+    cell = run_of(run_dir.name, variants)
     base_spec = _base_variant(cell[1]) if cell else None
     if cell is None or base_spec is None or (run_dir / "config.yaml").is_file():
         return

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from freespace.engine.config import read_config_yaml
-from freespace.experiments.protocol import GAIN_METRICS, METRIC_NAMES, VARIANTS
+from freespace.experiments.protocol import GAIN_METRICS, METRIC_NAMES, VARIANTS, Variant
 from freespace.io.codecs import write_image
 from freespace.io.files import atomic_write_bytes
 
@@ -53,9 +53,13 @@ def gain_figure(out: Path, model: str, gains: list[dict[str, Any]]) -> None:
     atomic_write_bytes(out / "figures" / f"gains_{model}.png", buf.getvalue())
 
 
-def frames_figure(out: Path, model: str, entries: list[dict[str, Any]], frames: int) -> None:
+def frames_figure(out: Path, model: str, entries: list[dict[str, Any]], frames: int,
+                  variants: dict[str, Variant] | None = None) -> None:
     """``figures/<model>.png``: test frames of seed 0 — image, then each finished variant's prediction
-    (TP/FN/FP), X first."""
+    (TP/FN/FP), X first: the test frames of the first of ``variants`` (by default :data:`VARIANTS`, whose
+    first is X; a protocol's :attr:`~freespace.experiments.protocol.Protocol.vocabulary`)."""
+    vocabulary = variants or VARIANTS
+    first = next(iter(vocabulary))
     from freespace.data.registry import get_dataset
     from freespace.data.splits import read_splits
     from freespace.evaluation.viz import caption, grid, overlay_errors
@@ -64,11 +68,11 @@ def frames_figure(out: Path, model: str, entries: list[dict[str, Any]], frames: 
     runs = {e["variant"]: out / e["run"] for e in entries
             if e["model"] == model and e["seed"] == 0 and (out / e["run"] / "checkpoints" / "best.ckpt").is_file()
             and "metrics" in e}
-    if "X" not in runs or len(runs) < 2 or frames < 1:
+    if first not in runs or len(runs) < 2 or frames < 1:
         return
-    config = read_config_yaml(runs["X"] / "config.yaml")
+    config = read_config_yaml(runs[first] / "config.yaml")
     ds = get_dataset(config["dataset"], config["root"], config.get("split"), disparity_source="none")
-    names = read_splits(runs["X"] / "splits")["test"][:frames]
+    names = read_splits(runs[first] / "splits")["test"][:frames]
     predictors = {v: Predictor(checkpoint=r / "checkpoints" / "best.ckpt") for v, r in runs.items()}
     rows = []
     for name in names:
@@ -76,6 +80,6 @@ def frames_figure(out: Path, model: str, entries: list[dict[str, Any]], frames: 
         row = [caption(s.left, name)]
         for v, predictor in predictors.items():
             pred = predictor.predict([s.left])[0] >= 0.5
-            row.append(caption(overlay_errors(s.left, pred, s.label.road, s.label.valid), VARIANTS[v].label(model)))
+            row.append(caption(overlay_errors(s.left, pred, s.label.road, s.label.valid), vocabulary[v].label(model)))
         rows.append(row)
     write_image(out / "figures" / f"{model}.png", grid(rows, width=min(480, rows[0][0].shape[1])))

@@ -19,10 +19,28 @@ method's own defaults hold (:data:`DEFAULT_VARIANTS`, :data:`GAINS`, no primary 
       margin: 1.0                           # the equivalence margin, in points
     test_sets: {fixed: fixed, shifted: shifted}   # optional: NAME: DIR, as test_root takes NAME=DIR
     reference: "..."                        # optional: a sentence under the gains table (published gains)
+
+A study whose arms train on *other data* declares them, each with its training data (:class:`DataSource`,
+:attr:`Protocol.declared`); ``reproduce`` then takes no ``--dataset``/``--root``::
+
+    data:                                   # named training sources (paths: ${VAR} from the environment,
+      real: {dataset: kitti-raw, root: "${RAW}", labels: "${WORK}/autolabels", splits: "${WORK}/splits",
+             cache_dir: "${WORK}/sgbm-cache"}    # then relative ones from the protocol file's folder)
+      rendered: {dataset: synth, root: syn}
+    variants:                               # a mapping: NAME: {data, augment}; run in this order
+      S: {data: rendered}
+      R-auto: {data: real}
+      HA-R-auto: {data: real, augment: homography}
+    gains: [R-auto - S, HA-R-auto - R-auto]  # required
+
+A declared variant's name (letters, digits, ``+``, ``-``, ``_``; none of :data:`VARIANTS`, in any case) is
+literal (no ``X`` for the network); its run folders' tag is the name in lower case with ``+`` as ``_``
+(:func:`variant_tag`: ``S+R-auto`` → ``s_r-auto``), unique and none of the built-in variants' tags.
 """
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,8 +49,9 @@ from typing import Any
 from freespace.errors import InvalidOptionError, param
 from freespace.io.files import PathLike
 
-__all__ = ["Variant", "VARIANTS", "DEFAULT_VARIANTS", "GAINS", "METRICS", "GAIN_METRICS", "Primary", "Protocol",
-           "TestRoots", "parse_models", "parse_variants", "parse_cell", "parse_test_roots", "run_name", "run_of"]
+__all__ = ["Variant", "DataSource", "DATA_KEYS", "VARIANTS", "DEFAULT_VARIANTS", "GAINS", "METRICS", "GAIN_METRICS",
+           "Primary", "Protocol", "TestRoots", "parse_models", "parse_variants", "parse_cell", "parse_test_roots",
+           "run_name", "run_of", "variant_tag"]
 
 
 @dataclass(frozen=True)
@@ -42,17 +61,21 @@ class Variant:
     ``tag`` of its run folders (``runs/<model>-<tag>-s<seed>``), ``budget``, the factor on the epoch cap
     and on the early-stopping patience (X-long: 2, as many optimiser steps as HA-X), and where the training
     labels come from: ``human`` (the dataset's), ``auto`` (the ``autolabels`` tree) or ``mix`` (the
-    dataset's on :data:`MIX_HUMAN_SHARE` of the training drives, the tree's on the rest)."""
+    dataset's on :data:`MIX_HUMAN_SHARE` of the training drives, the tree's on the rest). ``data``: the
+    training source (a :attr:`Protocol.data` name) of a variant a protocol file declares; None for the built-in
+    ones, which train on ``reproduce``'s dataset."""
 
     name: str
     augment: tuple[str, ...]
     tag: str
     budget: int = 1
     labels: str = "human"
+    data: str | None = None
 
     def label(self, model: str) -> str:
-        """The table row of ``model``: ``X`` replaced by the network's name (``HA-X`` → ``HA-unet``)."""
-        return self.name.replace("X", model)
+        """The table row of ``model``: ``X`` replaced by the network's name (``HA-X`` → ``HA-unet``); a declared
+        variant's name as it is."""
+        return self.name if self.data is not None else self.name.replace("X", model)
 
 
 #: the arms, by table name
@@ -96,17 +119,42 @@ TestRoots = PathLike | list[PathLike] | tuple[PathLike, ...] | dict[str, PathLik
 MAX_SEEDS = 1000
 
 
-def run_name(model: str, variant: str, seed: int) -> str:
-    """The run folder of a cell: ``<model>-<tag>-s<seed>`` (``variant``: a table name)."""
-    return f"{model}-{VARIANTS[variant].tag}-s{seed}"
+#: a declared variant's name (a protocol file's ``variants`` mapping), and a training source's (``data``)
+_VARIANT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9+_-]{0,39}")
+_DATA_NAME = re.compile(r"[a-z][a-z0-9_-]{0,39}")
+#: ``${NAME}`` in a training source's paths: the environment variable's value
+_ENV = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
 
 
-def run_of(folder_name: str) -> tuple[str, Variant, int] | None:
-    """The cell a run folder's name (``<model>-<tag>-s<seed>``) stands for: network, variant and seed; None for
-    a name of another form or an unknown tag."""
-    named = _RUN_NAME.fullmatch(folder_name)
-    spec = _BY_TAG.get(named["tag"]) if named else None
-    return (named["model"], spec, int(named["seed"])) if named and spec else None
+def variant_tag(name: str) -> str:
+    """The run folders' tag of a declared variant: ``name`` in lower case, ``+`` as ``_`` (``S+R-auto`` →
+    ``s_r-auto``; letters, digits, ``-`` and ``_``: safe in a folder name)."""
+    return name.lower().replace("+", "_")
+
+
+def run_name(model: str, variant: str, seed: int, variants: dict[str, Variant] | None = None) -> str:
+    """The run folder of a cell: ``<model>-<tag>-s<seed>`` (``variant``: a table name of ``variants``, by
+    default :data:`VARIANTS`; :attr:`Protocol.vocabulary`)."""
+    return f"{model}-{(variants or VARIANTS)[variant].tag}-s{seed}"
+
+
+def run_of(folder_name: str, variants: dict[str, Variant] | None = None) -> tuple[str, Variant, int] | None:
+    """The cell a run folder's name (``<model>-<tag>-s<seed>``) stands for: network, variant (of ``variants``,
+    by default :data:`VARIANTS`) and seed; None for a name of another form or an unknown tag. A declared
+    variant's tag may hold ``-``: the longest tag that leaves a network's name wins (``unet-ha-r-auto-s0`` is
+    HA-R-auto's, not R-auto's of a network ``unet-ha``)."""
+    if variants is None or variants is VARIANTS:
+        named = _RUN_NAME.fullmatch(folder_name)
+        spec = _BY_TAG.get(named["tag"]) if named else None
+        return (named["model"], spec, int(named["seed"])) if named and spec else None
+    named = re.fullmatch(r"(?P<rest>.+)-s(?P<seed>\d+)", folder_name)
+    if named is None:
+        return None
+    for spec in sorted(variants.values(), key=lambda v: -len(v.tag)):
+        model = named["rest"][: -len(spec.tag) - 1]
+        if model and named["rest"] == f"{model}-{spec.tag}":
+            return model, spec, int(named["seed"])
+    return None
 
 
 def parse_models(text: str | list[str] | tuple[str, ...] | None) -> list[str]:
@@ -127,17 +175,23 @@ def parse_models(text: str | list[str] | tuple[str, ...] | None) -> list[str]:
     return names
 
 
-def parse_variants(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
-    """``"HA-X,X-dup"`` → the variants' table names, in the given order; ``X`` always comes first."""
+def parse_variants(text: str | list[str] | tuple[str, ...],
+                   variants: dict[str, Variant] | None = None) -> tuple[str, ...]:
+    """``"HA-X,X-dup"`` → the variants' table names, in the given order; ``X`` always comes first. Among a
+    protocol's declared ``variants`` (:attr:`Protocol.vocabulary`): the names given, in their order."""
+    vocabulary = variants or VARIANTS
     names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
-    bad = [n for n in names if n not in VARIANTS]
+    bad = [n for n in names if n not in vocabulary]
     if bad or not names:
-        raise InvalidOptionError(f"unknown variants {bad}; choose from {', '.join(VARIANTS)} (comma-separated)")
+        raise InvalidOptionError(f"unknown variants {bad}; choose from {', '.join(vocabulary)} (comma-separated)")
+    if vocabulary is not VARIANTS:
+        return tuple(dict.fromkeys(names))
     return tuple(["X"] + [n for n in dict.fromkeys(names) if n != "X"])  # the gains are measured against X
 
 
-def parse_cell(text: str, seeds: int) -> tuple[str, str, int]:
-    """``"unet,HA-X,2"`` (``only``) → ``("unet", "HA-X", 2)``: network, variant, seed.
+def parse_cell(text: str, seeds: int, variants: dict[str, Variant] | None = None) -> tuple[str, str, int]:
+    """``"unet,HA-X,2"`` (``only``) → ``("unet", "HA-X", 2)``: network, variant (of ``variants``, by default
+    :data:`VARIANTS`), seed.
 
     Raises:
         InvalidOptionError: not three comma-separated fields, an unknown network or variant, or a seed
@@ -151,8 +205,9 @@ def parse_cell(text: str, seeds: int) -> tuple[str, str, int]:
     model, name, seed_text = parts
     if model not in list_models():
         raise InvalidOptionError(f"{param('only')}: unknown network {model!r}; choose from {', '.join(list_models())}")
-    if name not in VARIANTS:
-        raise InvalidOptionError(f"{param('only')}: unknown variant {name!r}; choose from {', '.join(VARIANTS)}")
+    vocabulary = variants or VARIANTS
+    if name not in vocabulary:
+        raise InvalidOptionError(f"{param('only')}: unknown variant {name!r}; choose from {', '.join(vocabulary)}")
     if not seed_text.isdigit() or not 0 <= int(seed_text) < seeds:
         raise InvalidOptionError(f"{param('only')}: the seed must be an integer in 0…{seeds - 1} ({param('seeds')} "
                                  f"{seeds}), "
@@ -208,6 +263,87 @@ class Primary:
     margin: float
 
 
+#: a training source's keys (``data``), and the :class:`~freespace.engine.config.TrainConfig` field each sets
+DATA_KEYS = {"dataset": "dataset", "root": "root", "labels": "labels", "splits": "splits_dir", "cache_dir": "cache_dir"}
+
+
+@dataclass(frozen=True)
+class DataSource:
+    """A named training source of a protocol file (its ``data`` mapping): the dataset layout ``dataset`` at
+    ``root``; optionally ``labels``, a label tree that replaces the dataset's labels (``freespace autolabel``'s:
+    :attr:`~freespace.engine.config.TrainConfig.labels`), ``splits``, a folder of ``train.txt``/``val.txt``/
+    ``test.txt`` (:attr:`~freespace.engine.config.TrainConfig.splits_dir`), and ``cache_dir``, an SGBM cache,
+    which only the variants with an ``augment`` get (they read disparities; the others keep the default, so that
+    their settings do not depend on it).
+
+    Paths are kept as the file spells them and resolved when cells are made (:meth:`training`; ``--tables``
+    needs none of them): ``${NAME}`` is the environment variable's value, ``~`` the home folder, and a
+    relative path is taken from ``base``, the protocol file's folder. ``file``: the protocol file, for the
+    messages."""
+
+    name: str
+    dataset: str
+    root: str
+    labels: str | None = None
+    splits: str | None = None
+    cache_dir: str | None = None
+    base: Path = Path(".")
+    file: str = ""
+
+    def _where(self, key: str) -> str:
+        return f"{param('protocol')} {self.file}: data {self.name}: {key} {getattr(self, key)}"
+
+    def path(self, key: str) -> Path | None:
+        """The path of ``key`` (``root``, ``labels``, ``splits`` or ``cache_dir``) on this machine: ``${NAME}``
+        expanded, absolute (None when the source gives none).
+
+        Raises:
+            InvalidOptionError: an environment variable it names is not set (or empty).
+        """
+        text = getattr(self, key)
+        if text is None:
+            return None
+        unset = [m[1] for m in _ENV.finditer(text) if not os.environ.get(m[1])]
+        if unset:
+            raise InvalidOptionError(f"{self._where(key)}: the environment variable {unset[0]} is not set; "
+                                     f"export {unset[0]}=DIR before the command")
+        path = Path(os.path.expanduser(_ENV.sub(lambda m: os.environ[m[1]], text)))
+        return path if path.is_absolute() else self.base / path
+
+    def training(self, augment: tuple[str, ...] = ()) -> dict[str, str | None]:
+        """The :class:`~freespace.engine.config.TrainConfig` values of a variant with ``augment`` that trains
+        on this source: ``dataset``, ``root``, ``labels``, ``splits_dir`` and ``cache_dir`` (None: not given,
+        or no ``augment``), paths resolved (:meth:`path`) and checked before any work.
+
+        Raises:
+            InvalidOptionError: an unset environment variable. InputFileError: ``root``, ``labels`` or
+            ``splits`` is no folder (or ``splits`` lacks a list); ``cache_dir`` is a file. DatasetError:
+            ``splits`` lists a frame twice.
+        """
+        from freespace.data.splits import read_splits
+        from freespace.errors import FreespaceError, InputFileError
+
+        values: dict[str, str | None] = {"dataset": self.dataset}
+        for key, field_name in DATA_KEYS.items():
+            if key == "dataset":
+                continue
+            path = self.path(key) if key != "cache_dir" or augment else None
+            if path is not None and key != "cache_dir" and not path.is_dir():
+                raise InputFileError(f"{self._where(key)}: no folder {path}; give the "
+                                     + {"root": f"{self.dataset} dataset's folder",
+                                        "labels": "label tree that `freespace autolabel` wrote",
+                                        "splits": "folder of train.txt, val.txt and test.txt"}[key])
+            if path is not None and key == "cache_dir" and path.is_file():
+                raise InputFileError(f"{self._where(key)}: {path} is a file; give a folder for the SGBM cache")
+            if path is not None and key == "splits":
+                try:
+                    read_splits(path)
+                except FreespaceError as exc:
+                    raise type(exc)(f"{self._where(key)}: {exc}") from None
+            values[field_name] = None if path is None else str(path)
+        return values
+
+
 @dataclass(frozen=True)
 class Protocol:
     """What one study runs and reports (see the module docstring for its file): the ``variants`` run when none
@@ -215,13 +351,24 @@ class Protocol:
     optional ``primary`` endpoint, further ``test_sets`` (``{name: folder}``; a relative folder is taken from
     the working directory, as ``test_root`` takes it) and an optional ``reference`` sentence printed under the
     gains table of results.md (e.g. the published gains to compare with). ``Protocol()`` is the method's own
-    defaults: :data:`DEFAULT_VARIANTS`, :data:`GAINS`, nothing else."""
+    defaults: :data:`DEFAULT_VARIANTS`, :data:`GAINS`, nothing else.
+
+    A protocol with ``data`` (named :class:`DataSource` s) declares its own variants, ``declared`` (by name,
+    each with its ``data``; :attr:`vocabulary`), which then are all there is: ``variants`` names them in the
+    file's order, and the gains and primary endpoint name them."""
 
     variants: tuple[str, ...] = DEFAULT_VARIANTS
     gains: tuple[tuple[str, str], ...] = GAINS
     primary: Primary | None = None
     test_sets: dict[str, Path] = field(default_factory=dict)
     reference: str | None = None
+    data: dict[str, DataSource] = field(default_factory=dict)
+    declared: dict[str, Variant] = field(default_factory=dict)
+
+    @property
+    def vocabulary(self) -> dict[str, Variant]:
+        """The variants this protocol's names mean, in table order: its declared ones, else :data:`VARIANTS`."""
+        return self.declared or VARIANTS
 
     @classmethod
     def load(cls, path: PathLike) -> Protocol:
@@ -231,7 +378,9 @@ class Protocol:
             InputFileError: no such file.
             CorruptFileError: not readable, or not YAML.
             InvalidOptionError: an unknown key, variant, metric or test set name; a gain given twice; a primary
-            endpoint that is not among the gains (one line naming the file and the key).
+            endpoint that is not among the gains; with ``data``: a malformed source, a variant without data or
+            of an unknown one, a name of the built-in variants, two names of one tag (one line naming the file
+            and the key). The data's paths are checked when cells are made (:meth:`DataSource.training`).
         """
         from freespace.errors import InputFileError
         from freespace.io.codecs import load_yaml
@@ -241,33 +390,48 @@ class Protocol:
             raise InputFileError(f"{where} not found; give a study's protocol.yaml")
         data = load_yaml(path)
         if not isinstance(data, dict):
-            raise InvalidOptionError(f"{where} is not a mapping of variants, gains, primary, test_sets and reference")
-        unknown = sorted(set(map(str, data)) - {"variants", "gains", "primary", "test_sets", "reference"})
+            raise InvalidOptionError(f"{where} is not a mapping of variants, gains, primary, test_sets, reference "
+                                     f"and data")
+        unknown = sorted(set(map(str, data)) - {"variants", "gains", "primary", "test_sets", "reference", "data"})
         if unknown:
             raise InvalidOptionError(f"{where}: unknown key {unknown[0]!r}; the keys are variants, gains, primary, "
-                                     f"test_sets and reference")
+                                     f"test_sets, reference and data")
         try:
-            return _protocol(data)
+            return _protocol(data, Path(path).resolve().parent, str(path))
         except InvalidOptionError as exc:
             raise InvalidOptionError(f"{where}: {exc}") from None
 
 
-def _protocol(data: dict[str, Any]) -> Protocol:
-    """A :class:`Protocol` of the values of a protocol file (refused in one line each)."""
+def _protocol(data: dict[str, Any], base: Path = Path("."), file: str = "") -> Protocol:
+    """A :class:`Protocol` of the values of a protocol file in the folder ``base`` (refused in one line each)."""
     values: dict[str, Any] = {}
-    if "variants" in data:
+    vocabulary = VARIANTS
+    if "data" in data:
+        values["data"] = _data(data["data"], base, file)
+        if not isinstance(data.get("variants"), dict):
+            raise InvalidOptionError("data is the training data of the variants it declares: give variants as a "
+                                     "mapping NAME: {data: SOURCE, augment: ...} (e.g. {S: {data: rendered}})")
+        vocabulary = values["declared"] = _declared(data["variants"], values["data"])
+        values["variants"] = tuple(vocabulary)
+        if "gains" not in data:
+            raise InvalidOptionError("a protocol that declares its variants names its gains (e.g. gains: "
+                                     f"[{' - '.join(list(vocabulary)[1::-1]) if len(vocabulary) > 1 else 'A - B'}])")
+    elif isinstance(data.get("variants"), dict):
+        raise InvalidOptionError("variants given as a mapping declare their own training data: add data: {NAME: "
+                                 "{dataset, root, labels, splits, cache_dir}} and name one in each variant")
+    elif "variants" in data:
         if not isinstance(data["variants"], list) or not all(isinstance(v, str) for v in data["variants"]):
             raise InvalidOptionError("variants must be a list of variant names (e.g. [X, HA-X, X-dup])")
         values["variants"] = parse_variants(data["variants"])
     if "gains" in data:
         if not isinstance(data["gains"], list) or not data["gains"]:
             raise InvalidOptionError("gains must be a list of gains, each 'VARIANT - VERSUS' (e.g. HA-X - X)")
-        gains = tuple(_gain(g) for g in data["gains"])
+        gains = tuple(_gain(g, vocabulary) for g in data["gains"])
         if len(set(gains)) != len(gains):
             raise InvalidOptionError("gains names a gain twice; keep one")
         values["gains"] = gains
     if data.get("primary") is not None:
-        values["primary"] = _primary(data["primary"], values.get("gains", GAINS))
+        values["primary"] = _primary(data["primary"], values.get("gains", GAINS), vocabulary)
     if data.get("test_sets") is not None:
         sets = data["test_sets"]
         if not isinstance(sets, dict) or not all(isinstance(v, str) for v in sets.values()):
@@ -280,22 +444,92 @@ def _protocol(data: dict[str, Any]) -> Protocol:
     return Protocol(**values)
 
 
-def _gain(text: Any) -> tuple[str, str]:
-    """``"HA-X - X"`` → ``("HA-X", "X")``."""
+def _gain(text: Any, variants: dict[str, Variant] = VARIANTS) -> tuple[str, str]:
+    """``"HA-X - X"`` → ``("HA-X", "X")`` (two names of ``variants``)."""
     a, sep, b = str(text).partition(" - ")
-    if not isinstance(text, str) or not sep or a.strip() not in VARIANTS or b.strip() not in VARIANTS \
+    if not isinstance(text, str) or not sep or a.strip() not in variants or b.strip() not in variants \
             or a.strip() == b.strip():
         raise InvalidOptionError(f"gain {text!r} is not 'VARIANT - VERSUS' of two variants among "
-                                 f"{', '.join(VARIANTS)}")
+                                 f"{', '.join(variants)}")
     return a.strip(), b.strip()
 
 
-def _primary(data: Any, gains: tuple[tuple[str, str], ...]) -> Primary:
-    """The ``primary`` mapping → a :class:`Primary` among ``gains``."""
+def _data(data: Any, base: Path, file: str) -> dict[str, DataSource]:
+    """The ``data`` mapping → its :class:`DataSource` s by name (paths kept as written)."""
+    from freespace.data.registry import list_datasets
+
+    if not isinstance(data, dict) or not data:
+        raise InvalidOptionError("data must map names to training sources (e.g. {rendered: {dataset: synth, root: "
+                                 "syn}})")
+    sources = {}
+    for name, spec in data.items():
+        if not isinstance(name, str) or not _DATA_NAME.fullmatch(name):
+            raise InvalidOptionError(f"data name {name!r}: lower-case letters, digits, - and _ (at most 40)")
+        if not isinstance(spec, dict) or not {"dataset", "root"} <= set(spec) or set(spec) - set(DATA_KEYS):
+            raise InvalidOptionError(f"data {name} must give dataset and root, and optionally labels, splits and "
+                                     f"cache_dir (nothing else)")
+        for key, value in spec.items():
+            if not isinstance(value, str) or not value.strip():
+                raise InvalidOptionError(f"data {name}: {key} must be text (a name or a path), got {value!r}")
+            if "$" in _ENV.sub("", value):
+                raise InvalidOptionError(f"data {name}: {key} {value}: write an environment variable as ${{NAME}}, "
+                                         f"and no other $")
+        if spec["dataset"] not in list_datasets():
+            raise InvalidOptionError(f"data {name}: unknown dataset {spec['dataset']!r}; choose one of "
+                                     f"{', '.join(list_datasets())}")
+        sources[name] = DataSource(name=name, base=base, file=file, **spec)
+    return sources
+
+
+def _declared(data: Any, sources: dict[str, DataSource]) -> dict[str, Variant]:
+    """A protocol's ``variants`` mapping (``NAME: {data, augment}``) → its :class:`Variant` s, in the file's
+    order, each training on one of ``sources``."""
+    from freespace.engine.config import AUGMENTS, parse_augment
+
+    if not data:
+        raise InvalidOptionError("variants must declare at least one variant")
+    builtin = {v.upper(): v for v in VARIANTS}
+    tags = {v.tag: v.name for v in VARIANTS.values()}
+    declared: dict[str, Variant] = {}
+    for name, spec in data.items():
+        if not isinstance(name, str) or not _VARIANT_NAME.fullmatch(name):
+            raise InvalidOptionError(f"variant name {name!r}: letters, digits, +, - and _ (at most 40, not "
+                                     f"starting with +, - or _)")
+        if name.upper() in builtin:
+            raise InvalidOptionError(f"variant {name} is (or spells) the built-in variant {builtin[name.upper()]}, "
+                                     f"which trains on reproduce's own dataset; give the declared one another name")
+        if not isinstance(spec, dict) or set(spec) - {"data", "augment"}:
+            raise InvalidOptionError(f"variant {name} must be a mapping of data and augment (e.g. {{data: "
+                                     f"{next(iter(sources))}}})")
+        if spec.get("data") not in sources:
+            what = f"unknown data {spec['data']!r}" if "data" in spec else "names no data"
+            raise InvalidOptionError(f"variant {name}: {what}; give data: one of {', '.join(sources)}")
+        try:
+            augment = parse_augment(spec.get("augment", "none")) if isinstance(spec.get("augment", "none"), str) \
+                else None
+        except InvalidOptionError:
+            augment = None
+        if augment is None:
+            raise InvalidOptionError(f"variant {name}: augment must be one of {', '.join(AUGMENTS)}, got "
+                                     f"{spec.get('augment')!r}")
+        tag = variant_tag(name)
+        if tag in tags:
+            raise InvalidOptionError(f"variants {tags[tag]} and {name} would share the run folders' tag {tag!r} "
+                                     f"(the name in lower case, + as _); rename one")
+        tags[tag] = name
+        declared[name] = Variant(name, augment, tag, data=spec["data"])
+    unused = [s for s in sources if all(v.data != s for v in declared.values())]
+    if unused:
+        raise InvalidOptionError(f"data {unused[0]} is the data of no variant; name it in one, or remove it")
+    return declared
+
+
+def _primary(data: Any, gains: tuple[tuple[str, str], ...], variants: dict[str, Variant] = VARIANTS) -> Primary:
+    """The ``primary`` mapping → a :class:`Primary` among ``gains`` (of ``variants``)."""
     keys = {"versus", "metric", "test_set", "margin"}
     if not isinstance(data, dict) or set(data) != keys:
         raise InvalidOptionError(f"primary must give {', '.join(sorted(keys))} (and nothing else)")
-    versus = _gain(data["versus"])
+    versus = _gain(data["versus"], variants)
     if versus not in gains:
         raise InvalidOptionError(f"primary's gain {data['versus']!r} is not among the gains reported")
     if data["metric"] not in GAIN_METRICS:

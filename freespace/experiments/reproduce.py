@@ -7,6 +7,8 @@ views' content) — or any variants of :data:`~freespace.experiments.protocol.VA
 with the same seeds and budget, and tested on the test split (``test_set = test``) and, with
 ``test_root``, on every labelled frame of further datasets (``test_set = shifted`` for a bare folder, e.g.
 other rigs, or the name given as ``NAME=DIR``, e.g. a large fixed set rendered with the training rigs).
+A study's protocol file may instead declare its own variants, each training on its own data
+(:attr:`~freespace.experiments.protocol.Protocol.declared`; then no ``dataset`` and ``root`` are given).
 For one network and seed all variants share the split and the initial weights; HA-X and X-dup also share
 the data order and the conventional augmentation's draws (same number of samples).
 
@@ -41,12 +43,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from freespace.engine.config import FIRST_FRAME_SIZE, augment_text
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, augment_text
 from freespace.errors import InvalidOptionError, param
 from freespace.experiments.cells import (cell_config, check_autolabels_used, check_cell, check_inputs,
                                          check_test_roots, run_cell)
-from freespace.experiments.protocol import (MAX_SEEDS, VARIANTS, Protocol, TestRoots, parse_cell, parse_models,
-                                            parse_test_roots, parse_variants)
+from freespace.experiments.protocol import (MAX_SEEDS, Protocol, TestRoots, parse_cell, parse_models, parse_test_roots,
+                                            parse_variants)
 from freespace.experiments.tables import OUT_ENTRIES, write_tables
 from freespace.io.files import PathLike, check_writable
 from freespace.io.outdir import claim_folder
@@ -54,7 +56,8 @@ from freespace.io.outdir import claim_folder
 __all__ = ["reproduce"]
 
 
-def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list[str] | None = None, seeds: int = 3,
+def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, models: str | list[str] | None = None,
+              seeds: int = 3,
               epochs: int = 50, image_size: tuple[int, int] | str = FIRST_FRAME_SIZE, patience: int = 10,
               val_window: int = 1,
               min_delta: float = 0.0,
@@ -67,7 +70,10 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
     "runs": index}``.
 
     ``protocol``: the study's :class:`~freespace.experiments.protocol.Protocol` (its variants, gains, primary
-    endpoint, test sets and reference; None: the method's defaults, ``Protocol()``).
+    endpoint, test sets and reference; None: the method's defaults, ``Protocol()``). A protocol with ``data``
+    gives each of its declared variants its training data: ``dataset`` and ``root`` are then None (and
+    ``autolabels`` too), ``variants`` and ``only`` name its variants, and a further test set is read in the
+    layout of each cell's data.
     ``models``: networks (:func:`~freespace.experiments.protocol.parse_models`; None = all). ``variants``: table
     names from :data:`~freespace.experiments.protocol.VARIANTS` (None = the protocol's; ``X`` is always run:
     gains are against it); a variant's ``budget`` multiplies ``epochs`` and ``patience`` (X-long).
@@ -95,37 +101,55 @@ def reproduce(dataset: str, root: PathLike, out: PathLike, *, models: str | list
     options.update(virtual)
     out = check_writable(out, folder=True)
     protocol = Protocol() if protocol is None else protocol
+    vocabulary = protocol.vocabulary
+    if protocol.data and (dataset is not None or root is not None or autolabels is not None):
+        given = [param(k) for k, v in (("dataset", dataset), ("root", root), ("autolabels", autolabels))
+                 if v is not None]
+        raise InvalidOptionError(f"{param('protocol')} gives each variant its training data (its data); leave "
+                                 f"{' and '.join(given)} out")
+    if not protocol.data and (dataset is None or root is None):
+        raise InvalidOptionError(f"reproduce needs {param('dataset')} and {param('root')} (or a {param('protocol')} "
+                                 f"with data)")
     roots = _test_roots(protocol, test_root)
     chosen_models = parse_models(models)
-    chosen = parse_variants(variants if variants is not None else protocol.variants)
+    chosen = parse_variants(variants if variants is not None else protocol.variants, vocabulary)
     if only is not None:
-        model, variant, seed = parse_cell(only, seeds)
+        model, variant, seed = parse_cell(only, seeds, vocabulary)
         if (models is not None and model not in chosen_models) or (variants is not None and variant not in chosen):
             what = (f"network {model!r} is not among {param('models')}" if model not in chosen_models
                     else f"variant {variant!r} is not among {param('variants')}")
             raise InvalidOptionError(f"{param('only')} {only}: its {what}; include it there, or leave the option out")
-    check_autolabels_used(autolabels, [variant] if only is not None else chosen)
+    if not protocol.data:
+        check_autolabels_used(autolabels, [variant] if only is not None else chosen)
     if only is not None:
-        config = cell_config(dataset, root, out, model, variant, seed, options, autolabels)
-        check_inputs(out, [config])
-        check_test_roots(dataset, roots, root)
+        config = cell_config(dataset, root, out, model, variant, seed, options, autolabels, protocol)
+        check_inputs(out, [config], vocabulary)
+        _check_test_roots([config], roots)
         with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
-            status = run_cell(config, test_root=roots, progress=progress)
+            status = run_cell(config, test_root=roots, progress=progress, variants=vocabulary)
         entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": variant,
-                 "augment": augment_text(VARIANTS[variant].augment), "seed": seed, "status": status}
+                 "augment": augment_text(vocabulary[variant].augment), "seed": seed, "status": status}
         return {"table": [], "gains": [], "runs": [entry]}
-    configs = [cell_config(dataset, root, out, model, variant, seed, options, autolabels)  # all checked before any work
-               for model in chosen_models for variant in chosen for seed in range(seeds)]
+    configs = [cell_config(dataset, root, out, model, variant, seed, options, autolabels, protocol)  # all checked
+               for model in chosen_models for variant in chosen for seed in range(seeds)]   # before any work
     for config in configs:
         check_cell(config)
-    check_inputs(out, configs)
-    check_test_roots(dataset, roots, root)
+    check_inputs(out, configs, vocabulary)
+    _check_test_roots(configs, roots)
     statuses: dict[str, str] = {}
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
         for config in configs:
-            statuses[Path(config.out).name] = run_cell(config, test_root=roots, progress=progress)
+            statuses[Path(config.out).name] = run_cell(config, test_root=roots, progress=progress, variants=vocabulary)
             write_tables(out, figures=0, statuses=statuses, protocol=protocol)  # the tables so far, after every run
         return write_tables(out, figures=figures, statuses=statuses, protocol=protocol)
+
+
+def _check_test_roots(configs: list[TrainConfig], roots: dict[str, Path]) -> None:
+    """:func:`~freespace.experiments.cells.check_test_roots` for each training data of ``configs`` (one
+    dataset and root; several when a protocol's variants train on their own data)."""
+    if roots:
+        for dataset, root in dict.fromkeys((c.dataset, c.root) for c in configs):
+            check_test_roots(dataset, roots, root)
 
 
 def _test_roots(protocol: Protocol, test_root: TestRoots) -> dict[str, Path]:

@@ -22,7 +22,7 @@ from freespace.errors import FreespaceError, InvalidOptionError
 from freespace.experiments.cells import read_metrics
 from freespace.experiments.figures import frames_figure, gain_figure
 from freespace.experiments.protocol import (ALL_NETWORKS, DEFAULT_TEST_SET, GAIN_METRICS, METRIC_NAMES, METRICS,
-                                            RESERVED_TEST_SETS, VARIANTS, Primary, Protocol, run_of)
+                                            RESERVED_TEST_SETS, VARIANTS, Primary, Protocol, Variant, run_of)
 from freespace.experiments.stats import paired_gain
 from freespace.io.files import PathLike, atomic_write_text, write_csv, write_json
 from freespace.io.outdir import claim_folder
@@ -35,13 +35,17 @@ __all__ = ["write_tables", "collect", "OUT_ENTRIES"]
 OUT_ENTRIES = ("runs/", "index.json", "results.csv", "gains.csv", "results.md", "figures/")
 
 
-def collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[dict[str, Any]], list[str]]:
+def collect(out: Path, statuses: dict[str, str] | None = None,
+            variants: dict[str, Variant] | None = None) -> tuple[list[dict[str, Any]], list[str]]:
     """Every run folder under ``OUT/runs`` (its config.yaml names the network, variant and seed), in
-    network, :data:`VARIANTS` and seed order, with its test metrics (and those of further test sets,
+    network, variant (``variants``: a protocol's :attr:`~freespace.experiments.protocol.Protocol.vocabulary`,
+    by default :data:`VARIANTS`) and seed order, with its test metrics (and those of further test sets,
     ``test_sets``) when finished; and the settings that differ between the runs (a table should compare
-    like with like)."""
+    like with like; the training data of a declared variant, its dataset, root, labels and split lists, is
+    compared among the variants of the same data only)."""
     from freespace.models import list_models
 
+    vocabulary = variants or VARIANTS
     entries, settings = [], {}
     for run_dir in sorted((out / "runs").glob("*/config.yaml")):
         run_dir = run_dir.parent
@@ -50,11 +54,12 @@ def collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[dic
         except FreespaceError as exc:
             log.warning("%s skipped: %s", run_dir, exc)
             continue
-        cell = run_of(run_dir.name)
+        cell = run_of(run_dir.name, vocabulary)
         spec = cell[1] if cell else None
-        if spec is None or "model" not in config or spec.augment != config.get("augment", ()):
+        if spec is None or "model" not in config or spec.augment != config.get("augment", ()) or \
+                (cell is not None and cell[0] != config["model"]):  # unet-r-auto-s0: no X-auto of a net unet-r
             log.warning("%s skipped: not a run folder of the protocol (<model>-<tag>-s<seed> with the variant's "
-                        "augment)", run_dir)
+                        "augment; a protocol's own variants need its file, --protocol)", run_dir)
             continue
         entry: dict[str, Any] = {"run": str(run_dir.relative_to(out)), "model": config["model"],
                                  "variant": spec.name, "augment": augment_text(spec.augment),
@@ -81,18 +86,20 @@ def collect(out: Path, statuses: dict[str, str] | None = None) -> tuple[list[dic
                     continue
                 entry.setdefault("test_sets", {})[name] = {k: extra[k] for k in (*METRICS, "max_f", "ap")}
                 settings.setdefault(f"the root of test set {name}", set()).add(json.dumps(extra.get("root")))
+        of_data = f" of data {spec.data}" if spec.data is not None else ""  # each training data its own
         for key, value in _input_hashes(run_dir).items():  # runs of older versions recorded none
-            settings.setdefault(f"the content of {key}", set()).add(json.dumps(value))
-        for key in ("dataset", "root", "epochs", "patience", "val_window", "min_delta", "lr", "batch_size",
-                    "max_frames", *_PER_NETWORK):
+            settings.setdefault(f"the content of {key}{of_data}", set()).add(json.dumps(value))
+        for key in ("dataset", "root", *(("labels", "splits_dir") if of_data else ()), "epochs", "patience",
+                    "val_window", "min_delta", "lr", "batch_size", "max_frames", *_PER_NETWORK):
             value = config.get(key)
             if key in ("epochs", "patience") and isinstance(value, int):
                 value //= spec.budget  # X-long's budget is part of the variant
-            name = f"{key} of {config['model']}" if key in _PER_NETWORK else key
+            name = f"{key} of {config['model']}" if key in _PER_NETWORK else \
+                f"{key}{of_data}" if key in ("dataset", "root", "labels", "splits_dir") else key
             settings.setdefault(name, set()).add(json.dumps(value))
         entries.append(entry)
     order = {m: i for i, m in enumerate(list_models())}
-    names = list(VARIANTS)
+    names = list(vocabulary)
     entries.sort(key=lambda e: (order.get(e["model"], len(order)), e["model"], names.index(e["variant"]), e["seed"]))
     differ = [f"{k}: {', '.join(sorted(v))}" for k, v in settings.items() if len(v) > 1]
     return entries, differ
@@ -139,13 +146,13 @@ def _models(entries: list[dict[str, Any]]) -> list[str]:
     return list(dict.fromkeys(e["model"] for e in entries))
 
 
-def _table(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """``results.csv`` rows: per network, variant (:data:`VARIANTS` order) and test set, ``n`` finished
-    seeds and each metric's mean and std (ddof 1; 0 with one seed) in %."""
+def _table(entries: list[dict[str, Any]], variants: dict[str, Variant] | None = None) -> list[dict[str, Any]]:
+    """``results.csv`` rows: per network, variant (``variants`` order, by default :data:`VARIANTS`) and test
+    set, ``n`` finished seeds and each metric's mean and std (ddof 1; 0 with one seed) in %."""
     rows = []
     for model in _models(entries):
         for test_set in _test_sets(entries):
-            for name in VARIANTS:
+            for name in variants or VARIANTS:
                 runs = list(_values(entries, model, name, test_set).values())
                 if not runs:
                     continue
@@ -158,13 +165,25 @@ def _table(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
-def _gains(entries: list[dict[str, Any]], gains: tuple[tuple[str, str], ...]) -> list[dict[str, Any]]:
+def _apart(a: str, b: str, test_set: str, variants: dict[str, Variant] | None) -> bool:
+    """Whether the variants ``a`` and ``b`` are tested on other frames in ``test_set``: on ``test``, each
+    variant's test split is its own training data's, so two declared variants of other data are not paired
+    there (a further test set is the same frames for every variant)."""
+    vocabulary = variants or VARIANTS
+    return test_set == "test" and a in vocabulary and b in vocabulary and vocabulary[a].data != vocabulary[b].data
+
+
+def _gains(entries: list[dict[str, Any]], gains: tuple[tuple[str, str], ...],
+           variants: dict[str, Variant] | None = None) -> list[dict[str, Any]]:
     """``gains.csv`` rows: the paired ``gains`` (``(variant, versus)`` pairs, :attr:`Protocol.gains`) in points,
-    over the seeds both variants finished."""
+    over the seeds both variants finished; not on ``test`` between variants of other training data
+    (:func:`_apart`)."""
     rows = []
     for model in _models(entries):
         for test_set in _test_sets(entries):
             for a, b in gains:
+                if _apart(a, b, test_set, variants):
+                    continue
                 va, vb = _values(entries, model, a, test_set), _values(entries, model, b, test_set)
                 seeds = sorted(set(va) & set(vb))
                 if not seeds:
@@ -172,7 +191,7 @@ def _gains(entries: list[dict[str, Any]], gains: tuple[tuple[str, str], ...]) ->
                 for k in GAIN_METRICS:
                     g = paired_gain([100 * va[s][k] for s in seeds], [100 * vb[s][k] for s in seeds])
                     rows.append(_gain_row(model, a, b, k, test_set, g))
-    return rows + _averaged_gains(entries, gains)
+    return rows + _averaged_gains(entries, gains, variants)
 
 
 def _gain_row(network: str, a: str, b: str, metric: str, test_set: str, g: Any) -> dict[str, Any]:
@@ -180,7 +199,8 @@ def _gain_row(network: str, a: str, b: str, metric: str, test_set: str, g: Any) 
             "ci_low": g.ci_low, "ci_high": g.ci_high, "n": g.n, "excludes_zero": g.excludes_zero}
 
 
-def _averaged_gains(entries: list[dict[str, Any]], gains: tuple[tuple[str, str], ...]) -> list[dict[str, Any]]:
+def _averaged_gains(entries: list[dict[str, Any]], gains: tuple[tuple[str, str], ...],
+                    variants: dict[str, Variant] | None = None) -> list[dict[str, Any]]:
     """Gains averaged over the networks (``network`` = :data:`ALL_NETWORKS`), with two or more networks:
     per seed, the mean over the networks of each variant's metric (the seeds every network finished in
     both variants), then the paired t-interval over those seeds. The primary endpoint is one of them."""
@@ -190,6 +210,8 @@ def _averaged_gains(entries: list[dict[str, Any]], gains: tuple[tuple[str, str],
     rows = []
     for test_set in _test_sets(entries):
         for a, b in gains:
+            if _apart(a, b, test_set, variants):
+                continue
             va = {m: _values(entries, m, a, test_set) for m in models}
             vb = {m: _values(entries, m, b, test_set) for m in models}
             seeds = sorted(set.intersection(*(set(va[m]) & set(vb[m]) for m in models)))
@@ -224,18 +246,20 @@ def write_tables(out: PathLike, *, figures: int = 3, statuses: dict[str, str] | 
         InvalidOptionError: ``OUT/runs`` holds no run folder.
     """
     out = Path(out)
-    entries, differ = collect(out, statuses)
+    protocol = Protocol() if protocol is None else protocol
+    entries, differ = collect(out, statuses, protocol.vocabulary)
     if not entries:
         raise InvalidOptionError(f"{out / 'runs'} holds no run folders of `freespace reproduce`; nothing to collect")
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
-        return _write_tables(out, entries, differ, figures, Protocol() if protocol is None else protocol)
+        return _write_tables(out, entries, differ, figures, protocol)
 
 
 def _write_tables(out: Path, entries: list[dict[str, Any]], differ: list[str], figures: int,
                   protocol: Protocol) -> dict[str, Any]:
     if differ:
         log.warning("the runs differ in %s", "; ".join(differ))
-    table, gains = _table(entries), _gains(entries, protocol.gains)
+    vocabulary = protocol.vocabulary
+    table, gains = _table(entries, vocabulary), _gains(entries, protocol.gains, vocabulary)
     write_json(out / "index.json", entries)
     fields = ["network", "variant", "test_set", "n"] + [f"{k}_{s}" for k in METRICS for s in ("mean", "std")]
     write_csv(out / "results.csv", fields, [{k: _cell(v) for k, v in r.items()} for r in table])
@@ -246,7 +270,7 @@ def _write_tables(out: Path, entries: list[dict[str, Any]], differ: list[str], f
         for model in _models(entries):
             gain_figure(out, model, [g for g in gains if g["network"] == model])
             try:
-                frames_figure(out, model, entries, figures)
+                frames_figure(out, model, entries, figures, vocabulary)
             except FreespaceError as exc:  # a moved dataset, a damaged checkpoint: the tables stand without it
                 log.warning("figures/%s.png skipped: %s", model, exc)
     return {"table": table, "gains": gains, "runs": entries}
@@ -258,7 +282,9 @@ def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[s
     skipped = sum(e["status"].startswith("skipped") for e in entries)
     md = [f"Results of {finished} finished run{'s' if finished != 1 else ''} ({len(entries) - finished - skipped} "
           "unfinished" + (f", {skipped} skipped for unusable metrics.json" if skipped else "") + "): "
-          "test set `test` = the dataset's test split, any other = every labelled frame of the further test set of "
+          + ("test set `test` = the test split of each variant's own training data (gains between variants of "
+             "other data are not paired there), " if protocol.data else "test set `test` = the dataset's test split, ")
+          + "any other = every labelled frame of the further test set of "
           "that name (`shifted` when it was given none); "
           "%, mean ± std over the `n` seeds finished (no std with one seed).", ""]
     if differ:
@@ -278,18 +304,18 @@ def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[s
             (f"[{g['ci_low']:+.2f}, {g['ci_high']:+.2f}]", f"{(g['ci_high'] - g['ci_low']) / 2:.2f}")
         md.append(f"| {g['network']} | {g['versus'].replace(' - ', ' − ')} | {METRIC_NAMES[g['metric']]} | {g['test_set']} "
                   f"| {g['n']} | {g['mean']:+.2f} | {ci} | {half} | {'yes' if g['excludes_zero'] else 'no'} |")
-    md += _convergence_lines(entries) + _primary_lines(gains, protocol.primary)
+    md += _convergence_lines(entries, protocol.vocabulary) + _primary_lines(gains, protocol.primary)
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
 
 
-def _convergence_lines(entries: list[dict[str, Any]]) -> list[str]:
+def _convergence_lines(entries: list[dict[str, Any]], variants: dict[str, Variant] | None = None) -> list[str]:
     """results.md: per network and variant, the best and last epochs (1-based; mean, min–max) and how many
     runs early stopping ended against how many ran to the epoch cap."""
     lines = ["", "Convergence: best epoch (the checkpoint tested) and epochs run, mean (min–max) over the finished "
              "runs; stopped = early stopping fired (patience), cap = ran the most epochs allowed.", "",
              "| Network | Variant | n | best epoch | epochs run | stopped | cap |", "|---|---|---:|---:|---:|---:|---:|"]
     for model in _models(entries):
-        for name in VARIANTS:
+        for name in variants or VARIANTS:
             done = [e for e in entries if e["model"] == model and e["variant"] == name and "metrics" in e]
             if not done:
                 continue
