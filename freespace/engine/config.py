@@ -365,13 +365,15 @@ class TrainConfig:
         checkpoint rebuilds the network from these and then loads all its tensors."""
         return {"preset": self.preset, **({"encoder_name": self.encoder_name} if self.encoder_name else {})}
 
-    def with_size(self, size: tuple[int, int] | Callable[[], tuple[int, int]]) -> TrainConfig:
+    def with_size(self, size: tuple[int, int] | str | Callable[[], tuple[int, int]]) -> TrainConfig:
         """This configuration with its image size resolved: itself when ``image_size`` names one; for
         :data:`FIRST_FRAME_SIZE` one with ``image_size`` ``size`` (H, W): the first labelled frame's (a function
-        that reads it, called only then), or the size a run's config.yaml recorded it resolved to."""
+        that reads it, called only then), or the size a run's config.yaml recorded it resolved to (itself when
+        that is :data:`FIRST_FRAME_SIZE` too: a configuration never started)."""
         if self.image_size != FIRST_FRAME_SIZE:
             return self
-        return replace(self, image_size=tuple(size() if callable(size) else size))
+        size = size() if callable(size) else size
+        return self if size == FIRST_FRAME_SIZE else replace(self, image_size=tuple(size))
 
     def to_dict(self) -> dict[str, Any]:
         """The values as config.yaml spells them (``augment`` ``"homography,virtual"``, ``virtual_shift``
