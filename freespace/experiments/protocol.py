@@ -21,7 +21,7 @@ method's own defaults hold (:data:`DEFAULT_VARIANTS`, :data:`GAINS`, no primary 
     reference: "..."                        # optional: a sentence under the gains table (published gains)
 
 A study whose arms train on *other data* declares them, each with its training data (:class:`DataSource`,
-:attr:`Protocol.declared`); ``reproduce`` then takes no ``--dataset``/``--root``::
+:attr:`Protocol.declared`); ``reproduce`` then takes no ``dataset``/``root`` parameters::
 
     data:                                   # named training sources (paths: ${VAR} from the environment,
       real: {dataset: kitti-raw, root: "${RAW}", labels: "${WORK}/autolabels", splits: "${WORK}/splits",
@@ -276,7 +276,7 @@ class DataSource:
     which only the variants with an ``augment`` get (they read disparities; the others keep the default, so that
     their settings do not depend on it).
 
-    Paths are kept as the file spells them and resolved when cells are made (:meth:`training`; ``--tables``
+    Paths are kept as the file spells them and resolved when cells are made (:meth:`training`; rebuilding the tables
     needs none of them): ``${NAME}`` is the environment variable's value, ``~`` the home folder, and a
     relative path is taken from ``base``, the protocol file's folder. ``file``: the protocol file, for the
     messages."""

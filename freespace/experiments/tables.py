@@ -59,7 +59,7 @@ def collect(out: Path, statuses: dict[str, str] | None = None,
         if spec is None or "model" not in config or spec.augment != config.get("augment", ()) or \
                 (cell is not None and cell[0] != config["model"]):  # unet-r-auto-s0: no X-auto of a net unet-r
             log.warning("%s skipped: not a run folder of the protocol (<model>-<tag>-s<seed> with the variant's "
-                        "augment; a protocol's own variants need its file, --protocol)", run_dir)
+                        "augment; a protocol's own variants need its protocol file)", run_dir)
             continue
         entry: dict[str, Any] = {"run": str(run_dir.relative_to(out)), "model": config["model"],
                                  "variant": spec.name, "augment": augment_text(spec.augment),
