@@ -849,7 +849,7 @@ REPRODUCE_OPTIONS = ("dataset", "root", "epochs", "patience", "val_window", "min
 
 
 def _reproduce_parser(p: argparse.ArgumentParser) -> None:
-    from freespace.experiments.protocol import MAX_SEEDS
+    from freespace.experiments.variants import MAX_SEEDS
 
     _add_config_options(p, REPRODUCE_OPTIONS, values={"dataset": None, "root": None})  # not with --tables
     p.add_argument("--models", help="all (the paper's six networks) or a comma-separated list (default all)")

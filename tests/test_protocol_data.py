@@ -17,7 +17,7 @@ from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.engine.config import TrainConfig
 from freespace.errors import InvalidOptionError
 from freespace.experiments import VARIANTS, Protocol, parse_variants
-from freespace.experiments.protocol import run_name, run_of
+from freespace.experiments.variants import run_name, run_of
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -451,8 +451,8 @@ def test_resized_intrinsics_keep_the_geometry() -> None:
 # --- reproduce: the variants table ------------------------------------------------------------------------
 
 def test_reproduce_variants_table() -> None:
-    from freespace.experiments.protocol import parse_variants
-    from freespace.experiments.protocol import run_name as _name
+    from freespace.experiments.variants import parse_variants
+    from freespace.experiments.variants import run_name as _name
     from freespace.experiments.tables import _table
 
     assert parse_variants("X,HA-X") == ("X", "HA-X")

@@ -1,5 +1,5 @@
 """Running the protocol's cells: one network, variant and seed each, in its run folder
-``OUT/runs/<model>-<tag>-s<seed>/`` (:func:`~freespace.experiments.protocol.run_name`).
+``OUT/runs/<model>-<tag>-s<seed>/`` (:func:`~freespace.experiments.variants.run_name`).
 
 A cell's training configuration is built from the variant (:func:`cell_config`) and checked, with every other
 cell of a campaign, before any work: the same settings as the cell already started in its folder
@@ -21,8 +21,9 @@ from typing import Any
 
 from freespace.engine.config import TrainConfig
 from freespace.errors import CorruptFileError, DatasetError, InvalidOptionError, param
-from freespace.experiments.protocol import (DEFAULT_TEST_SET, METRICS, MIX_HUMAN_SHARE, VARIANTS, Protocol, TestRoots,
-                                            Variant, parse_test_roots, run_name, run_of)
+from freespace.experiments.protocol import Protocol
+from freespace.experiments.variants import (DEFAULT_TEST_SET, METRICS, MIX_HUMAN_SHARE, VARIANTS, TestRoots, Variant,
+                                            parse_test_roots, run_name, run_of)
 from freespace.io.files import PathLike, write_json
 from freespace.io.outdir import claim_folder
 

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from freespace.engine.config import read_config_yaml
-from freespace.experiments.protocol import GAIN_METRICS, METRIC_NAMES, VARIANTS, Variant
+from freespace.experiments.variants import GAIN_METRICS, METRIC_NAMES, VARIANTS, Variant
 from freespace.io.codecs import write_image
 from freespace.io.files import atomic_write_bytes
 

@@ -1,14 +1,16 @@
-"""The protocol's vocabulary: its variants (arms), the paired gains it reports, the names of its run folders and
-test sets, and a :class:`Protocol` — a study's choice among them, read from a YAML file.
+"""A study's :class:`Protocol`, read from a YAML file: its choice among the variants and gains of
+:mod:`~freespace.experiments.variants` (the vocabulary: variants, gains, run-folder names, the parsing of
+names), or variants of its own with their own training data (:class:`DataSource`).
 
-Names: a *variant* is an arm of the protocol, named as in the tables (``"HA-X"``, :attr:`Variant.name`; its
-run folders carry its short :attr:`Variant.tag`, ``ha``); its ``augment`` is the training configuration's
+Names: a *variant* is an arm of the protocol, named as in the tables (``"HA-X"``, :attr:`~freespace.experiments.variants.Variant.name`; its
+run folders carry its short :attr:`~freespace.experiments.variants.Variant.tag`, ``ha``); its ``augment`` is the training configuration's
 (:attr:`freespace.engine.config.TrainConfig.augment`, e.g. ``("homography",)``), which several variants may
 share (X and X-long). index.json holds both: ``variant`` (the name) and ``augment`` (spelled as in
 config.yaml, ``"homography"``).
 
 A protocol file (``protocol``, :meth:`Protocol.load`) names what one study runs and reports; without one, the
-method's own defaults hold (:data:`DEFAULT_VARIANTS`, :data:`GAINS`, no primary endpoint)::
+method's own defaults hold (:data:`~freespace.experiments.variants.DEFAULT_VARIANTS`,
+:data:`~freespace.experiments.variants.GAINS`, no primary endpoint)::
 
     variants: [X, HA-X, X-dup, X-long]      # run when no variants are asked for (X always is)
     gains: [HA-X - X, HA-X - X-dup]         # the paired gains reported, in this order
@@ -47,206 +49,17 @@ from pathlib import Path
 from typing import Any
 
 from freespace.errors import InvalidOptionError, param
+from freespace.experiments.variants import (DEFAULT_VARIANTS, GAIN_METRICS, GAINS, TEST_SET_NAME, VARIANTS, Variant,
+                                            parse_test_roots, parse_variants, variant_tag)
 from freespace.io.files import PathLike
 
-__all__ = ["Variant", "DataSource", "DATA_KEYS", "VARIANTS", "DEFAULT_VARIANTS", "GAINS", "METRICS", "GAIN_METRICS",
-           "Primary", "Protocol", "TestRoots", "parse_models", "parse_variants", "parse_cell", "parse_test_roots",
-           "run_name", "run_of", "variant_tag"]
-
-
-@dataclass(frozen=True)
-class Variant:
-    """A variant (one arm) of the protocol: its ``name`` in the tables (``X`` stands for the network), its
-    training ``augment`` (a :attr:`~freespace.engine.config.TrainConfig.augment` value: ``()`` none), the
-    ``tag`` of its run folders (``runs/<model>-<tag>-s<seed>``), ``budget``, the factor on the epoch cap
-    and on the early-stopping patience (X-long: 2, as many optimiser steps as HA-X), and where the training
-    labels come from: ``human`` (the dataset's), ``auto`` (the ``autolabels`` tree) or ``mix`` (the
-    dataset's on :data:`MIX_HUMAN_SHARE` of the training drives, the tree's on the rest). ``data``: the
-    training source (a :attr:`Protocol.data` name) of a variant a protocol file declares; None for the built-in
-    ones, which train on ``reproduce``'s dataset."""
-
-    name: str
-    augment: tuple[str, ...]
-    tag: str
-    budget: int = 1
-    labels: str = "human"
-    data: str | None = None
-
-    def label(self, model: str) -> str:
-        """The table row of ``model``: ``X`` replaced by the network's name (``HA-X`` → ``HA-unet``); a declared
-        variant's name as it is."""
-        return self.name if self.data is not None else self.name.replace("X", model)
-
-
-#: the arms, by table name
-VARIANTS: dict[str, Variant] = {v.name: v for v in (
-    Variant("X", (), "orig"),                              # conventional augmentation only
-    Variant("HA-X", ("homography",), "ha"),                # + the DS-Generator views (the paper)
-    Variant("HV-X", ("virtual",), "hv"),                   # + road-plane virtual views (no right image)
-    Variant("HAV-X", ("homography", "virtual"), "hav"),    # + both
-    Variant("X-dup", ("duplicate",), "dup"),               # control: HA-X's step count, the frames' own images
-    Variant("X-long", (), "long", budget=2),               # control: HA-X's step count, each frame once per epoch
-    Variant("X-auto", (), "auto", labels="auto"),          # labels nobody drew (freespace autolabel)
-    Variant("X-mix", (), "mix", labels="mix"),             # people's labels on a fifth of the drives, autolabels after
-)}
-#: the share of the training drives that keep the dataset's labels in X-mix
-MIX_HUMAN_SHARE = 0.2
-DEFAULT_VARIANTS = ("X", "HA-X", "X-dup")
-#: the paired gains reported (variant, versus), when both were run (X-dup − X-long: the second draw of the
-#: conventional augmentation at equal optimiser steps)
-GAINS = (("HA-X", "X"), ("HA-X", "X-dup"), ("HA-X", "X-long"), ("X-dup", "X"), ("X-long", "X"), ("X-dup", "X-long"),
-         ("HV-X", "X"), ("HAV-X", "X"), ("X-auto", "X"), ("X-mix", "X"), ("X-mix", "X-auto"))
-#: the ``network`` of the gains averaged over networks
-ALL_NETWORKS = "all"
-#: the paper's six networks: what ``models="all"`` trains (networks registered later, e.g. ``fastscnn``, by name)
-PAPER_NETWORKS = ("deeplabv3plus", "denseaspp", "dupsampling", "gscnn", "segnet", "unet")
-GAIN_METRICS = ("f_score", "iou")
-METRICS = ("accuracy", "precision", "recall", "f_score", "iou")
-#: the metrics' names in results.md and the figures
-METRIC_NAMES = {"accuracy": "Accuracy", "precision": "Precision", "recall": "Recall", "f_score": "F-score",
-                "iou": "IoU"}
-#: the name of a further test set (``test_root``) given without one
-DEFAULT_TEST_SET = "shifted"
-#: names a further test set cannot take: the test split's, and the run folder's own entries
-RESERVED_TEST_SETS = frozenset({"train", "val", "test", "metrics", "config", "splits", "generated", "checkpoints",
-                                "tensorboard"})
-_TEST_SET_NAME = re.compile(r"[a-z][a-z0-9_-]*")
-_BY_TAG = {v.tag: v for v in VARIANTS.values()}
-_RUN_NAME = re.compile(r"(?P<model>.+)-(?P<tag>[a-z]+)-s(?P<seed>\d+)")
-#: further test sets: a folder (named ``shifted``), ``NAME=DIR`` strings, or ``{name: folder}``
-TestRoots = PathLike | list[PathLike] | tuple[PathLike, ...] | dict[str, PathLike] | None
-#: more seeds than this is a typo, not an experiment (each seed trains every network and variant)
-MAX_SEEDS = 1000
-
+__all__ = ["DataSource", "DATA_KEYS", "Primary", "Protocol"]
 
 #: a declared variant's name (a protocol file's ``variants`` mapping), and a training source's (``data``)
 _VARIANT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9+_-]{0,39}")
 _DATA_NAME = re.compile(r"[a-z][a-z0-9_-]{0,39}")
 #: ``${NAME}`` in a training source's paths: the environment variable's value
 _ENV = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
-
-
-def variant_tag(name: str) -> str:
-    """The run folders' tag of a declared variant: ``name`` in lower case, ``+`` as ``_`` (``S+R-auto`` →
-    ``s_r-auto``; letters, digits, ``-`` and ``_``: safe in a folder name)."""
-    return name.lower().replace("+", "_")
-
-
-def run_name(model: str, variant: str, seed: int, variants: dict[str, Variant] | None = None) -> str:
-    """The run folder of a cell: ``<model>-<tag>-s<seed>`` (``variant``: a table name of ``variants``, by
-    default :data:`VARIANTS`; :attr:`Protocol.vocabulary`)."""
-    return f"{model}-{(variants or VARIANTS)[variant].tag}-s{seed}"
-
-
-def run_of(folder_name: str, variants: dict[str, Variant] | None = None) -> tuple[str, Variant, int] | None:
-    """The cell a run folder's name (``<model>-<tag>-s<seed>``) stands for: network, variant (of ``variants``,
-    by default :data:`VARIANTS`) and seed; None for a name of another form or an unknown tag. A declared
-    variant's tag may hold ``-``: the longest tag that leaves a network's name wins (``unet-ha-r-auto-s0`` is
-    HA-R-auto's, not R-auto's of a network ``unet-ha``)."""
-    if variants is None or variants is VARIANTS:
-        named = _RUN_NAME.fullmatch(folder_name)
-        spec = _BY_TAG.get(named["tag"]) if named else None
-        return (named["model"], spec, int(named["seed"])) if named and spec else None
-    named = re.fullmatch(r"(?P<rest>.+)-s(?P<seed>\d+)", folder_name)
-    if named is None:
-        return None
-    for spec in sorted(variants.values(), key=lambda v: -len(v.tag)):
-        model = named["rest"][: -len(spec.tag) - 1]
-        if model and named["rest"] == f"{model}-{spec.tag}":
-            return model, spec, int(named["seed"])
-    return None
-
-
-def parse_models(text: str | list[str] | tuple[str, ...] | None) -> list[str]:
-    """``"unet,segnet"`` (``models``) → the networks, in the given order; ``"all"`` or None → the paper's six
-    (:data:`PAPER_NETWORKS`).
-
-    Raises:
-        InvalidOptionError: an unknown network, or none.
-    """
-    from freespace.models import list_models
-
-    if text is None or text == "all":
-        return list(PAPER_NETWORKS)
-    names = list(dict.fromkeys(n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()))
-    unknown = [n for n in names if n not in list_models()]
-    if unknown or not names:
-        raise InvalidOptionError(f"unknown models {unknown}; choose from {', '.join(list_models())} or all")
-    return names
-
-
-def parse_variants(text: str | list[str] | tuple[str, ...],
-                   variants: dict[str, Variant] | None = None) -> tuple[str, ...]:
-    """``"HA-X,X-dup"`` → the variants' table names, in the given order; ``X`` always comes first. Among a
-    protocol's declared ``variants`` (:attr:`Protocol.vocabulary`): the names given, in their order."""
-    vocabulary = variants or VARIANTS
-    names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
-    bad = [n for n in names if n not in vocabulary]
-    if bad or not names:
-        raise InvalidOptionError(f"unknown variants {bad}; choose from {', '.join(vocabulary)} (comma-separated)")
-    if vocabulary is not VARIANTS:
-        return tuple(dict.fromkeys(names))
-    return tuple(["X"] + [n for n in dict.fromkeys(names) if n != "X"])  # the gains are measured against X
-
-
-def parse_cell(text: str, seeds: int, variants: dict[str, Variant] | None = None) -> tuple[str, str, int]:
-    """``"unet,HA-X,2"`` (``only``) → ``("unet", "HA-X", 2)``: network, variant (of ``variants``, by default
-    :data:`VARIANTS`), seed.
-
-    Raises:
-        InvalidOptionError: not three comma-separated fields, an unknown network or variant, or a seed
-        outside ``0 … seeds − 1``.
-    """
-    from freespace.models import list_models
-
-    parts = [p.strip() for p in str(text).split(",")]
-    if len(parts) != 3:
-        raise InvalidOptionError(f"{param('only')} must be NETWORK,VARIANT,SEED (e.g. unet,HA-X,0), got {text!r}")
-    model, name, seed_text = parts
-    if model not in list_models():
-        raise InvalidOptionError(f"{param('only')}: unknown network {model!r}; choose from {', '.join(list_models())}")
-    vocabulary = variants or VARIANTS
-    if name not in vocabulary:
-        raise InvalidOptionError(f"{param('only')}: unknown variant {name!r}; choose from {', '.join(vocabulary)}")
-    if not seed_text.isdigit() or not 0 <= int(seed_text) < seeds:
-        raise InvalidOptionError(f"{param('only')}: the seed must be an integer in 0…{seeds - 1} ({param('seeds')} "
-                                 f"{seeds}), "
-                                 f"got {seed_text!r}")
-    return model, name, int(seed_text)
-
-
-def parse_test_roots(test_root: TestRoots) -> dict[str, Path]:
-    """``test_root`` values → ``{name: folder}``: ``DIR`` is named ``shifted``, ``NAME=DIR`` ``NAME``
-    (lower-case letters, digits, ``-`` and ``_``; not ``test``, the test split's). A dict is taken as it is.
-
-    Raises:
-        InvalidOptionError: a bad or repeated name.
-    """
-    if test_root is None:
-        return {}
-    if isinstance(test_root, dict):
-        pairs = list(test_root.items())
-    else:
-        pairs = []
-        for text in [test_root] if isinstance(test_root, (str, Path)) else test_root:
-            name, sep, folder = str(text).partition("=")
-            named = sep and _TEST_SET_NAME.fullmatch(name)  # else a folder, whatever its characters
-            if sep and not named and re.fullmatch(r"\w[\w-]*", name) and not Path(text).exists():
-                raise InvalidOptionError(f"{param('test_root')} {text}: test set names are lower-case letters, digits, "
-                                         f"- and _ "
-                                         f"(e.g. {name.lower()}={folder}); {text} is no folder either")
-            pairs.append((name, folder) if named else (DEFAULT_TEST_SET, str(text)))
-    roots: dict[str, Path] = {}
-    for name, folder in pairs:
-        if not isinstance(name, str) or not _TEST_SET_NAME.fullmatch(name) or name in RESERVED_TEST_SETS:
-            raise InvalidOptionError(f"{param('test_root')}: {name!r} cannot name a test set; use lower-case letters, "
-                                     f"digits, "
-                                     f"- and _, and none of {', '.join(sorted(RESERVED_TEST_SETS))} (NAME=DIR)")
-        if name in roots:
-            raise InvalidOptionError(f"{param('test_root')}: two test sets are named {name!r}; give the others "
-                                     f"NAME=DIR")
-        roots[name] = Path(folder)
-    return roots
 
 
 # --- a study's protocol ----------------------------------------------------------------------------------
@@ -535,7 +348,7 @@ def _primary(data: Any, gains: tuple[tuple[str, str], ...], variants: dict[str, 
     if data["metric"] not in GAIN_METRICS:
         raise InvalidOptionError(f"primary's metric must be one of {', '.join(GAIN_METRICS)}, got {data['metric']!r}")
     test_set = data["test_set"]
-    if not isinstance(test_set, str) or not (test_set == "test" or _TEST_SET_NAME.fullmatch(test_set)):
+    if not isinstance(test_set, str) or not (test_set == "test" or TEST_SET_NAME.fullmatch(test_set)):
         raise InvalidOptionError(f"primary's test_set must be test or a test set's name, got {test_set!r}")
     margin = data["margin"]
     if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0 < margin < float("inf"):

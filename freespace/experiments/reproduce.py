@@ -3,7 +3,7 @@
 Every chosen network is trained on the original training set (X), on the set augmented with the
 DS-Generator views (HA-X) and on the control X-dup (X with every frame that has a DS-Generator view once
 more, unchanged: as many optimiser steps per epoch as HA-X under the same early stopping, without the
-views' content) — or any variants of :data:`~freespace.experiments.protocol.VARIANTS` (HV-X: road-plane virtual views, HAV-X: both) —
+views' content) — or any variants of :data:`~freespace.experiments.variants.VARIANTS` (HV-X: road-plane virtual views, HAV-X: both) —
 with the same seeds and budget, and tested on the test split (``test_set = test``) and, with
 ``test_root``, on every labelled frame of further datasets (``test_set = shifted`` for a bare folder, e.g.
 other rigs, or the name given as ``NAME=DIR``, e.g. a large fixed set rendered with the training rigs).
@@ -47,7 +47,8 @@ from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, augment_text
 from freespace.errors import InvalidOptionError, param
 from freespace.experiments.cells import (cell_config, check_autolabels_used, check_cell, check_inputs,
                                          check_test_roots, run_cell)
-from freespace.experiments.protocol import (MAX_SEEDS, Protocol, TestRoots, parse_cell, parse_models, parse_test_roots,
+from freespace.experiments.protocol import Protocol
+from freespace.experiments.variants import (MAX_SEEDS, TestRoots, parse_cell, parse_models, parse_test_roots,
                                             parse_variants)
 from freespace.experiments.tables import OUT_ENTRIES, write_tables
 from freespace.io.files import PathLike, check_writable
@@ -74,10 +75,10 @@ def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, mode
     gives each of its declared variants its training data: ``dataset`` and ``root`` are then None (and
     ``autolabels`` too), ``variants`` and ``only`` name its variants, and a further test set is read in the
     layout of each cell's data.
-    ``models``: networks (:func:`~freespace.experiments.protocol.parse_models`; None = all). ``variants``: table
-    names from :data:`~freespace.experiments.protocol.VARIANTS` (None = the protocol's; ``X`` is always run:
+    ``models``: networks (:func:`~freespace.experiments.variants.parse_models`; None = all). ``variants``: table
+    names from :data:`~freespace.experiments.variants.VARIANTS` (None = the protocol's; ``X`` is always run:
     gains are against it); a variant's ``budget`` multiplies ``epochs`` and ``patience`` (X-long).
-    ``test_root``: further test sets (:func:`~freespace.experiments.protocol.parse_test_roots`), added to the
+    ``test_root``: further test sets (:func:`~freespace.experiments.variants.parse_test_roots`), added to the
     protocol's. ``autolabels``: the label tree of ``root``
     that X-auto and X-mix train on (made by ``freespace autolabel``).
     ``image_size``: (H, W), or :data:`~freespace.engine.config.FIRST_FRAME_SIZE`.
