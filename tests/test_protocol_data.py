@@ -1,7 +1,7 @@
 """A protocol that declares its own variants, each with its own training data (``data:``): each cell trains on
 its variant's dataset, root, labels, split lists and augment, in a run folder tagged from the variant's name;
 the existing checks hold per cell; the tables pair only what was tested on the same frames; a bad file, a bad
-path or a clash ends in one line before any work; the real-roads study's file gives run.sh's options."""
+path or a clash ends in one line before any work."""
 
 from __future__ import annotations
 
@@ -19,7 +19,6 @@ from freespace.errors import InvalidOptionError
 from freespace.experiments import VARIANTS, Protocol, parse_variants
 from freespace.experiments.variants import run_name, run_of
 
-REPO = Path(__file__).resolve().parents[1]
 
 #: two training sources: ``first`` (a rendered set as it is) and ``second`` (another rendered set, with its own
 #: label tree and split lists, both given relative to the protocol file's folder; its root through ${FS_SECOND})
@@ -259,34 +258,3 @@ def test_the_inputs_check_compares_the_cells_of_one_data(study: Path, env: Path,
     (same / "inputs.json").write_text(json.dumps({"labels": {"path": str(study / "labels"), "sha256": "0" * 64}}))
     with pytest.raises(InvalidOptionError, match="other contents of the labels of the protocol's data second"):
         check_inputs(tmp_path, [config], p.vocabulary)
-
-
-def test_the_real_roads_protocol_gives_run_sh_options(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """studies/real-roads/protocol.yaml: run.sh's cell() data, augment and run folder names, variant by variant
-    (run.sh's tag: ``tr 'A-Z+' 'a-z_'``; its --cache-dir for HA-R-auto and R-auto-dup only)."""
-    raw, work = tmp_path / "raw", tmp_path / "work"
-    for folder in (raw, work / "autolabels", work / "sgbm-cache", work / "syn", work / "splits-raw",
-                   work / "mix/splits"):
-        folder.mkdir(parents=True)
-    for part in ("train", "val", "test"):
-        for lists in (work / "splits-raw", work / "mix/splits"):
-            (lists / f"{part}.txt").write_text(f"{part}\n")
-    monkeypatch.setenv("RAW", str(raw))
-    monkeypatch.setenv("WORK", str(work))
-    p = Protocol.load(REPO / "studies/real-roads/protocol.yaml")
-    real = {"dataset": "kitti-raw", "root": str(raw), "labels": str(work / "autolabels"),
-            "splits_dir": str(work / "splits-raw")}
-    run_sh = {  # studies/real-roads/run.sh, cell()
-        "S": ({"dataset": "synth", "root": str(work / "syn")}, ()),
-        "R-auto": (real, ()),
-        "HA-R-auto": ({**real, "cache_dir": str(work / "sgbm-cache")}, ("homography",)),
-        "R-auto-dup": ({**real, "cache_dir": str(work / "sgbm-cache")}, ("duplicate",)),
-        "S+R-auto": ({"dataset": "generic", "root": str(work / "mix"), "splits_dir": str(work / "mix/splits")}, ()),
-    }
-    assert p.variants == tuple(run_sh)
-    for name, (values, augment) in run_sh.items():
-        spec = p.declared[name]
-        given = {k: v for k, v in p.data[spec.data].training(spec.augment).items() if v is not None}
-        assert (given, spec.augment) == (values, augment), name
-        assert spec.tag == name.translate(str.maketrans("ABCDEFGHIJKLMNOPQRSTUVWXYZ+", "abcdefghijklmnopqrstuvwxyz_"))
-    assert ("HA-R-auto", "R-auto-dup") in p.gains and ("R-auto", "S") in p.gains
