@@ -1,0 +1,75 @@
+"""The real-roads study's scripts: the variants' table (evaluate.py) from run folders' real.json, and the
+S+R-auto link dataset (mix.py)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+STUDY = Path(__file__).resolve().parents[1]
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(f"real_roads_{name}", STUDY / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _real_json(run: Path, f0: float, f1: float, polygon: float) -> None:
+    run.mkdir(parents=True)
+    frames = {"000000_10": {"kind": "mask", "precision": 0.9, "recall": 0.5, "f_score": f0, "iou": 0.5},
+              "000001_10": {"kind": "mask", "precision": 0.9, "recall": 0.7, "f_score": f1, "iou": 0.6},
+              "um_000000": {"kind": "polygon", "recall": polygon}}
+    pooled = {"precision": 0.9, "recall": 0.6, "f_score": (f0 + f1) / 2, "iou": 0.55}
+    (run / "real.json").write_text(json.dumps({"frames": frames, "pooled_masks": pooled, "left_out": []}))
+
+
+def test_the_table_gives_means_intervals_and_paired_gains(tmp_path: Path) -> None:
+    evaluate = _load("evaluate")
+    for seed, (s, r) in enumerate([(0.40, 0.70), (0.50, 0.74), (0.45, 0.78)]):
+        _real_json(tmp_path / f"unet-s-s{seed}", s, s, 0.5)
+        _real_json(tmp_path / f"unet-r-auto-s{seed}", r, r, 0.99)
+    _real_json(tmp_path / "unet-64x208-r-auto-s0", 0.7, 0.7, 0.9)  # another size: its own row
+    _real_json(tmp_path / "notarun", 0.1, 0.1, 0.1)  # not a cell's name: ignored
+    text = evaluate.table(tmp_path)
+    rows = {tuple(c.strip() for c in line.split("|")[1:3]): line for line in text.splitlines() if line.startswith("| unet")}
+    # R-auto's F over 3 seeds (70, 74, 78): 74.0 with the t-interval 74 ± 4.303·4/√3 = [64.1, 83.9]
+    assert "| 3 | 74.0 [64.1, 83.9] | 74.0 [64.1, 83.9] | 74.0 [64.1, 83.9] |" in rows["unet", "R-auto"]
+    assert "| 1 |" in rows["unet-64x208", "R-auto"]
+    gain = next(line for line in text.splitlines() if "R-auto − S" in line)
+    # paired differences 30, 24, 33 points: mean 29.0, t-interval 29 ± 4.303·4.583/√3 = [17.6, 40.4]
+    assert "+29.0 [+17.6, +40.4]" in gain and "| 3 |" in gain
+    assert "notarun" not in text
+
+
+def test_mix_links_both_sources_and_splits_them(tmp_path: Path) -> None:
+    mix = _load("mix")
+    syn = tmp_path / "syn" / "data_road" / "training"
+    for folder, name in (("image_2", "um_000000.png"), ("gt_image_2", "um_road_000000.png")):
+        (syn / folder).mkdir(parents=True)
+        (syn / folder / name).write_bytes(b"png")
+    drive = tmp_path / "raw" / "2011_09_26" / "2011_09_26_drive_0001_sync" / "image_02" / "data"
+    drive.mkdir(parents=True)
+    labels = tmp_path / "al" / "2011_09_26_drive_0001_sync"
+    labels.mkdir(parents=True)
+    for frame in ("0000000000", "0000000001", "0000000002"):
+        (drive / f"{frame}.png").write_bytes(b"png")
+        if frame != "0000000002":  # a frame without an autolabel is left out
+            (labels / f"{frame}.png").write_bytes(b"label")
+    splits = tmp_path / "splits"
+    splits.mkdir()
+    for part, frame in (("train", "0000000000"), ("val", "0000000001"), ("test", "0000000002")):
+        (splits / f"{part}.txt").write_text(f"2011_09_26_drive_0001_sync/{frame}\n")
+    out = tmp_path / "mix"
+    lists = mix.build(tmp_path / "syn", tmp_path / "raw", tmp_path / "al", splits, out)
+    assert lists == {"train": ["syn-um_000000", "2011_09_26_drive_0001_sync-0000000000"],
+                     "val": ["2011_09_26_drive_0001_sync-0000000001"], "test": []}
+    assert (out / "label" / "syn-um_000000.png").resolve() == (syn / "gt_image_2" / "um_road_000000.png").resolve()
+    assert (out / "left" / "2011_09_26_drive_0001_sync-0000000000.png").read_bytes() == b"png"
+    assert "label_encoding: kitti" in (out / "freespace.yaml").read_text()
+    with pytest.raises(SystemExit, match="exists"):
+        mix.build(tmp_path / "syn", tmp_path / "raw", tmp_path / "al", splits, out)
