@@ -69,9 +69,8 @@ def main() -> None:
     if folder.exists():
         raise SystemExit(f"{folder} exists; remove it first")
     (folder / "examples").mkdir(parents=True)
-    cmd = ["freespace", "export", "--checkpoint", str(a.run / "checkpoints" / "best.ckpt"), "--format", "onnx",
-           "--out", str(folder / "model.onnx"), *(["--fp16"] if a.fp16 else [])]
-    subprocess.run([sys.executable, "-m", "freespace.cli", *cmd[1:]], check=True)
+    subprocess.run([sys.executable, "-m", "freespace.cli", "export", "--checkpoint", str(a.run / "checkpoints" / "best.ckpt"),
+                    "--format", "onnx", "--out", str(folder / "model.onnx"), *(["--fp16"] if a.fp16 else [])], check=True)
     drives = {p.name: p for p in a.raw.rglob("*_drive_*_sync") if p.is_dir()}
     for drive, frame in EXAMPLES:
         shutil.copyfile(drives[drive] / "image_02" / "data" / f"{frame}.png",
