@@ -641,12 +641,18 @@ def _train_parser(p: argparse.ArgumentParser, config: Mapping[str, Any] | None =
 
 def _config_file_options(argv: Sequence[str]) -> dict[str, Any] | None:
     """The options in ``--config YAML`` when ``argv`` has one (read before the real parse, as timm does), as
-    typed values (:func:`~freespace.engine.config.read_config_yaml`)."""
+    typed values (:func:`~freespace.engine.config.read_config_yaml`); without one, ``--resume --out RUN`` reads
+    the run's own ``RUN/config.yaml``, so that a run resumes from its folder alone."""
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--config", action="append")
+    pre.add_argument("--out")
+    pre.add_argument("--resume", action="store_true")
     known, _ = pre.parse_known_args(argv)
     if known.config is None:
-        return None
+        saved = Path(known.out) / "config.yaml" if known.resume and known.out else None
+        if saved is None or not saved.is_file():
+            return None  # the resume check names what is missing
+        known.config = [str(saved)]
     if len(known.config) > 1:  # the last would win without a word, as a key given twice in one file would
         raise InvalidOptionError(f"--config is given {len(known.config)} times ({', '.join(known.config)}); give one "
                                  f"file (flags given as well override it)")

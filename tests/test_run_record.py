@@ -75,6 +75,15 @@ def test_a_resume_is_not_refused_for_another_commit(trained: dict[str, Path], tm
                                "torch": torch.__version__}
 
 
+def test_a_run_resumes_from_its_folder_alone(trained: dict[str, Path], tmp_path: Path) -> None:
+    """``train --out RUN --resume`` reads the run's own config.yaml: no dataset, root or options again; a flag
+    given as well is an extension the resume check allows (here a larger --epochs)."""
+    run = tmp_path / "run"
+    shutil.copytree(trained["run"], run)
+    assert main(["train", "--out", str(run), "--resume", "--epochs", "2", "--no-progress"]) == 0
+    assert json.loads((run / "metrics.json").read_text())["epochs_run"] == 2
+
+
 def test_the_reproduce_index_holds_each_runs_record(trained: dict[str, Path], tmp_path: Path) -> None:
     out = tmp_path / "out"
     shutil.copytree(trained["run"], out / "runs" / "segnet-orig-s0")
