@@ -8,7 +8,9 @@ parked cars' shadows' edges).
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -48,10 +50,19 @@ def test_depth_to_disparity_rejects_bad_rig(focal: float, baseline: float) -> No
 # --- readers -----------------------------------------------------------------------------------------
 
 
-def _png16(path: Path, raw: np.ndarray) -> Path:
-    ok, buf = cv2.imencode(".png", raw)
+def _file_bytes(suffix: str, raw: np.ndarray) -> bytes:
+    """``raw`` as the content of a ``.png`` (OpenCV's encoding, 16-bit kept) or a ``.npy`` file."""
+    if suffix == ".npy":
+        buf = io.BytesIO()
+        np.save(buf, raw)
+        return buf.getvalue()
+    ok, png = cv2.imencode(suffix, raw)
     assert ok
-    path.write_bytes(buf.tobytes())
+    return png.tobytes()
+
+
+def _png16(path: Path, raw: np.ndarray) -> Path:
+    path.write_bytes(_file_bytes(".png", raw))
     return path
 
 
@@ -74,28 +85,33 @@ def test_read_depth_float_files_in_metres(tmp_path: Path) -> None:
         assert np.isnan(out[0, 1]) and np.isnan(out[1, 0])
 
 
-def test_read_depth_errors(tmp_path: Path) -> None:
-    with pytest.raises(CorruptFileError, match="8-bit image with 1 channel.*16-bit one-channel depth PNG"):
-        read_depth(_png16(tmp_path / "eight.png", np.full((4, 5), 7, np.uint8)))
-    with pytest.raises(CorruptFileError, match="3 channel"):
-        read_depth(_png16(tmp_path / "rgb16.png", np.zeros((4, 5, 3), np.uint16)))
-    (tmp_path / "corrupt.png").write_bytes(b"\x89PNG\r\n\x1a\n-truncated")
-    with pytest.raises(CorruptFileError, match="cannot decode depth"):
-        read_depth(tmp_path / "corrupt.png")
-    np.save(tmp_path / "cube.npy", np.zeros((2, 3, 4)))
-    with pytest.raises(CorruptFileError, match="2-D float array in metres"):
-        read_depth(tmp_path / "cube.npy")
-    (tmp_path / "bad.pfm").write_bytes(b"P6\n1 1\n-1\nxxxx")
-    with pytest.raises(CorruptFileError, match="cannot decode depth .*PFM"):
-        read_depth(tmp_path / "bad.pfm")
-    with pytest.raises(ShapeMismatchError, match="5×4 but its image is 6×4"):
-        read_depth(_png16(tmp_path / "ok.png", np.ones((4, 5), np.uint16)), shape=(4, 6))
-    with pytest.raises(InvalidOptionError, match="unknown depth format '.exr'"):
-        read_depth(tmp_path / "d.exr")
-    with pytest.raises(InputFileError, match="not found"):
-        read_depth(tmp_path / "missing.png")
-    with pytest.raises(InvalidOptionError, match="PNG scale"):
-        read_depth(tmp_path / "ok.png", png_scale=0)
+#: what read_depth refuses: test id → (file name, its bytes or None for no file, read_depth's keywords, the error
+#: and its message)
+DEPTH_ERRORS = {
+    "8-bit-png": ("eight.png", _file_bytes(".png", np.full((4, 5), 7, np.uint8)), {}, CorruptFileError,
+                  "8-bit image with 1 channel.*16-bit one-channel depth PNG"),
+    "colour-png": ("rgb16.png", _file_bytes(".png", np.zeros((4, 5, 3), np.uint16)), {}, CorruptFileError, "3 channel"),
+    "truncated-png": ("corrupt.png", b"\x89PNG\r\n\x1a\n-truncated", {}, CorruptFileError, "cannot decode depth"),
+    "3-d-npy": ("cube.npy", _file_bytes(".npy", np.zeros((2, 3, 4))), {}, CorruptFileError,
+                "2-D float array in metres"),
+    "bad-pfm": ("bad.pfm", b"P6\n1 1\n-1\nxxxx", {}, CorruptFileError, "cannot decode depth .*PFM"),
+    "wrong-size": ("ok.png", _file_bytes(".png", np.ones((4, 5), np.uint16)), {"shape": (4, 6)},
+                   ShapeMismatchError, "5×4 but its image is 6×4"),
+    "unknown-suffix": ("d.exr", b"v/1\x01", {}, InvalidOptionError, "unknown depth format '.exr'"),
+    "missing": ("missing.png", None, {}, InputFileError, "not found"),
+    "zero-png-scale": ("ok.png", _file_bytes(".png", np.ones((4, 5), np.uint16)), {"png_scale": 0},
+                       InvalidOptionError, "PNG scale"),
+}
+
+
+@pytest.mark.parametrize("name, content, kwargs, error, match", DEPTH_ERRORS.values(), ids=list(DEPTH_ERRORS))
+def test_read_depth_errors(tmp_path: Path, name: str, content: bytes | None, kwargs: dict[str, Any],
+                           error: type[Exception], match: str) -> None:
+    path = tmp_path / name
+    if content is not None:
+        path.write_bytes(content)
+    with pytest.raises(error, match=match):
+        read_depth(path, **kwargs)
 
 
 # --- the rig from a calibration ----------------------------------------------------------------------

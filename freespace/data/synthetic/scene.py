@@ -14,13 +14,13 @@ is ``s = x − x_c(z)``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 
 import numpy as np
 
 from freespace.errors import InvalidOptionError, param
 
-__all__ = ["SynthConfig", "Scenario", "Frame", "Box", "Sphere", "sample_scenario", "sample_frame",
+__all__ = ["SynthConfig", "Scenario", "Frame", "Solid", "Box", "Sphere", "sample_scenario", "sample_frame",
            "WEATHERS", "CATEGORIES"]
 
 WEATHERS = ("clear", "cloudy", "rain", "sunset", "dusk", "fog")
@@ -95,33 +95,45 @@ class SynthConfig:
 
 
 @dataclass(frozen=True)
-class Box:
-    """An upright box: centre of its base (x, y = ground, z), size (width, height, length), yaw about Y,
-    and its surface (material, RGB albedo 0..1). Parts stacked on one object share ``group``."""
+class Solid:
+    """An object of the scene (a :class:`Box` or a :class:`Sphere`): the point it stands at and its surface.
+
+    Attributes:
+        x, y, z: the object's anchor in the world frame (metres; see the subclass for which point it is).
+        material: its material (one of the material constants above: ``VEHICLE``, ``POLE``, …).
+        colour: RGB albedo, 0..1 each.
+        group: the object it is part of: parts stacked on one object (a car's body and cabin, a tree's
+            trunk and canopy) share it.
+
+    The surface (``material``, ``colour``, ``group``) is given by keyword, after the subclass's own sizes:
+    ``Sphere(x, y, z, r, material=FOLIAGE, colour=rgb, group=g)``.
+    """
 
     x: float
     y: float
     z: float
-    width: float
-    height: float
-    length: float
-    yaw: float
+    _: KW_ONLY
     material: int
     colour: tuple[float, float, float]
     group: int = 0
 
 
 @dataclass(frozen=True)
-class Sphere:
-    """A sphere (tree canopy): centre, radius, material, colour."""
+class Box(Solid):
+    """An upright box: (x, y, z) is the centre of its bottom face, (width, height, length) its size in metres
+    along its own x, y, z (the height upwards, towards −Y), and ``yaw`` its rotation about Y in radians."""
 
-    x: float
-    y: float
-    z: float
+    width: float
+    height: float
+    length: float
+    yaw: float
+
+
+@dataclass(frozen=True)
+class Sphere(Solid):
+    """A sphere (tree canopy): (x, y, z) is its centre and ``radius`` its radius in metres."""
+
     radius: float
-    material: int
-    colour: tuple[float, float, float]
-    group: int = 0
 
 
 @dataclass
@@ -290,15 +302,18 @@ def sample_scenario(config: SynthConfig, seed: int, index: int) -> Scenario:
             y = -sc.elevation(s, z) - sc.curb_height
             if kind < 0.5:  # pole, sometimes with a sign
                 ph = float(rng.uniform(3, 7))
-                objects.append(Box(x, y, z, 0.14, ph, 0.14, 0.0, POLE, _colour(rng, (0.45, 0.45, 0.47), 0.1), group))
+                objects.append(Box(x, y, z, 0.14, ph, 0.14, 0.0, material=POLE,
+                                   colour=_colour(rng, (0.45, 0.45, 0.47), 0.1), group=group))
                 if rng.random() < 0.4:
-                    objects.append(Box(x, y - ph + 0.9, z, 0.7, 0.6, 0.06, 0.0, POLE,
-                                       _colour(rng, (0.6, 0.15, 0.15), 0.2), group))
+                    objects.append(Box(x, y - ph + 0.9, z, 0.7, 0.6, 0.06, 0.0, material=POLE,
+                                       colour=_colour(rng, (0.6, 0.15, 0.15), 0.2), group=group))
             else:  # tree
                 th = float(rng.uniform(2.0, 3.0))
                 r = float(rng.uniform(1.2, 2.4))
-                objects.append(Box(x, y, z, 0.3, th + 0.5 * r, 0.3, 0.0, TRUNK, _colour(rng, (0.3, 0.2, 0.12), 0.05), group))
-                objects.append(Sphere(x, y - th - 0.8 * r, z, r, FOLIAGE, _colour(rng, (0.2, 0.4, 0.12), 0.08), group))
+                objects.append(Box(x, y, z, 0.3, th + 0.5 * r, 0.3, 0.0, material=TRUNK,
+                                   colour=_colour(rng, (0.3, 0.2, 0.12), 0.05), group=group))
+                objects.append(Sphere(x, y - th - 0.8 * r, z, r, material=FOLIAGE,
+                                      colour=_colour(rng, (0.2, 0.4, 0.12), 0.08), group=group))
             group += 1
             z += float(rng.uniform(8, 25))
     sc.static_objects = objects
@@ -332,12 +347,14 @@ def sample_frame(config: SynthConfig, seed: int, index: int) -> Frame:
         y = -sc.elevation(s, z)
         yaw_o = sc.heading(z) + (math.pi if rng.random() < 0.3 else 0.0) + math.radians(rng.uniform(-4, 4))
         colour = CAR_COLOURS[int(rng.integers(0, len(CAR_COLOURS)))]
-        objects.append(Box(x, y, z, w, body_h, l, yaw_o, VEHICLE, _colour(rng, colour, 0.05), group))
+        objects.append(Box(x, y, z, w, body_h, l, yaw_o, material=VEHICLE, colour=_colour(rng, colour, 0.05),
+                           group=group))
         if not van:
             cab_l = 0.55 * l
             dz = -0.08 * l
             objects.append(Box(x + dz * math.sin(yaw_o), y - body_h, z + dz * math.cos(yaw_o), 0.92 * w,
-                               float(rng.uniform(0.45, 0.6)), cab_l, yaw_o, GLASS, (0.08, 0.1, 0.12), group))
+                               float(rng.uniform(0.45, 0.6)), cab_l, yaw_o, material=GLASS, colour=(0.08, 0.1, 0.12),
+                               group=group))
         group += 1
     for _ in range(int(rng.integers(config.pedestrians[0], config.pedestrians[1] + 1))):
         z = z_cam + float(rng.uniform(5, 40))
@@ -350,11 +367,12 @@ def sample_frame(config: SynthConfig, seed: int, index: int) -> Frame:
         height = float(rng.uniform(1.55, 1.9))
         yaw_o = float(rng.uniform(-math.pi, math.pi))
         legs = 0.47 * height
-        objects.append(Box(x, y, z, 0.36, legs, 0.25, yaw_o, PERSON, _colour(rng, (0.2, 0.2, 0.3), 0.15), group))
-        objects.append(Box(x, y - legs, z, 0.46, 0.4 * height, 0.28, yaw_o, PERSON,
-                           _colour(rng, (0.5, 0.4, 0.4), 0.35), group))
-        objects.append(Box(x, y - 0.87 * height, z, 0.2, 0.13 * height, 0.22, yaw_o, PERSON,
-                           _colour(rng, (0.75, 0.58, 0.45), 0.15), group))
+        objects.append(Box(x, y, z, 0.36, legs, 0.25, yaw_o, material=PERSON,
+                           colour=_colour(rng, (0.2, 0.2, 0.3), 0.15), group=group))
+        objects.append(Box(x, y - legs, z, 0.46, 0.4 * height, 0.28, yaw_o, material=PERSON,
+                           colour=_colour(rng, (0.5, 0.4, 0.4), 0.35), group=group))
+        objects.append(Box(x, y - 0.87 * height, z, 0.2, 0.13 * height, 0.22, yaw_o, material=PERSON,
+                           colour=_colour(rng, (0.75, 0.58, 0.45), 0.15), group=group))
         group += 1
     return Frame(index=index, scenario=scenario, z_cam=z_cam, yaw=yaw, objects=objects,
                  seed=(seed, index))
