@@ -1,11 +1,11 @@
 """Publish a real-roads cell as a model of the repository (issue 45 §4): ``models/<name>/``.
 
-    python studies/real-roads/publish.py RUN NAME --raw RAW [--fp16] [--no-examples]
+    python studies/real-roads/publish.py RUN NAME --raw RAW [--fp16]
 
 Writes ``models/NAME/model.onnx`` (``freespace export``, float16 with ``--fp16``), ``examples/`` (two real
 KITTI raw frames of the drives' test blocks, never trained on, with their licence) and ``failures.jpg`` (the
 model's masks on the two KITTI stereo 2015 frames: true positives green, false negatives red, false positives
-blue; ``--no-examples`` leaves the examples out, for a second model that points at the first one's), and prints the card's figures from ``RUN/real.json`` and ``RUN/metrics.json``. The card itself
+blue), and prints the card's figures from ``RUN/real.json`` and ``RUN/metrics.json``. The card itself
 (``README.md``) is written by hand from them.
 """
 
@@ -62,25 +62,20 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)
     ap.add_argument("name")
-    ap.add_argument("--raw", type=Path, help="the KITTI raw root the examples come from (not with --no-examples)")
+    ap.add_argument("--raw", type=Path, required=True, help="the KITTI raw root the examples come from")
     ap.add_argument("--fp16", action="store_true")
-    ap.add_argument("--no-examples", action="store_true", help="no examples/ (another model of the repository has them)")
     a = ap.parse_args()
-    if a.raw is None and not a.no_examples:
-        ap.error("--raw is needed for the examples (or --no-examples)")
     folder = ROOT / "models" / a.name
     if folder.exists():
         raise SystemExit(f"{folder} exists; remove it first")
-    folder.mkdir(parents=True)
+    (folder / "examples").mkdir(parents=True)
     subprocess.run([sys.executable, "-m", "freespace.cli", "export", "--checkpoint", str(a.run / "checkpoints" / "best.ckpt"),
                     "--format", "onnx", "--out", str(folder / "model.onnx"), *(["--fp16"] if a.fp16 else [])], check=True)
-    if not a.no_examples:
-        (folder / "examples").mkdir()
-        drives = {p.name: p for p in a.raw.rglob("*_drive_*_sync") if p.is_dir()}
-        for drive, frame in EXAMPLES:
-            shutil.copyfile(drives[drive] / "image_02" / "data" / f"{frame}.png",
-                            folder / "examples" / f"{drive[:-5]}_{frame}.png")
-        (folder / "examples" / "LICENSE").write_text(LICENSE)
+    drives = {p.name: p for p in a.raw.rglob("*_drive_*_sync") if p.is_dir()}
+    for drive, frame in EXAMPLES:
+        shutil.copyfile(drives[drive] / "image_02" / "data" / f"{frame}.png",
+                        folder / "examples" / f"{drive[:-5]}_{frame}.png")
+    (folder / "examples" / "LICENSE").write_text(LICENSE)
     failures(a.run, folder / "failures.jpg")
     real = json.loads((a.run / "real.json").read_text())
     metrics = json.loads((a.run / "metrics.json").read_text())
