@@ -42,7 +42,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, section_text, write_section  # noqa: E402
 
-SECTION = "Real time on the CPU"
+SECTION = "Real time on the CPU (bench/realtime.py)"
 KITTI_RAW = Path("/work/shared/data/kitti_raw/2011_09_26/2011_09_26_drive_0001_sync/image_02/data")
 REAL = Path("/work/shared/data/kitti_stereo_2015")
 

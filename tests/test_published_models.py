@@ -276,7 +276,7 @@ def _repository_models() -> list[Path]:
 
 @pytest.mark.parametrize("model", _repository_models(), ids=lambda p: p.parent.name)
 def test_every_published_model_is_complete(model: Path) -> None:
-    """Each model the repository publishes (issue 45 §4; none yet: no case): the ONNX file at most 25 MB,
+    """Each model the repository publishes (issues 45 §4 and 48): the ONNX file at most 25 MB,
     loadable by the predictor with its training size in its metadata; a card naming the data's licence, the
     input size and showing a picture; a few real example frames (PNG, at most 2 MB together) with their
     licence."""
