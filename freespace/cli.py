@@ -649,9 +649,13 @@ def _config_file_options(argv: Sequence[str]) -> dict[str, Any] | None:
     pre.add_argument("--resume", action="store_true")
     known, _ = pre.parse_known_args(argv)
     if known.config is None:
-        saved = Path(known.out) / "config.yaml" if known.resume and known.out else None
-        if saved is None or not saved.is_file():
-            return None  # the resume check names what is missing
+        if not (known.resume and known.out):
+            return None
+        saved = Path(known.out) / "config.yaml"
+        if not saved.is_file():
+            raise InvalidOptionError(f"--resume needs a run folder with config.yaml and checkpoints/last.ckpt; "
+                                     f"{known.out} has no config.yaml: give the --out of a run that freespace train "
+                                     f"started, or leave out --resume to train anew")
         known.config = [str(saved)]
     if len(known.config) > 1:  # the last would win without a word, as a key given twice in one file would
         raise InvalidOptionError(f"--config is given {len(known.config)} times ({', '.join(known.config)}); give one "
