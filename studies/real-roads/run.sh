@@ -55,6 +55,7 @@ cell() {  # model variant seed
         *) echo "unknown variant $variant" >&2; return 2 ;;
     esac
     if [ -f "$run/checkpoints/last.ckpt" ] && [ ! -f "$run/metrics.json" ]; then
+        # --config: a package pinned before f802195 does not read the run's config.yaml on --resume by itself
         OMP_NUM_THREADS=1 $FREESPACE train --config "$run/config.yaml" --out "$run" --resume > "$run.log" 2>&1 || return 1
     elif [ ! -f "$run/metrics.json" ]; then
         [ "$model" = fastscnn ] || args+=($LITE0)  # Fast-SCNN: its own encoder, trained from scratch
