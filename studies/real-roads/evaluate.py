@@ -1,12 +1,18 @@
 """Real-frame evaluation of the real-roads study's cells (issue 45).
 
     python studies/real-roads/evaluate.py RUN [RUN ...]     # writes RUN/real.json for each run folder
+    python studies/real-roads/evaluate.py --rendered TREE RUN [RUN ...]   # also RUN/rendered.json
     python studies/real-roads/evaluate.py --table RUNS      # the variants' table (Markdown) from RUNS/*/real.json
 
 Each run's best checkpoint predicts the real labelled frames of ``bench/real_frames.py`` at full resolution
 (the network at its training size, the probabilities upsampled; road where p ≥ 0.5). Full-mask frames: precision,
 recall, F and IoU per frame and pooled over the frames' pixels; polygon frames: recall inside the polygon. A
 frame the run trained or validated on (its ``splits/train.txt``/``val.txt``) is left out and named.
+
+``--rendered TREE`` also scores the run on every frame of a rendered tree (``freespace synth``'s KITTI road
+layout; the study uses the converged run's ``same-rigs``: 200 frames of 40 drives, 416×320): F at p ≥ 0.5 and
+the KITTI MaxF from counts summed over the frames, in ``RUN/rendered.json``. For the R-auto variants these
+frames are out of domain; for S they are the domain it trained on.
 
 The table gives, per network and variant, the mean over seeds with its 95 % t-interval (n − 1 degrees of
 freedom; ``n`` seeds), and the paired gains of every variant over S and of HA-R-auto over R-auto-dup, one
@@ -79,11 +85,31 @@ def evaluate(run: Path) -> dict:
     return result
 
 
+def evaluate_rendered(run: Path, tree: Path) -> dict:
+    """Measure ``run``'s best checkpoint on every frame of the rendered tree ``tree``; return (and write to
+    ``run/rendered.json``) F at p ≥ 0.5, the MaxF and the number of frames."""
+    from freespace.inference.predictor import Predictor
+    from freespace.io.files import atomic_write_text
+    from realtime import f_scores, rendered_pairs
+
+    pairs = rendered_pairs(tree, None)
+    if not pairs:
+        raise SystemExit(f"--rendered {tree}: no data_road/training/image_2 frames; give a `freespace synth` tree")
+    scores = f_scores(Predictor(checkpoint=run / "checkpoints" / "best.ckpt"), pairs)
+    result = {"checkpoint": str(run / "checkpoints" / "best.ckpt"), "tree": str(tree), "threshold": THRESHOLD,
+              **scores}
+    atomic_write_text(run / "rendered.json", json.dumps(result, indent=2) + "\n")
+    return result
+
+
 def _interval(values: list[float]) -> str:
-    """``mean [low, high]`` in points (×100) with the 95 % t-interval; the mean alone for one value."""
+    """``mean [low, high]`` in points (×100) with the 95 % t-interval; the mean alone for one value; ``—`` for
+    none (NaN values, a figure some runs lack, are left out)."""
     from scipy import stats
 
-    x = 100 * np.asarray(values)
+    x = 100 * np.asarray([v for v in values if not math.isnan(v)])
+    if len(x) == 0:
+        return "—"
     if len(x) < 2:
         return f"{x.mean():.1f}"
     half = stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))
@@ -111,7 +137,10 @@ def table(runs: Path) -> str:
         if m is None or m.group("tag") not in VARIANT_TAGS:
             continue
         key = (m.group("model"), VARIANT_TAGS[m.group("tag")])
-        cells.setdefault(key, {})[int(m.group("seed"))] = _figures(json.loads(path.read_text()))
+        figures = _figures(json.loads(path.read_text()))
+        rendered = path.parent / "rendered.json"
+        figures["F rendered"] = json.loads(rendered.read_text())["f"] if rendered.is_file() else float("nan")
+        cells.setdefault(key, {})[int(m.group("seed"))] = figures
     if not cells:
         raise SystemExit(f"no run folder with real.json under {runs}")
     columns = list(next(iter(next(iter(cells.values())).values())))
@@ -142,12 +171,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="*", type=Path, help="run folders to evaluate")
     ap.add_argument("--table", type=Path, metavar="RUNS", help="print the table of RUNS/*/real.json")
+    ap.add_argument("--rendered", type=Path, metavar="TREE", help="also score each run on this rendered tree "
+                    "(RUN/rendered.json)")
     a = ap.parse_args()
     if a.table:
         print(table(a.table), end="")
     for run in a.runs:
-        result = evaluate(run)
-        print(run.name, json.dumps(_figures(result)))
+        figures = _figures(evaluate(run))
+        if a.rendered:
+            figures["F rendered"] = evaluate_rendered(run, a.rendered)["f"]
+        print(run.name, json.dumps(figures))
 
 
 if __name__ == "__main__":

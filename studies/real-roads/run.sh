@@ -3,11 +3,13 @@
 #
 #   RAW=DIR WORK=DIR [SEEDS="0 1"] [MODELS="unet"] [VARIANTS="R-auto HA-R-auto R-auto-dup S S+R-auto"] \
 #   [JOBS=2]  (MODELS: unet, deeplabv3plus with the ImageNet Lite0 encoder; fastscnn from scratch)
-#   [SIZE=128x416] [FREESPACE=freespace] [PYTHON=python] bash studies/real-roads/run.sh
+#   [SIZE=128x416] [RENDERED=TREE] [FREESPACE=freespace] [PYTHON=python] bash studies/real-roads/run.sh
 #
 # RAW: a KITTI raw root (date folders with calib_*.txt; drives with image_02/03, velodyne_points). WORK: the
 # study's working folder (autolabels, splits, rendered frames, run folders). Every step is skipped when its
 # output exists, so the script resumes; each cell is `freespace train` + studies/real-roads/evaluate.py.
+# RENDERED: a rendered tree (the converged run's same-rigs) that evaluate.py also scores each cell on.
+# The two drives come from fetch.sh beside this script.
 set -euo pipefail
 : "${RAW:?set RAW to a KITTI raw root}" "${WORK:?set WORK to a working folder}"
 SEEDS=${SEEDS:-"0 1 2 3 4"}
@@ -62,10 +64,10 @@ cell() {  # model variant seed
         OMP_NUM_THREADS=1 $FREESPACE train "${args[@]}" --model "$model" --seed "$seed" "${COMMON[@]}" \
             --out "$run" > "$run.log" 2>&1 || return 1
     fi
-    OMP_NUM_THREADS=1 "$PYTHON" "$HERE/evaluate.py" "$run" >> "$run.log" 2>&1
+    OMP_NUM_THREADS=1 "$PYTHON" "$HERE/evaluate.py" ${RENDERED:+--rendered "$RENDERED"} "$run" >> "$run.log" 2>&1
 }
 export -f cell
-export WORK RAW AL SYN MIX FREESPACE PYTHON HERE SIZE LITE0
+export WORK RAW AL SYN MIX FREESPACE PYTHON HERE SIZE LITE0 RENDERED=${RENDERED:-}
 export COMMON_TEXT="${COMMON[*]}"
 mkdir -p "$WORK/runs"
 for seed in $SEEDS; do for model in $MODELS; do for variant in $VARIANTS; do

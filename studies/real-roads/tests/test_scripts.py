@@ -46,6 +46,20 @@ def test_the_table_gives_means_intervals_and_paired_gains(tmp_path: Path) -> Non
     assert "notarun" not in text
 
 
+def test_the_table_gives_the_rendered_f_where_runs_have_it(tmp_path: Path) -> None:
+    evaluate = _load("evaluate")
+    for seed, f in enumerate((0.50, 0.60)):
+        _real_json(tmp_path / f"fastscnn-192x640-s-s{seed}", 0.4, 0.4, 0.5)
+        (tmp_path / f"fastscnn-192x640-s-s{seed}" / "rendered.json").write_text(json.dumps({"f": f, "max_f": f}))
+    _real_json(tmp_path / "unet-s-s0", 0.4, 0.4, 0.5)  # scored on the real frames only
+    text = evaluate.table(tmp_path)
+    assert text.splitlines()[0].endswith("| polygon recall | F rendered |")
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+    # 50 and 60: 55.0 ± 12.706·7.071/√2 = [-8.5, 118.5]
+    assert rows["fastscnn-192x640"].endswith("| 55.0 [-8.5, 118.5] |")
+    assert rows["unet"].endswith("| — |")
+
+
 def test_mix_links_both_sources_and_splits_them(tmp_path: Path) -> None:
     mix = _load("mix")
     syn = tmp_path / "syn" / "data_road" / "training"
