@@ -26,8 +26,8 @@ def _target(n: int, h: int, w: int) -> torch.Tensor:
 
 
 def test_registry() -> None:
-    assert MODELS == ["deeplabv3plus", "denseaspp", "dupsampling", "fastscnn", "gscnn", "segnet", "unet"]
-    with pytest.raises(InvalidOptionError, match="choose one of deeplabv3plus, denseaspp"):
+    assert MODELS == ["contextnet", "deeplabv3plus", "denseaspp", "dupsampling", "fastscnn", "gscnn", "segnet", "unet"]
+    with pytest.raises(InvalidOptionError, match="choose one of contextnet, deeplabv3plus, denseaspp"):
         create_model("fcn")
     with pytest.raises(InvalidOptionError, match="unknown preset 'huge' for model 'segnet'; choose one of light, pa"):
         create_model("segnet", preset="huge")
@@ -192,7 +192,7 @@ def test_train_warns_below_the_intact_size(caplog: pytest.LogCaptureFixture) -> 
 # output stride and largest dilation rate of each paper preset (DUpsampling: ResNet-50's last stage
 # dilated by 2 at ratio 16; SegNet: its deepest convolutions, block 5, at stride 16; U-Net: ResNet at 32)
 PAPER_GEOMETRY = {"deeplabv3plus": (16, 18), "denseaspp": (8, 24), "dupsampling": (16, 2), "gscnn": (8, 36),
-                  "segnet": (16, 1), "unet": (32, 1), "fastscnn": (32, 1)}
+                  "segnet": (16, 1), "unet": (32, 1), "fastscnn": (32, 1), "contextnet": (128, 1)}
 
 
 @pytest.mark.parametrize("name", MODELS)

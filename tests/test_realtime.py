@@ -72,6 +72,29 @@ def test_fast_network_is_registered_with_the_papers_size() -> None:
     assert light < 0.4 * paper           # half the channels: about a quarter of the weights
 
 
+def test_contextnet_starts_its_context_branch_from_imagenet_and_sees_the_frame_at_two_scales() -> None:
+    import torch
+
+    from freespace.errors import InvalidOptionError
+    from freespace.models import create_model, min_input_size
+
+    net = create_model("contextnet", encoder_weights="imagenet")
+    unet = create_model("unet", encoder_name="efficientnet-lite0", encoder_weights="imagenet")
+    ours, theirs = net.encoder.state_dict(), unet.net.encoder.state_dict()
+    assert ours.keys() == theirs.keys() and all(torch.equal(ours[k], theirs[k]) for k in ours)
+    assert torch.equal(net.mean, unet.mean) and torch.equal(net.std, unet.std)  # Lite's [-1, 1] scaling
+    seen: list[tuple[int, ...]] = []
+    net.encoder.stem.register_forward_hook(lambda m, i, o: seen.append(tuple(i[0].shape[2:])))
+    with torch.no_grad():
+        assert net.eval()(torch.rand(1, 3, 100, 330)).shape == (1, 2, 100, 330)
+    assert seen == [(64, 192)]  # padded to a multiple of 64 (128×384), the context branch at half of it
+    assert create_model("contextnet", preset="paper").divisor == 128 and min_input_size("contextnet") == (128, 128)
+    with pytest.raises(InvalidOptionError, match="EfficientNet-Lite encoder"):
+        create_model("contextnet", encoder_name="resnet18")
+    with pytest.raises(InvalidOptionError, match="context_scale must be 0.5 or 0.25"):
+        create_model("contextnet", context_scale=0.3)
+
+
 def test_trained_fixture_finds_the_road(files: dict[str, Path]) -> None:
     """The fixture's model is good enough that the agreement tests below mean something."""
     predictor = Predictor(onnx=files["onnx"])

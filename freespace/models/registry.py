@@ -3,7 +3,7 @@ preset table; :func:`create_model` builds by name and checks the preset and the 
 
 >>> from freespace.models import create_model, list_models, presets
 >>> list_models()
-['deeplabv3plus', 'denseaspp', 'dupsampling', 'fastscnn', 'gscnn', 'segnet', 'unet']
+['contextnet', 'deeplabv3plus', 'denseaspp', 'dupsampling', 'fastscnn', 'gscnn', 'segnet', 'unet']
 >>> sorted(presets("unet"))
 ['light', 'paper']
 """
@@ -147,7 +147,7 @@ def create_model(name: str, num_classes: int = 2, preset: str = "light", **optio
 
     Args:
         name: one of :func:`list_models` (``segnet``, ``unet``, ``deeplabv3plus``, ``denseaspp``, ``fastscnn``,
-            ``dupsampling``, ``gscnn``).
+            ``contextnet``, ``dupsampling``, ``gscnn``).
         num_classes: output classes (2: non-road, road).
         preset: ``light`` (the default; trains on a CPU) or ``paper`` (the original papers'
             configuration); :func:`presets` shows what each sets.
