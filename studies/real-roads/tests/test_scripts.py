@@ -60,6 +60,35 @@ def test_the_table_gives_the_rendered_f_where_runs_have_it(tmp_path: Path) -> No
     assert rows["unet"].endswith("| — |")
 
 
+def test_rendered_scores_every_frame_of_a_tree_and_refuses_an_empty_one(tmp_path: Path) -> None:
+    """``evaluate.py --rendered``: a run's best checkpoint on a rendered tree's frames (F and MaxF from summed
+    counts), written to RUN/rendered.json; a folder without frames is a one-line refusal."""
+    import numpy as np
+
+    from freespace.io.codecs import write_image
+    from helpers import road_frame, tiny_road_checkpoint
+
+    evaluate = _load("evaluate")
+    run = tmp_path / "fastscnn-s-s0"
+    (run / "checkpoints").mkdir(parents=True)
+    tiny_road_checkpoint(run / "checkpoints" / "best.ckpt", (32, 96), width=0.5)
+    training = tmp_path / "tree" / "data_road" / "training"
+    for folder in ("image_2", "gt_image_2"):
+        (training / folder).mkdir(parents=True)
+    for i in range(3):
+        image, road = road_frame((75, 250), 900 + i)
+        write_image(training / "image_2" / f"um_{i:06d}.png", image)
+        label = np.zeros((*road.shape, 3), np.uint8)
+        label[..., 0] = 255
+        label[road.astype(bool), 2] = 255  # KITTI road colours: magenta road, red non-road
+        write_image(training / "gt_image_2" / f"um_road_{i:06d}.png", label)
+    result = evaluate.evaluate_rendered(run, tmp_path / "tree")
+    assert result["images"] == 3 and 0.8 < result["f"] <= result["max_f"] <= 1  # the fixture finds the road
+    assert json.loads((run / "rendered.json").read_text())["f"] == result["f"]
+    with pytest.raises(SystemExit, match="no data_road/training/image_2 frames"):
+        evaluate.evaluate_rendered(run, tmp_path / "empty")
+
+
 def test_mix_links_both_sources_and_splits_them(tmp_path: Path) -> None:
     mix = _load("mix")
     syn = tmp_path / "syn" / "data_road" / "training"
