@@ -33,7 +33,7 @@ from torch import nn
 from freespace.errors import InvalidOptionError
 from freespace.models.base import SegmentationModel, load_smp_encoder
 from freespace.models.blocks import upsample_to
-from freespace.models.fastscnn import _bn_relu, _DSConv, _GlobalContext
+from freespace.models.fastscnn import _bn_relu, _DSConv, _fusion, _GlobalContext
 from freespace.models.registry import register_model
 
 __all__ = ["ContextNet"]
@@ -75,11 +75,7 @@ class ContextNet(SegmentationModel):
         f16, f32 = self.encoder.out_channels[-2:]
         self.context = _GlobalContext(f32, c128)
         self.lateral = nn.Sequential(nn.Conv2d(f16, c128, 1, bias=False), nn.BatchNorm2d(c128))
-        self.fuse_low = nn.Sequential(nn.Conv2d(c128, c128, 3, 1, 1, groups=c128, bias=False), *_bn_relu(c128),
-                                      nn.Conv2d(c128, c128, 1, bias=False), nn.BatchNorm2d(c128))
-        self.fuse_high = nn.Sequential(nn.Conv2d(c64, c128, 1, bias=False), nn.BatchNorm2d(c128))
-        self.classifier = nn.Sequential(_DSConv(c128, c128), _DSConv(c128, c128), nn.Dropout2d(0.1),
-                                        nn.Conv2d(c128, num_classes, 1))
+        self.fuse_low, self.fuse_high, self.classifier = _fusion(c64, c128, num_classes)
 
     def forward_features(self, x: torch.Tensor) -> torch.Tensor:
         high = self.detail(x)

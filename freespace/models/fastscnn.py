@@ -81,6 +81,17 @@ class _GlobalContext(nn.Module):
         return self.local(x) * torch.sigmoid(self.gate(x.mean((2, 3), keepdim=True)))
 
 
+def _fusion(c_high: int, c: int, num_classes: int) -> tuple[nn.Module, nn.Module, nn.Module]:
+    """Feature fusion and classifier: ``fuse_low`` (depthwise 3×3 and 1×1 of the upsampled ``c``-channel context
+    features), ``fuse_high`` (1×1 of the ``c_high``-channel high-resolution features to ``c``), whose sum goes
+    through a ReLU into ``classifier`` (two depthwise-separable convolutions, dropout, 1×1 to the classes)."""
+    fuse_low = nn.Sequential(nn.Conv2d(c, c, 3, 1, 1, groups=c, bias=False), *_bn_relu(c),
+                             nn.Conv2d(c, c, 1, bias=False), nn.BatchNorm2d(c))
+    fuse_high = nn.Sequential(nn.Conv2d(c_high, c, 1, bias=False), nn.BatchNorm2d(c))
+    classifier = nn.Sequential(_DSConv(c, c), _DSConv(c, c), nn.Dropout2d(0.1), nn.Conv2d(c, num_classes, 1))
+    return fuse_low, fuse_high, classifier
+
+
 class FastSCNN(SegmentationModel):
     """Fast-SCNN: learning to downsample (stride 8), a global feature extractor (stride 32), feature fusion
     and a light classifier (see the module's docstring for the design and its one departure)."""
@@ -105,11 +116,7 @@ class FastSCNN(SegmentationModel):
                 stages.append(_Bottleneck(cin, cout, stride if i == 0 else 1, expansion))
                 cin = cout
         self.features = nn.Sequential(*stages, _GlobalContext(c128, c128))
-        self.fuse_low = nn.Sequential(nn.Conv2d(c128, c128, 3, 1, 1, groups=c128, bias=False), *_bn_relu(c128),
-                                      nn.Conv2d(c128, c128, 1, bias=False), nn.BatchNorm2d(c128))
-        self.fuse_high = nn.Sequential(nn.Conv2d(c64, c128, 1, bias=False), nn.BatchNorm2d(c128))
-        self.classifier = nn.Sequential(_DSConv(c128, c128), _DSConv(c128, c128), nn.Dropout2d(0.1),
-                                        nn.Conv2d(c128, num_classes, 1))
+        self.fuse_low, self.fuse_high, self.classifier = _fusion(c64, c128, num_classes)
 
     def forward_features(self, x: torch.Tensor) -> torch.Tensor:
         high = self.downsample(x)
