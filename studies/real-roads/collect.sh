@@ -9,6 +9,10 @@ for run in "$WORK"/runs/*/; do
     run=${run%/}
     [ -f "$run/real.json" ] || continue  # unfinished, or not evaluated yet
     dest=$HERE/runs/$(basename "$run")
+    if [ -f "$dest/metrics.json" ] && ! cmp -s "$run/metrics.json" "$dest/metrics.json"; then
+        echo "kept $dest: its record is of another run of that cell (a rerun, or another commit); rename one" >&2
+        continue
+    fi
     mkdir -p "$dest/splits"
     for f in config.yaml inputs.json metrics.csv metrics.json real.json rendered.json; do
         [ -f "$run/$f" ] && cp "$run/$f" "$dest/$f"
