@@ -284,7 +284,7 @@ def test_bad_encoder_options_fail_before_any_work(tiny: Path, tmp_path: Path, co
              (["--encoder-name", "efficientnet-lite9"], "unknown encoder 'efficientnet-lite9'")]
     if command == "train":
         cases.append((["--model", "segnet", "--encoder-name", LITE0], "--encoder-name: segnet takes none; the "
-                      "networks that do: deeplabv3plus, denseaspp, dupsampling, gscnn, unet"))
+                      "networks that do: contextnet, deeplabv3plus, denseaspp, dupsampling, gscnn, unet"))
     for extra, message in cases:
         assert main([command, *common, *model, *extra]) == 2
         err = capsys.readouterr().err.strip()
