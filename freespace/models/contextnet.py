@@ -2,26 +2,25 @@
 Detail for Semantic Segmentation in Real-time", BMVC 2018): a deep branch that sees the frame at a reduced
 resolution for context, and a shallow branch that sees it at full resolution for detail, fused at stride 8.
 
-Design, as in the paper:
+Design:
 
 - **Detail branch** (the full input, stride 8): a 3×3 stride-2 convolution, then two depthwise-separable
-  stride-2 convolutions (Fast-SCNN's *learning to downsample*, 16, 24, 32 channels at ``width`` 0.5).
-- **Context branch** (the input resized by ``context_scale``): a deep encoder down to stride 32 of its own
-  input, and a context module (:class:`~freespace.models.fastscnn._GlobalContext`).
-- **Feature fusion**: the context features upsampled to the detail branch's grid, a depthwise 3×3 and a 1×1
-  convolution, added to a 1×1 convolution of the detail features, ReLU.
-- **Classifier**: two depthwise-separable convolutions, dropout, a 1×1 convolution to the classes, upsampled
-  ×8 bilinearly to the input.
+  stride-2 convolutions (16, 24, 32 channels at ``width`` 0.5; Fast-SCNN's *learning to downsample*, where the
+  paper's shallow branch has one more depthwise-separable convolution).
+- **Context branch** (the input resized by ``context_scale``): EfficientNet-Lite0 down to stride 32 of its own
+  input (:class:`~freespace.models.lite.LiteEncoder`, ImageNet weights shipped by ``freespace[pretrained]``),
+  LR-ASPP's global-context gating on its last map (:class:`~freespace.models.fastscnn._GlobalContext`), added,
+  upsampled, to a 1×1 convolution of its stride-16 map.
+- **Feature fusion and classifier**, as the paper's: the context features upsampled to the detail branch's
+  grid, a depthwise 3×3 and a 1×1 convolution, added to a 1×1 convolution of the detail features, ReLU; two
+  depthwise-separable convolutions, dropout, a 1×1 convolution to the classes, upsampled ×8 bilinearly.
 
-Departures: the context branch is EfficientNet-Lite0 (:class:`~freespace.models.lite.LiteEncoder`, ImageNet
-weights shipped by ``freespace[pretrained]``) instead of the paper's MobileNetV2 bottlenecks trained from
-scratch, with Lite0's stride-16 map added to its upsampled stride-32 map before the fusion (the paper fuses
-only the deepest map); and the paper's ``context_scale`` is 1/4, the default here 1/2 (the ``paper`` preset
-has 1/4). An ImageNet start is what a from-scratch fast network lacks on a few hundred training frames
-(Fast-SCNN's validation F stops near 0.88 on 300 rendered frames, the Lite0 U-Net's near 0.98), and the
-shallow branch keeps the road's edges at the full input's resolution, which a whole network at a reduced size
-loses. The input is padded to a multiple of ``32 / context_scale`` (64 at 1/2), so the resized frame is a
-multiple of 32.
+Departures from the paper: its deep branch is MobileNetV2 bottlenecks trained from scratch on the deepest map
+alone; here it is the ImageNet Lite0 encoder with its stride-16 map and a global context. The paper's
+``context_scale`` is 1/4 (the ``paper`` preset); the default here is 1/2. An ImageNet start is what a
+from-scratch fast network lacks on a few hundred training frames, and the shallow branch keeps the road's edges
+at the full input's resolution, which a whole network at a reduced size loses. The input is padded to a
+multiple of ``32 / context_scale`` (64 at 1/2), so the resized frame is a multiple of 32.
 """
 
 from __future__ import annotations
