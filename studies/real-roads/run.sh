@@ -2,7 +2,7 @@
 # Real roads, no people (issue 45): the data, the variants' cells and their real-frame evaluation.
 #
 #   RAW=DIR WORK=DIR [SEEDS="0 1"] [MODELS="unet"] [VARIANTS="R-auto HA-R-auto R-auto-dup S S+R-auto"] \
-#   [JOBS=2]  (MODELS: unet, deeplabv3plus with the ImageNet Lite0 encoder; fastscnn from scratch)
+#   [JOBS=2]  (MODELS: unet, deeplabv3plus, contextnet with the ImageNet Lite0 encoder; fastscnn from scratch)
 #   [SIZE=128x416] [RENDERED=TREE] [FREESPACE=freespace] [PYTHON=python] bash studies/real-roads/run.sh
 #
 # RAW: a KITTI raw root (date folders with calib_*.txt; drives with image_02/03, velodyne_points). WORK: the
