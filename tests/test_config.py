@@ -105,7 +105,8 @@ def _folders(tmp_path: Path) -> dict[str, str]:
 
 def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) -> None:
     """The recorded-settings check of reproduce passes for a cell written before this version, and the cell
-    is written back in the same spellings (the disparity source's key renamed, the old key read too)."""
+    is written back in the same spellings (the disparity source's key renamed, the old key read too; the options
+    added since written at their defaults)."""
     from freespace.experiments.cells import check_cell as _check_cell
 
     where = _folders(tmp_path)
@@ -126,7 +127,8 @@ def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) 
             _check_cell(dataclasses.replace(cell, **change))
     TrainConfig.load(run / "config.yaml").save(tmp_path / "again.yaml")
     assert (tmp_path / "again.yaml").read_text() == \
-        CAMPAIGN_YAML.format(**where).replace("disparity_mode:", "disparity_source:")
+        CAMPAIGN_YAML.format(**where).replace("disparity_mode:", "disparity_source:").replace(
+            "augment: homography\n", "augment: homography\nflip: false\nphotometric: false\n")  # options added since
 
 
 def test_diff_lets_only_the_cap_and_patience_grow(tmp_path: Path) -> None:
@@ -159,7 +161,8 @@ def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:
     old.save(tmp_path / "new.yaml")
     written, before = yaml.safe_load((tmp_path / "new.yaml").read_text()), yaml.safe_load(OLDER_YAML.format(**where))
     assert written == {**{k if k != "disparity_mode" else "disparity_source": v for k, v in before.items()},
-                       "virtual_shift": "0.5,0.2,0"}  # one spelling per value
+                       "virtual_shift": "0.5,0.2,0", "flip": False, "photometric": False}  # one spelling per value;
+    # the options added since, at their defaults
     assert TrainConfig.load(tmp_path / "new.yaml") == old
     assert read_config_yaml(tmp_path / "old.yaml")["augment"] == ("homography", "virtual")
 

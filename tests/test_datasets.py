@@ -391,6 +391,44 @@ def test_torch_dataset_training_options(tmp_path: Path) -> None:
     assert set(torch.unique(torch.stack(draws)).tolist()) <= {0, 1, IGNORE_INDEX}
 
 
+def test_torch_dataset_flip_and_photometric(tmp_path: Path) -> None:
+    """``flip`` mirrors image and label together, about half the draws; ``photometric`` changes the colours and
+    never the label; both are drawn from (seed, epoch, i) only; ``affine`` alone keeps the paper's draws."""
+    torch = pytest.importorskip("torch")
+    from freespace.data.torch_dataset import RoadSegmentationDataset
+
+    names = kitti_tree(tmp_path, 1)
+    kitti = KittiRoad(tmp_path, disparity_source="none")
+    plain = RoadSegmentationDataset(kitti, names)[0]
+    flips = RoadSegmentationDataset(kitti, names, flip=True, seed=1)
+    mirrored = []
+    for e in range(40):
+        s = flips[(e, 0)]
+        if torch.equal(s["image"], plain["image"]):
+            assert torch.equal(s["label"], plain["label"])
+            mirrored.append(False)
+        else:  # mirrored: the image and its label with it
+            assert torch.equal(s["image"], plain["image"].flip(-1)) and torch.equal(s["label"], plain["label"].flip(-1))
+            mirrored.append(True)
+    assert 10 <= sum(mirrored) <= 30
+    assert [torch.equal(flips[(e, 0)]["image"], plain["image"]) for e in range(40)] == [not m for m in mirrored]
+
+    colour = RoadSegmentationDataset(kitti, names, photometric=True, seed=1)
+    draws = [colour[(e, 0)] for e in range(10)]
+    assert all(torch.equal(d["label"], plain["label"]) for d in draws)
+    assert sum(not torch.equal(d["image"], plain["image"]) for d in draws) >= 5
+    assert all(torch.equal(d["image"], colour[(e, 0)]["image"]) for e, d in enumerate(draws))
+
+    # the paper's augmentation alone draws as it did before these options: its own pipeline of one step
+    import albumentations as A
+
+    from freespace.data.torch_dataset import _augmenter
+
+    assert [type(t) for t in _augmenter(True, False, False).transforms] == [A.Affine]
+    assert [type(t) for t in _augmenter(True, True, True).transforms] == [A.ColorJitter, A.HorizontalFlip, A.Affine]
+    assert _augmenter(False, False, False) is None
+
+
 def test_datasets_split_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     synthia_tree(tmp_path / "s", n=5)
     out = tmp_path / "lists"

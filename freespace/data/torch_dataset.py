@@ -11,6 +11,9 @@ Samples are dicts: ``image`` float32 ``3×H×W`` in [0, 1] (normalisation belong
   image and label together; label borders become don't care). Keys may be ``(epoch, i)`` pairs (see
   :class:`freespace.engine.data.EpochSampler`): the augmentation of sample i in an epoch depends only on
   (``seed``, epoch, i), so a resumed run sees exactly the same data;
+* ``flip=True``, ``photometric=True``: a left-right mirror of image and label (probability ½) and a colour jitter
+  of the image (brightness, contrast and saturation ×0.75–1.25, hue ±0.04 turn; probability 0.8), drawn with the
+  conventional augmentation (before it, in this order); not in the paper, for training on few real drives;
 * ``virtual=VirtualAugment(...)``: road-plane virtual views (a training run's ``augment="virtual"``),
   drawn from (``seed``, epoch, i) like the conventional augmentation and applied before it (when both are
   on), with the torch-free :func:`freespace.geometry.virtual_view`;
@@ -100,12 +103,18 @@ def resized_intrinsics(K: np.ndarray, src: tuple[int, int], dst: tuple[int, int]
     return S @ K
 
 
-def _augmenter():
+def _augmenter(affine: bool, flip: bool, photometric: bool) -> Any:
+    """The per-sample augmentations that are on, as one albumentations pipeline (None when none is): the colour
+    jitter, the mirror, then the paper's conventional augmentation (random translation and rotation of image and
+    label together). With ``affine`` alone it is the paper's pipeline as it always was (the same draws)."""
     import albumentations as A
 
-    # the paper's conventional augmentation: random translation and rotation of image and label together
-    return A.Compose([A.Affine(translate_percent=(-0.1, 0.1), rotate=(-10, 10), p=0.8,
-                               border_mode=cv2.BORDER_CONSTANT, fill=0, fill_mask=IGNORE_INDEX)], seed=0)
+    steps = [A.ColorJitter(brightness=(0.75, 1.25), contrast=(0.75, 1.25), saturation=(0.75, 1.25),
+                           hue=(-0.04, 0.04), p=0.8)] if photometric else []
+    steps += [A.HorizontalFlip(p=0.5)] if flip else []
+    steps += [A.Affine(translate_percent=(-0.1, 0.1), rotate=(-10, 10), p=0.8, border_mode=cv2.BORDER_CONSTANT,
+                       fill=0, fill_mask=IGNORE_INDEX)] if affine else []
+    return A.Compose(steps, seed=0) if steps else None
 
 
 class RoadSegmentationDataset(torch.utils.data.Dataset):
@@ -118,7 +127,9 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         size: ``(H, W)`` to resize to, or None (each frame's own size).
         affine: the conventional augmentation (random translation and rotation), drawn from (``seed``,
             epoch, i).
-        seed: the seed of both augmentations.
+        flip: mirror image and label left-right with probability ½, drawn like ``affine``.
+        photometric: jitter the image's colours, drawn like ``affine``.
+        seed: the seed of the augmentations.
         cache: keep decoded frames in memory.
         virtual: road-plane virtual views, drawn from (``seed``, epoch, i); before the conventional
             augmentation when both are on.
@@ -130,7 +141,8 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
     def __init__(self, dataset: StereoRoadDataset, names: Sequence[str | Item] | None = None,
                  transform: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None, *,
                  size: tuple[int, int] | None = None, affine: bool = False, seed: int = 0,
-                 cache: bool = False, virtual: VirtualAugment | None = None) -> None:
+                 cache: bool = False, virtual: VirtualAugment | None = None, flip: bool = False,
+                 photometric: bool = False) -> None:
         self.dataset = dataset
         wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
         self.items = [n if isinstance(n, Item) else Item(dataset.index(n), n) for n in wanted]
@@ -140,7 +152,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
                                f"train on a labelled split")
         self.transform, self.size, self.affine, self.seed, self.cache = transform, size, affine, seed, cache
         self._cache: dict[tuple[int, str | None], tuple[np.ndarray, np.ndarray]] = {}
-        self._aug = _augmenter() if affine else None
+        self._aug = _augmenter(affine, flip, photometric)
         self.virtual = virtual
         self._K: dict[tuple[int, str | None], np.ndarray] = {}  # intrinsics at the decoded size, by frame and image
 

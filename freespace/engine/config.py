@@ -262,6 +262,11 @@ class TrainConfig:
                                f"duplicate (the control of homography) adds every training frame that has a "
                                f"DS-Generator view once more, unchanged, so that it takes as many steps per epoch",
                                (), choices=AUGMENTS)
+    flip: bool = _option("also mirror each training sample left-right (image and label) with probability ½, drawn "
+                         "like the conventional augmentation", False)
+    photometric: bool = _option("also jitter each training sample's brightness, contrast and saturation (×0.75–1.25) "
+                                "and hue (±0.04 turn) with probability 0.8, drawn like the conventional augmentation",
+                                False)
     epochs: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = _option("most epochs", 50)
     batch_size: Annotated[int, Field(ge=1, le=MAX_BATCH_SIZE)] = _option("training batch size", 4)
     lr: Annotated[float, Field(gt=0, lt=10)] = _option("SGD learning rate", 0.001)

@@ -386,7 +386,9 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     ds, size = data["dataset"], tuple(data["size"])
     warn_if_below_intact_size(config.model, config.preset, size)
     train, val, test = (RoadSegmentationDataset(ds, data[k], size=size, affine=k == "train", seed=config.seed,
-                                                cache=True, virtual=data["virtual"] if k == "train" else None)
+                                                cache=True, virtual=data["virtual"] if k == "train" else None,
+                                                flip=config.flip and k == "train",
+                                                photometric=config.photometric and k == "train")
                         for k in ("train", "val", "test"))
 
     def loader(frames: RoadSegmentationDataset, shuffle: bool) -> torch.utils.data.DataLoader:

@@ -15,8 +15,8 @@ the KITTI MaxF from counts summed over the frames, in ``RUN/rendered.json``. For
 frames are out of domain; for S they are the domain it trained on.
 
 The table gives, per network and variant, the mean over seeds with its 95 % t-interval (n − 1 degrees of
-freedom; ``n`` seeds), and the paired gains of every variant over S and of HA-R-auto over R-auto-dup, one
-difference per seed (the cells of a seed share the seed; the paired interval is
+freedom; ``n`` seeds), and the paired gains of every variant over S, of HA-R-auto over R-auto-dup and R-auto,
+and of the -fp variants (mirror and colour jitter) over their bases, one difference per seed (the cells of a seed share the seed; the paired interval is
 :func:`freespace.experiments.stats.paired_gain`'s).
 """
 
@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench"))
 
 VARIANT_TAGS = {"s": "S", "r-auto": "R-auto", "ha-r-auto": "HA-R-auto", "r-auto-dup": "R-auto-dup",
-                "s_r-auto": "S+R-auto"}
+                "s_r-auto": "S+R-auto", "r-auto-fp": "R-auto-fp", "s_r-auto-fp": "S+R-auto-fp"}
 _RUN = re.compile(r"(?P<model>[a-z0-9]+(?:-\d+x\d+)?)-(?P<tag>[a-z_-]+)-s(?P<seed>\d+)$")
 THRESHOLD = 0.5
 
@@ -151,8 +151,8 @@ def table(runs: Path) -> str:
     lines += ["", "Paired gains (points, mean [95 % t-interval], one difference per seed):", "",
               "| network | gain | seeds | mean F (masks) | pooled F | polygon recall |", "|---|---|---:|---:|---:|---:|"]
     for model in sorted({m for m, _ in cells}):
-        pairs = [(v, "S") for v in ("R-auto", "HA-R-auto", "R-auto-dup", "S+R-auto")] + [("HA-R-auto", "R-auto-dup"),
-                                                                                        ("HA-R-auto", "R-auto")]
+        pairs = [(v, "S") for v in ("R-auto", "HA-R-auto", "R-auto-dup", "S+R-auto")] + [
+            ("HA-R-auto", "R-auto-dup"), ("HA-R-auto", "R-auto"), ("R-auto-fp", "R-auto"), ("S+R-auto-fp", "S+R-auto")]
         for a, b in pairs:
             if (model, a) not in cells or (model, b) not in cells:
                 continue

@@ -9,7 +9,8 @@
 # study's working folder (autolabels, splits, rendered frames, run folders). Every step is skipped when its
 # output exists, so the script resumes; each cell is `freespace train` + studies/real-roads/evaluate.py.
 # RENDERED: a rendered tree (the converged run's same-rigs) that evaluate.py also scores each cell on.
-# The two drives come from fetch.sh beside this script.
+# The two drives come from fetch.sh beside this script. A variant with the suffix -fp (R-auto-fp, S+R-auto-fp)
+# trains as its base with `--flip --photometric` (mirror and colour jitter: not in the paper; issue 45's target).
 set -euo pipefail
 : "${RAW:?set RAW to a KITTI raw root}" "${WORK:?set WORK to a working folder}"
 SEEDS=${SEEDS:-"0 1 2 3 4"}
@@ -41,12 +42,13 @@ if [ ! -f "$MIX/freespace.yaml" ]; then
 fi
 
 cell() {  # model variant seed
-    local model=$1 variant=$2 seed=$3 tag run
+    local model=$1 variant=$2 seed=$3 tag run extra=()
     tag=$(echo "$variant" | tr 'A-Z+' 'a-z_')
     run=$WORK/runs/$model-$tag-s$seed
     [ "$SIZE" = 128x416 ] || run=$WORK/runs/$model-$SIZE-$tag-s$seed
     [ -f "$run/real.json" ] && return 0
-    case $variant in
+    [ "${variant%-fp}" != "$variant" ] && extra=(--flip --photometric)
+    case ${variant%-fp} in
         S) args=(--dataset synth --root "$SYN") ;;
         R-auto) args=(--dataset kitti-raw --root "$RAW" --labels "$AL" --splits "$WORK/splits-raw") ;;
         HA-R-auto) args=(--dataset kitti-raw --root "$RAW" --labels "$AL" --splits "$WORK/splits-raw"
@@ -61,7 +63,7 @@ cell() {  # model variant seed
         OMP_NUM_THREADS=1 $FREESPACE train --config "$run/config.yaml" --out "$run" --resume > "$run.log" 2>&1 || return 1
     elif [ ! -f "$run/metrics.json" ]; then
         [ "$model" = fastscnn ] || args+=($LITE0)  # Fast-SCNN: its own encoder, trained from scratch
-        OMP_NUM_THREADS=1 $FREESPACE train "${args[@]}" --model "$model" --seed "$seed" "${COMMON[@]}" \
+        OMP_NUM_THREADS=1 $FREESPACE train "${args[@]}" "${extra[@]}" --model "$model" --seed "$seed" "${COMMON[@]}" \
             --out "$run" > "$run.log" 2>&1 || return 1
     fi
     OMP_NUM_THREADS=1 "$PYTHON" "$HERE/evaluate.py" ${RENDERED:+--rendered "$RENDERED"} "$run" >> "$run.log" 2>&1

@@ -34,6 +34,7 @@ def test_the_table_gives_means_intervals_and_paired_gains(tmp_path: Path) -> Non
         _real_json(tmp_path / f"unet-s-s{seed}", s, s, 0.5)
         _real_json(tmp_path / f"unet-r-auto-s{seed}", r, r, 0.99)
     _real_json(tmp_path / "unet-64x208-r-auto-s0", 0.7, 0.7, 0.9)  # another size: its own row
+    _real_json(tmp_path / "unet-r-auto-fp-s1", 0.80, 0.80, 0.99)  # mirror and colour jitter: paired with R-auto
     _real_json(tmp_path / "notarun", 0.1, 0.1, 0.1)  # not a cell's name: ignored
     text = evaluate.table(tmp_path)
     rows = {tuple(c.strip() for c in line.split("|")[1:3]): line for line in text.splitlines() if line.startswith("| unet")}
@@ -43,6 +44,9 @@ def test_the_table_gives_means_intervals_and_paired_gains(tmp_path: Path) -> Non
     gain = next(line for line in text.splitlines() if "R-auto − S" in line)
     # paired differences 30, 24, 33 points: mean 29.0, t-interval 29 ± 4.303·4.583/√3 = [17.6, 40.4]
     assert "+29.0 [+17.6, +40.4]" in gain and "| 3 |" in gain
+    assert "| 1 |" in rows["unet", "R-auto-fp"]
+    fp = next(line for line in text.splitlines() if "R-auto-fp − R-auto" in line)
+    assert "| 1 | +6.0 |" in fp  # seed 1 only: 80 − 74
     assert "notarun" not in text
 
 
