@@ -150,6 +150,21 @@ def test_the_protocol_reads_its_data_and_variants(study: Path) -> None:
     assert run_of("unet-a-s", p.vocabulary) is None and run_of("a-s0", p.vocabulary) is None
 
 
+def test_a_declared_variant_may_mirror_and_jitter_its_samples(study: Path, env: Path, tmp_path: Path) -> None:
+    """``flip: true`` and ``photometric: true`` in a declared variant: its cells train with those switches on; the
+    others keep them off."""
+    from freespace.experiments.cells import cell_config
+
+    (tmp_path / "p.yaml").write_text(PROTOCOL.replace("A-dup: {data: first, augment: duplicate}", "A-fp: {data: "
+                                                      "first, flip: true, photometric: true}").replace("A-dup", "A-fp"))
+    p = Protocol.load(tmp_path / "p.yaml")
+    assert [v.samples for v in p.declared.values()] == [(), ("flip", "photometric"), ()]
+    options = {"epochs": 1, "patience": 1, "image_size": (32, 64)}
+    fp, a = (cell_config(None, None, tmp_path / "o", "segnet", v, 0, options, protocol=p) for v in ("A-fp", "A"))
+    assert (fp.flip, fp.photometric, Path(fp.out).name) == (True, True, "segnet-a-fp-s0")
+    assert (a.flip, a.photometric) == (False, False)
+
+
 #: (protocol text, what the one line says); each refused when the file is read, before any work
 BAD = [
     ("data: {a: {dataset: synth, root: r}}\nvariants: {A: {data: b}}\ngains: [A - A]\n", "variant A: unknown data 'b'"),
@@ -167,7 +182,9 @@ BAD = [
     ("data: {a: {dataset: synth, root: r}}\nvariants: {A: {data: a, augment: warp}}\ngains: []\n",
      "variant A: augment must be one of"),
     ("data: {a: {dataset: synth, root: r}}\nvariants: {A: {data: a, labels: l}}\ngains: []\n",
-     "variant A must be a mapping of data and augment"),
+     "variant A must be a mapping of data, augment, flip and photometric"),
+    ("data: {a: {dataset: synth, root: r}}\nvariants: {A: {data: a, flip: 'yes'}}\ngains: []\n",
+     "variant A: flip must be true or false, got 'yes'"),
     ("data: {a: {dataset: synth, root: r}}\nvariants: [X, HA-X]\n", "give variants as a mapping"),
     ("variants: {A: {data: a}}\ngains: [A - A]\n", "variants given as a mapping declare their own training data"),
     ("data: {a: {dataset: synth, root: r}}\nvariants: {A: {data: a}, B: {data: a}}\n", "names its gains"),

@@ -87,7 +87,7 @@ def cell_config(dataset: str | None, root: PathLike | None, out: Path, model: st
         options.update(labels=str(autolabels), human_share=MIX_HUMAN_SHARE if spec.labels == "mix" else 0.0)
     config = TrainConfig(dataset=dataset, root=str(root),
                          out=str(out / "runs" / run_name(model, variant, seed, vocabulary)), model=model,
-                         augment=spec.augment, seed=seed, **options)
+                         augment=spec.augment, seed=seed, **{k: True for k in spec.samples}, **options)
     config.check()
     return config
 

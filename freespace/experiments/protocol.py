@@ -29,10 +29,11 @@ A study whose arms train on *other data* declares them, each with its training d
       real: {dataset: kitti-raw, root: "${RAW}", labels: "${WORK}/autolabels", splits: "${WORK}/splits",
              cache_dir: "${WORK}/sgbm-cache"}    # then relative ones from the protocol file's folder)
       rendered: {dataset: synth, root: syn}
-    variants:                               # a mapping: NAME: {data, augment}; run in this order
+    variants:                               # a mapping: NAME: {data, augment, flip, photometric}; in this order
       S: {data: rendered}
       R-auto: {data: real}
       HA-R-auto: {data: real, augment: homography}
+      R-auto-fp: {data: real, flip: true, photometric: true}   # train --flip --photometric
     gains: [R-auto - S, HA-R-auto - R-auto]  # required
 
 A declared variant's name (letters, digits, ``+``, ``-``, ``_``; none of :data:`VARIANTS`, in any case) is
@@ -58,6 +59,8 @@ __all__ = ["DataSource", "DATA_KEYS", "Primary", "Protocol"]
 #: a declared variant's name (a protocol file's ``variants`` mapping), and a training source's (``data``)
 _VARIANT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9+_-]{0,39}")
 _DATA_NAME = re.compile(r"[a-z][a-z0-9_-]{0,39}")
+#: the per-sample augmentations a declared variant may switch on (TrainConfig's switches)
+_SAMPLES = ("flip", "photometric")
 #: ``${NAME}`` in a training source's paths: the environment variable's value
 _ENV = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
 
@@ -295,7 +298,7 @@ def _data(data: Any, base: Path, file: str) -> dict[str, DataSource]:
 
 
 def _declared(data: Any, sources: dict[str, DataSource]) -> dict[str, Variant]:
-    """A protocol's ``variants`` mapping (``NAME: {data, augment}``) → its :class:`Variant` s, in the file's
+    """A protocol's ``variants`` mapping (``NAME: {data, augment, flip, photometric}``) → its :class:`Variant` s, in the file's
     order, each training on one of ``sources``."""
     from freespace.engine.config import AUGMENTS, parse_augment
 
@@ -311,9 +314,12 @@ def _declared(data: Any, sources: dict[str, DataSource]) -> dict[str, Variant]:
         if name.upper() in builtin:
             raise InvalidOptionError(f"variant {name} is (or spells) the built-in variant {builtin[name.upper()]}, "
                                      f"which trains on reproduce's own dataset; give the declared one another name")
-        if not isinstance(spec, dict) or set(spec) - {"data", "augment"}:
-            raise InvalidOptionError(f"variant {name} must be a mapping of data and augment (e.g. {{data: "
-                                     f"{next(iter(sources))}}})")
+        if not isinstance(spec, dict) or set(spec) - {"data", "augment", *_SAMPLES}:
+            raise InvalidOptionError(f"variant {name} must be a mapping of data, augment, flip and photometric (e.g. "
+                                     f"{{data: {next(iter(sources))}}})")
+        wrong = next((k for k in _SAMPLES if not isinstance(spec.get(k, False), bool)), None)
+        if wrong:
+            raise InvalidOptionError(f"variant {name}: {wrong} must be true or false, got {spec[wrong]!r}")
         if spec.get("data") not in sources:
             what = f"unknown data {spec['data']!r}" if "data" in spec else "names no data"
             raise InvalidOptionError(f"variant {name}: {what}; give data: one of {', '.join(sources)}")
@@ -330,7 +336,8 @@ def _declared(data: Any, sources: dict[str, DataSource]) -> dict[str, Variant]:
             raise InvalidOptionError(f"variants {tags[tag]} and {name} would share the run folders' tag {tag!r} "
                                      f"(the name in lower case, + as _); rename one")
         tags[tag] = name
-        declared[name] = Variant(name, augment, tag, data=spec["data"])
+        declared[name] = Variant(name, augment, tag, data=spec["data"],
+                                 samples=tuple(k for k in _SAMPLES if spec.get(k)))
     unused = [s for s in sources if all(v.data != s for v in declared.values())]
     if unused:
         raise InvalidOptionError(f"data {unused[0]} is the data of no variant; name it in one, or remove it")

@@ -24,7 +24,9 @@ class Variant:
     labels come from: ``human`` (the dataset's), ``auto`` (the ``autolabels`` tree) or ``mix`` (the
     dataset's on :data:`MIX_HUMAN_SHARE` of the training drives, the tree's on the rest). ``data``: the
     training source (a :attr:`Protocol.data` name) of a variant a protocol file declares; None for the built-in
-    ones, which train on ``reproduce``'s dataset."""
+    ones, which train on ``reproduce``'s dataset. ``samples``: the per-sample augmentations a declared variant
+    adds to the conventional one (``flip``, ``photometric``: :class:`~freespace.engine.config.TrainConfig`'s
+    switches of those names)."""
 
     name: str
     augment: tuple[str, ...]
@@ -32,6 +34,7 @@ class Variant:
     budget: int = 1
     labels: str = "human"
     data: str | None = None
+    samples: tuple[str, ...] = ()
 
     def label(self, model: str) -> str:
         """The table row of ``model``: ``X`` replaced by the network's name (``HA-X`` → ``HA-unet``); a declared
