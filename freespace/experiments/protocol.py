@@ -33,7 +33,7 @@ A study whose arms train on *other data* declares them, each with its training d
       S: {data: rendered}
       R-auto: {data: real}
       HA-R-auto: {data: real, augment: homography}
-      R-auto-fp: {data: real, flip: true, photometric: true}   # train --flip --photometric
+      R-auto-fp: {data: real, flip: true, photometric: true}   # the TrainConfig switches of those names
     gains: [R-auto - S, HA-R-auto - R-auto]  # required
 
 A declared variant's name (letters, digits, ``+``, ``-``, ``_``; none of :data:`VARIANTS`, in any case) is
