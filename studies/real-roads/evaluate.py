@@ -149,7 +149,8 @@ def table(runs: Path) -> str:
         row = [_interval([s[c] for s in seeds.values()]) for c in columns]
         lines.append(f"| {model} | {variant} | {len(seeds)} | " + " | ".join(row) + " |")
     lines += ["", "Paired gains (points, mean [95 % t-interval], one difference per seed):", "",
-              "| network | gain | seeds | mean F (masks) | pooled F | polygon recall |", "|---|---|---:|---:|---:|---:|"]
+              "| network | gain | seeds | mean F (masks) | pooled F | polygon recall | F rendered |",
+              "|---|---|---:|---:|---:|---:|---:|"]
     for model in sorted({m for m, _ in cells}):
         pairs = [(v, "S") for v in ("R-auto", "HA-R-auto", "R-auto-dup", "S+R-auto")] + [
             ("HA-R-auto", "R-auto-dup"), ("HA-R-auto", "R-auto"), ("R-auto-fp", "R-auto"), ("S+R-auto-fp", "S+R-auto")]
@@ -160,9 +161,10 @@ def table(runs: Path) -> str:
             if not seeds:
                 continue
             row = []
-            for c in ("mean F (masks)", "pooled f_score", "polygon recall"):
+            for c in ("mean F (masks)", "pooled f_score", "polygon recall", "F rendered"):
                 g = paired_gain([100 * cells[model, a][s][c] for s in seeds], [100 * cells[model, b][s][c] for s in seeds])
-                row.append(f"{g.mean:+.1f}" if g.n < 2 else f"{g.mean:+.1f} [{g.ci_low:+.1f}, {g.ci_high:+.1f}]")
+                row.append("—" if np.isnan(g.mean) else f"{g.mean:+.1f}" if g.n < 2 else
+                           f"{g.mean:+.1f} [{g.ci_low:+.1f}, {g.ci_high:+.1f}]")
             lines.append(f"| {model} | {a} − {b} | {len(seeds)} | " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 

@@ -55,13 +55,20 @@ def test_the_table_gives_the_rendered_f_where_runs_have_it(tmp_path: Path) -> No
     for seed, f in enumerate((0.50, 0.60)):
         _real_json(tmp_path / f"fastscnn-192x640-s-s{seed}", 0.4, 0.4, 0.5)
         (tmp_path / f"fastscnn-192x640-s-s{seed}" / "rendered.json").write_text(json.dumps({"f": f, "max_f": f}))
+        _real_json(tmp_path / f"fastscnn-192x640-r-auto-s{seed}", 0.7, 0.7, 0.9)
+        (tmp_path / f"fastscnn-192x640-r-auto-s{seed}" / "rendered.json").write_text(json.dumps({"f": f - 0.2}))
     _real_json(tmp_path / "unet-s-s0", 0.4, 0.4, 0.5)  # scored on the real frames only
+    _real_json(tmp_path / "unet-r-auto-s0", 0.7, 0.7, 0.9)
     text = evaluate.table(tmp_path)
     assert text.splitlines()[0].endswith("| polygon recall | F rendered |")
-    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")
+            and line.split("|")[2].strip() == "S"}
     # 50 and 60: 55.0 ± 12.706·7.071/√2 = [-8.5, 118.5]
     assert rows["fastscnn-192x640"].endswith("| 55.0 [-8.5, 118.5] |")
     assert rows["unet"].endswith("| — |")
+    gains = {line.split("|")[1].strip(): line for line in text.splitlines() if "R-auto − S" in line}
+    assert gains["fastscnn-192x640"].endswith("| -20.0 [-20.0, -20.0] |")  # the same difference for both seeds
+    assert gains["unet"].endswith("| — |")  # no rendered score: no gain
 
 
 def test_rendered_scores_every_frame_of_a_tree_and_refuses_an_empty_one(tmp_path: Path) -> None:
