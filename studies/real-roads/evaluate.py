@@ -15,8 +15,9 @@ the KITTI MaxF from counts summed over the frames, in ``RUN/rendered.json``. For
 frames are out of domain; for S they are the domain it trained on.
 
 The table gives, per network and variant, the mean over seeds with its 95 % t-interval (n − 1 degrees of
-freedom; ``n`` seeds), and the paired gains of every variant over S, of HA-R-auto over R-auto-dup and R-auto,
-and of the -fp variants (mirror and colour jitter) over their bases, one difference per seed (the cells of a seed share the seed; the paired interval is
+freedom; ``n`` seeds), and the paired gains of every variant over S, of HA-R-auto and S+R-auto over R-auto,
+of HA-R-auto over R-auto-dup, and of the -fp variants (mirror and colour jitter) over their bases, one
+difference per seed (the cells of a seed share the seed; the paired interval is
 :func:`freespace.experiments.stats.paired_gain`'s).
 """
 
@@ -153,7 +154,8 @@ def table(runs: Path) -> str:
               "|---|---|---:|---:|---:|---:|---:|"]
     for model in sorted({m for m, _ in cells}):
         pairs = [(v, "S") for v in ("R-auto", "HA-R-auto", "R-auto-dup", "S+R-auto")] + [
-            ("HA-R-auto", "R-auto-dup"), ("HA-R-auto", "R-auto"), ("R-auto-fp", "R-auto"), ("S+R-auto-fp", "S+R-auto")]
+            ("HA-R-auto", "R-auto-dup"), ("HA-R-auto", "R-auto"), ("S+R-auto", "R-auto"), ("R-auto-fp", "R-auto"),
+            ("S+R-auto-fp", "S+R-auto")]
         for a, b in pairs:
             if (model, a) not in cells or (model, b) not in cells:
                 continue
