@@ -295,14 +295,14 @@ class KittiRaw(StereoRoadDataset):
                            f"drives with image_03/data{other}")
 
     # --- what the base class asks ---------------------------------------------------------------------------
-    def read_label(self, frame: FrameRef) -> RoadLabel:
-        raise DatasetError(f"KITTI raw has no road labels ({frame.name}); make them with `freespace autolabel "
-                           f"--dataset kitti-raw` and train with their tree as labels")
-
     def calibration(self, frame: FrameRef) -> StereoCalibration | None:
         """The left colour camera's intrinsics from ``P_rect_02`` and the baseline from ``P_rect_02`` and
         ``P_rect_03`` (a virtual 0.54 m one without ``P_rect_03``); no road plane (KITTI raw gives none)."""
         return rig_from_kitti(self._frame_calib(frame))
+
+    def read_label(self, frame: FrameRef) -> RoadLabel:
+        raise DatasetError(f"KITTI raw has no road labels ({frame.name}); make them with `freespace autolabel "
+                           f"--dataset kitti-raw` and train with their tree as labels")
 
     def kitti_calib(self, frame: FrameRef) -> dict[str, np.ndarray]:
         """The frame's calibration in KITTI road's keys (``P2``, ``P3``, ``R0_rect``, ``Tr_velo_to_cam``,

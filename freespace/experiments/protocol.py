@@ -100,11 +100,11 @@ class DataSource:
     name: str
     dataset: str
     root: str
+    base: Path = Path(".")
+    file: str = ""
     labels: str | None = None
     splits: str | None = None
     cache_dir: str | None = None
-    base: Path = Path(".")
-    file: str = ""
 
     def _where(self, key: str) -> str:
         return f"{param('protocol')} {self.file}: data {self.name}: {key} {getattr(self, key)}"

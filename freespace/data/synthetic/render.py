@@ -31,20 +31,14 @@ F32 = np.float32
 FAR = 400.0
 
 # texture amplitudes (fine 2.5 cm, medium 17 cm, coarse 1.3 m) per material
+_AMPLITUDES = {
+    ROAD: (0.30, 0.16, 0.12), MARKING: (0.08, 0.06, 0.05), CURB: (0.15, 0.10, 0.05), SIDEWALK: (0.22, 0.14, 0.10),
+    GRASS: (0.40, 0.30, 0.20), FACADE: (0.14, 0.10, 0.15), VEHICLE: (0.03, 0.03, 0.03), GLASS: (0.05, 0.08, 0.10),
+    PERSON: (0.15, 0.10, 0.05), POLE: (0.06, 0.05, 0.05), TRUNK: (0.35, 0.25, 0.10), FOLIAGE: (0.55, 0.45, 0.25),
+    HEDGE: (0.50, 0.40, 0.20),
+}
 _AMPS = np.zeros((14, 3), F32)
-_AMPS[ROAD] = (0.30, 0.16, 0.12)
-_AMPS[MARKING] = (0.08, 0.06, 0.05)
-_AMPS[CURB] = (0.15, 0.10, 0.05)
-_AMPS[SIDEWALK] = (0.22, 0.14, 0.10)
-_AMPS[GRASS] = (0.40, 0.30, 0.20)
-_AMPS[FACADE] = (0.14, 0.10, 0.15)
-_AMPS[VEHICLE] = (0.03, 0.03, 0.03)
-_AMPS[GLASS] = (0.05, 0.08, 0.10)
-_AMPS[PERSON] = (0.15, 0.10, 0.05)
-_AMPS[POLE] = (0.06, 0.05, 0.05)
-_AMPS[TRUNK] = (0.35, 0.25, 0.10)
-_AMPS[FOLIAGE] = (0.55, 0.45, 0.25)
-_AMPS[HEDGE] = (0.50, 0.40, 0.20)
+_AMPS[list(_AMPLITUDES)] = list(_AMPLITUDES.values())
 
 # weather: ambient RGB, sun RGB, shadow strength, fog visibility (m), fog RGB, horizon RGB, zenith RGB
 _WEATHER: dict[str, dict[str, Any]] = {
