@@ -71,6 +71,8 @@ def decomposition(scores: Scores, networks: list[str], seed_sets: list[list[int]
 
     A network's cell pairs the seeds of the set where both variants finished; the mean's cell the seeds where
     both finished for every network, each seed's value the mean of the networks' differences."""
+    labels = [f"seeds {s[0]}–{s[-1]}" if s == list(range(s[0], s[-1] + 1)) else "seeds " + ",".join(map(str, s))
+              for s in seed_sets]
     rows = []
     for test_set in TEST_SETS:
         for a, b in GAINS:
@@ -79,9 +81,7 @@ def decomposition(scores: Scores, networks: list[str], seed_sets: list[list[int]
                     for n in networks}
             for name in [*networks, f"mean of {len(networks)} (subgroup)"]:
                 row = {"test set": test_set, "gain": f"{a} − {b}", "network": name}
-                for seeds in seed_sets:
-                    label = f"seeds {seeds[0]}–{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) \
-                        else "seeds " + ",".join(map(str, seeds))
+                for label, seeds in zip(labels, seed_sets):
                     if name in diff:
                         row[label] = _cell([diff[name][s] for s in seeds if s in diff[name]])
                     else:
