@@ -77,3 +77,49 @@ def test_the_script_prints_and_writes_the_table_and_refuses_mistakes(tmp_path: P
         assert run.returncode != 0 and message in run.stderr and "Traceback" not in run.stderr
     run = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path)], capture_output=True, text=True)
     assert run.returncode != 0 and "holds no index.json" in run.stderr
+
+
+def _run_folders(res: Path, index: list[dict]) -> None:
+    """A run folder for every entry: ``metrics.json`` with its training frames, ``config.yaml`` with batch 2."""
+    for e in index:
+        run = res / e["run"]
+        run.mkdir(parents=True)
+        frames = 120 if e["variant"] in ("HA-X", "X-dup") else 60
+        (run / "metrics.json").write_text(json.dumps({"frames": {"train": frames, "val": 20, "test": 20}}))
+        (run / "config.yaml").write_text("batch_size: 2\n")
+
+
+def test_the_steps_taken_are_epochs_times_batches_and_the_ratios_pair_seeds(tmp_path: Path) -> None:
+    index = _index()
+    for e in index:  # X 10 + seed epochs, X-long 20 + seed, X-dup 8, HA-X 9 (60 frames of batch 2: 30 steps)
+        e["epochs_run"] = {"X": 10, "X-long": 20, "X-dup": 8, "HA-X": 9}[e["variant"]] + e["seed"]
+    _run_folders(tmp_path, index)
+    steps = decomposition.steps_taken(tmp_path, index)
+    assert steps["a", "X"][3] == (13, 390) and steps["a", "HA-X"][0] == (9, 540)
+    assert 2 not in steps["b", "X-long"]  # still running
+    rows = {r["variant or ratio"]: r for r in decomposition.steps_table(steps, ["a", "b"], [[0, 1, 2, 3]])}
+    assert rows["X-dup"]["seeds 0–3"] == "9.5 epochs, 570 steps (n = 8)"
+    assert rows["X-long"]["seeds 0–3"].endswith("(n = 7)")
+    # HA-X / X-long seed by seed: 2 (9 + s) / (20 + s); the ratio falls with the seed
+    r = sorted(2 * (9 + s) / (20 + s) for s in (0, 1, 2, 3, 0, 1, 3))
+    assert rows["HA-X / X-long"]["seeds 0–3"] == f"{r[0]:.2f}–{r[-1]:.2f}, median {r[3]:.2f} (n = 7)"
+    d = sorted((9 + s) / (8 + s) for s in (0, 1, 2, 3) * 2)  # both 60 steps an epoch
+    assert rows["HA-X / X-dup"]["seeds 0–3"] == f"{d[0]:.2f}–{d[-1]:.2f}, median {(d[3] + d[4]) / 2:.2f} (n = 8)"
+
+
+def test_the_script_prints_the_steps_and_says_what_a_run_folder_lacks(tmp_path: Path) -> None:
+    res = tmp_path / "res"
+    index = _index()
+    for e in index:
+        e["epochs_run"] = 10
+    _run_folders(res, index)
+    (res / "index.json").write_text(json.dumps(index))
+    run = subprocess.run([sys.executable, str(SCRIPT), str(res), "--networks", "a,b", "--steps"],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "| HA-X / X-long | 2.00–2.00, median 2.00 (n = 7) | 2.00–2.00, median 2.00 (n = 7) |" in run.stdout
+    (res / "runs/a-X-s0/config.yaml").unlink()
+    run = subprocess.run([sys.executable, str(SCRIPT), str(res), "--networks", "a,b", "--steps"],
+                         capture_output=True, text=True)
+    assert run.returncode != 0 and "lacks its metrics.json or config.yaml" in run.stderr
+    assert "Traceback" not in run.stderr
