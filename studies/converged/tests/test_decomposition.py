@@ -49,13 +49,14 @@ def test_each_network_pairs_its_finished_seeds_and_the_mean_only_shared_ones() -
     assert a["seeds 0–1"].endswith("(n = 2)")
     b = _row(rows, "same-rigs", "X-long − X", "b")
     assert b["seeds 0–3"].endswith("(n = 3)")  # b's seed 2 has not finished X-long
-    mean = _row(rows, "same-rigs", "X-long − X", "mean of 2 (subgroup)")
+    mean = _row(rows, "same-rigs", "X-long − X", "mean of 2")
     g = paired_gain([0.5, 1.0, 2.0], [0.0] * 3)  # seeds 0, 1, 3: both networks equal, so the mean is either
     assert mean["seeds 0–3"] == f"{g.mean:+.2f} [{g.ci_low:+.2f}, {g.ci_high:+.2f}] (n = 3)"
     # the gains that need no X-long keep every seed, and shifted is its own test set
-    assert _row(rows, "shifted", "HA-X − X-dup", "mean of 2 (subgroup)")["seeds 0–3"].endswith("(n = 4)")
+    assert _row(rows, "shifted", "HA-X − X-dup", "mean of 2")["seeds 0–3"].endswith("(n = 4)")
     only = decomposition.decomposition(scores, ["a"], [[2]])
     assert _row(only, "same-rigs", "HA-X − X", "a")["seeds 2–2"] == "+1.20 (n = 1)"
+    assert _row(only, "same-rigs", "HA-X − X", "mean of 1 (subgroup)")["seeds 2–2"] == "+1.20 (n = 1)"
     assert _row(decomposition.decomposition(scores, ["b"], [[2]]), "same-rigs", "X-long − X", "b")["seeds 2–2"] == ""
 
 
@@ -67,7 +68,7 @@ def test_the_script_prints_and_writes_the_table_and_refuses_mistakes(tmp_path: P
     run = subprocess.run([sys.executable, str(SCRIPT), str(res), "--networks", "a,b", "--seeds", "0-1",
                           "--seeds", "0,3", "--csv", str(out)], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
-    assert "| same-rigs | HA-X − X-long | mean of 2 (subgroup) |" in run.stdout
+    assert "| same-rigs | HA-X − X-long | mean of 2 |" in run.stdout
     with out.open(newline="") as f:
         table = list(csv.DictReader(f))
     assert list(table[0]) == ["test set", "gain", "network", "seeds 0–1", "seeds 0,3"]
