@@ -3,6 +3,7 @@ byte with the study's protocol (res-pilot-lr01/ kept its tables only)."""
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import pytest
@@ -20,3 +21,18 @@ def test_without_the_protocol_the_primary_endpoint_and_the_paper_are_left_out(tm
     of results.md) come from its protocol file only; its gains are among the method's own, in the same order."""
     (tmp_path / "generic.yaml").write_text("{}\n")
     assert rebuilt_tables(HERE / "res-final", tmp_path / "generic.yaml") == ["results.md"]
+
+
+def test_every_x_long_is_x_s_run_continued() -> None:
+    """Issue 47: X-long is X with twice the cap and patience, extending X's own run, so its per-epoch record
+    equals X's in every column but the seconds up to X's stop, for every network and seed that has both."""
+    runs = HERE / "res-final" / "runs"
+    pairs = sorted(p for p in runs.glob("*-long-s*") if (runs / p.name.replace("-long-", "-orig-")).is_dir())
+    assert len(pairs) == 40  # the five networks' seeds 0–4, the three pretrained ones' 5–9
+    for long in pairs:
+        with (runs / long.name.replace("-long-", "-orig-") / "metrics.csv").open(newline="") as f:
+            x = [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
+        with (long / "metrics.csv").open(newline="") as f:
+            x_long = [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
+        assert len(x_long) > len(x), long.name  # twice the patience: at least 20 epochs past X's stop
+        assert x_long[: len(x)] == x, long.name
