@@ -26,8 +26,8 @@ import sys
 from pathlib import Path
 
 from freespace.experiments.stats import paired_gain
-from freespace.io.files import write_csv
 from freespace.io.codecs import load_yaml
+from freespace.io.files import write_csv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from forecast import markdown  # noqa: E402  (the table printer of the script beside this one)
