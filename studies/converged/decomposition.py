@@ -74,17 +74,18 @@ def steps_table(steps: dict[tuple[str, str], dict[int, tuple[int, int]]], networ
                 seed_sets: list[list[int]]) -> list[dict[str, str]]:
     """Rows ``variant`` (the median epochs and steps over the networks' cells of each seed set) and ``HA-X /
     X-long``, ``HA-X / X-dup`` (the steps' ratio of each network and seed where both finished: range, median)."""
+    labels = _labels(seed_sets)
     rows = []
     for variant in ("X", "X-long", "X-dup", "HA-X"):
         row = {"variant or ratio": variant}
-        for label, seeds in zip(_labels(seed_sets), seed_sets):
+        for label, seeds in zip(labels, seed_sets):
             cells = [steps[n, variant][s] for n in networks for s in seeds if s in steps.get((n, variant), {})]
             row[label] = (f"{statistics.median(c[0] for c in cells):g} epochs, "
                           f"{statistics.median(c[1] for c in cells):g} steps (n = {len(cells)})" if cells else "")
         rows.append(row)
     for other in ("X-long", "X-dup"):
         row = {"variant or ratio": f"HA-X / {other}"}
-        for label, seeds in zip(_labels(seed_sets), seed_sets):
+        for label, seeds in zip(labels, seed_sets):
             r = [steps[n, "HA-X"][s][1] / steps[n, other][s][1] for n in networks for s in seeds
                  if s in steps.get((n, "HA-X"), {}) and s in steps.get((n, other), {})]
             row[label] = f"{min(r):.2f}–{max(r):.2f}, median {statistics.median(r):.2f} (n = {len(r)})" if r else ""

@@ -23,6 +23,12 @@ def test_without_the_protocol_the_primary_endpoint_and_the_paper_are_left_out(tm
     assert rebuilt_tables(HERE / "res-final", tmp_path / "generic.yaml") == ["results.md"]
 
 
+def _epochs(run: Path) -> list[dict[str, str]]:
+    """A run's ``metrics.csv`` rows without the seconds (the only column that differs between machines' runs)."""
+    with (run / "metrics.csv").open(newline="") as f:
+        return [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
+
+
 def test_every_x_long_is_x_s_run_continued() -> None:
     """Issue 47: X-long is X with twice the cap and patience, extending X's own run, so its per-epoch record
     equals X's in every column but the seconds up to X's stop, for every network and seed that has both."""
@@ -30,9 +36,6 @@ def test_every_x_long_is_x_s_run_continued() -> None:
     pairs = sorted(p for p in runs.glob("*-long-s*") if (runs / p.name.replace("-long-", "-orig-")).is_dir())
     assert len(pairs) == 40  # the five networks' seeds 0–4, the three pretrained ones' 5–9
     for long in pairs:
-        with (runs / long.name.replace("-long-", "-orig-") / "metrics.csv").open(newline="") as f:
-            x = [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
-        with (long / "metrics.csv").open(newline="") as f:
-            x_long = [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
+        x, x_long = _epochs(runs / long.name.replace("-long-", "-orig-")), _epochs(long)
         assert len(x_long) > len(x), long.name  # twice the patience: at least 20 epochs past X's stop
         assert x_long[: len(x)] == x, long.name

@@ -92,7 +92,7 @@ def _run_folders(res: Path, index: list[dict]) -> None:
 
 def test_the_steps_taken_are_epochs_times_batches_and_the_ratios_pair_seeds(tmp_path: Path) -> None:
     index = _index()
-    for e in index:  # X 10 + seed epochs, X-long 20 + seed, X-dup 8, HA-X 9 (60 frames of batch 2: 30 steps)
+    for e in index:  # epochs: X 10 + seed, X-long 20 + seed, X-dup 8 + seed, HA-X 9 + seed
         e["epochs_run"] = {"X": 10, "X-long": 20, "X-dup": 8, "HA-X": 9}[e["variant"]] + e["seed"]
     _run_folders(tmp_path, index)
     steps = decomposition.steps_taken(tmp_path, index)
