@@ -686,25 +686,66 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def _evaluate_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--checkpoint", required=True, help="a .ckpt from a run folder")
-    _add_dataset_root(p)
-    p.add_argument("--subset", default="test", help="train, val, test (the run's lists) or all labelled frames "
+    from freespace.evaluation.labelled import LABEL_FORMATS
+
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--checkpoint", help="a .ckpt from a run folder")
+    src.add_argument("--onnx", help="a model exported with `freespace export --format onnx`")
+    d = p.add_argument_group("a dataset's frames (its labels)")
+    _add_dataset_root(d, required=False)
+    d.add_argument("--subset", default="test", help="train, val, test (the run's lists) or all labelled frames "
                                                     "(default test)")
-    p.add_argument("--splits", dest="splits_dir", metavar="DIR",
+    d.add_argument("--splits", dest="splits_dir", metavar="DIR",
                    help="train.txt/val.txt/test.txt (default: the checkpoint's run folder)")
+    f = p.add_argument_group("a labelled folder (real sets' label images, paired with the images by name)")
+    f.add_argument("--images", metavar="DIR", help="the images")
+    f.add_argument("--labels", metavar="DIR", help="the label images (frames without one are not scored)")
+    f.add_argument("--label-format", choices=LABEL_FORMATS,
+                   help="kitti: KITTI road ground truth (<cat>_road_<id>.png); binary: non-zero = road; class-id: "
+                        "class ids (--road IDS); palette: class colours (--road R,G,B)")
+    f.add_argument("--road", metavar="VALUES", help="class-id: the road's ids (CamVid: 3); palette: the road's "
+                                                    "colours R,G,B[;R,G,B] (Cityscapes: 128,64,128)")
+    f.add_argument("--ignore", metavar="VALUES", help="don't-care ids, grey values or colours, as --road "
+                                                      "(CamVid: 11)")
+    f.add_argument("--tolerance", type=int, metavar="LEVELS",
+                   help="palette: a pixel within LEVELS of a colour on every channel has it (default 8)")
+    p.add_argument("--threads", type=_WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
+    p.add_argument("--no-overlays", action="store_true", help="labelled folder: skip the TP/FN/FP overlays")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--out", required=True, metavar="DIR")
     p.set_defaults(func=cmd_evaluate)
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    """``freespace evaluate``: a checkpoint on a subset (train/val/test/all) of a dataset's on-disk split."""
-    from freespace.inference.evaluate import evaluate_checkpoint
+    """``freespace evaluate``: a model on a subset of a dataset's split, or on a labelled folder."""
+    from freespace.inference.evaluate import evaluate_checkpoint, evaluate_labelled
 
-    m = evaluate_checkpoint(args.checkpoint, args.dataset, args.root, args.out, subset=args.subset,
-                            splits_dir=args.splits_dir, split=args.split, progress=not args.no_progress)
+    folder = [n for n in ("images", "labels", "label_format") if getattr(args, n) is not None]
+    if args.dataset is not None and folder:
+        raise InvalidOptionError("give either --dataset/--root or --images/--labels/--label-format, not both")
+    if folder:
+        from freespace.evaluation.labelled import parse_label_format
+
+        missing = [f"--{n.replace('_', '-')}" for n in ("images", "labels", "label_format") if n not in folder]
+        if missing:
+            raise InvalidOptionError(f"a labelled folder needs --images, --labels and --label-format; add "
+                                     f"{', '.join(missing)}")
+        fmt = parse_label_format(args.label_format, args.road, args.ignore, args.tolerance)
+        m = evaluate_labelled(args.images, args.labels, fmt, args.out, checkpoint=args.checkpoint, onnx=args.onnx,
+                              threads=args.threads, overlays=not args.no_overlays, progress=not args.no_progress)
+    else:
+        if args.dataset is None or args.root is None:
+            raise InvalidOptionError("give the frames to evaluate on: --dataset NAME --root DIR, or a labelled folder "
+                                     "(--images DIR --labels DIR --label-format FORMAT)")
+        if any(getattr(args, n) is not None for n in ("road", "ignore", "tolerance")):
+            raise InvalidOptionError("--road, --ignore and --tolerance describe a labelled folder's labels "
+                                     "(--images/--labels/--label-format), not a dataset's")
+        m = evaluate_checkpoint(args.checkpoint, args.dataset, args.root, args.out, subset=args.subset,
+                                splits_dir=args.splits_dir, split=args.split, progress=not args.no_progress,
+                                onnx=args.onnx, threads=args.threads)
+    ci = m["intervals"]["f_score"]
     print(" ".join(f"{k} {m[k]:.4f}" for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
-          + f"  ({m['frames']} frames) → {args.out}")
+          + f"  F 95 % [{ci[0]:.4f}, {ci[1]:.4f}] ({m['frames']} frames) → {args.out}")
     return 0
 
 
@@ -978,9 +1019,11 @@ COMMANDS: dict[str, tuple[str, str, Callable[..., None]]] = {
               "Train a segmentation network on a dataset's train split, validate each epoch, stop early on the "
               "validation F-score and test the best checkpoint. The run folder holds config.yaml, splits/, "
               "metrics.csv, checkpoints/ and metrics.json.", _train_parser),
-    "evaluate": ("evaluate a checkpoint: metrics, TP/FN/FP overlays, PR curve",
-                 "Evaluate a training checkpoint on a subset (train, val, test or all) of a dataset's on-disk "
-                 "split; writes metrics.json, overlays/ (TP green, FN red, FP blue) and pr_curve.png.",
+    "evaluate": ("evaluate a model on labelled frames: metrics with intervals, per-frame scores, overlays",
+                 "Evaluate a checkpoint or an ONNX model on a subset (train, val, test or all) of a dataset's "
+                 "on-disk split, or on a labelled folder of real frames (KITTI ground truth, binary masks, class "
+                 "ids, palette colours); writes metrics.json (pooled scores, frame-level bootstrap intervals), "
+                 "per_frame.csv, overlays/ (TP green, FN red, FP blue) and pr_curve.png.",
                  _evaluate_parser),
     "evaluate-kitti": ("evaluate KITTI-format confidence maps like the KITTI road devkit",
                        "Evaluate 8-bit road confidence PNGs against KITTI road ground truth as the official devkit "

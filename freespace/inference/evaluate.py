@@ -1,39 +1,88 @@
-"""`freespace evaluate`: a trained checkpoint on a dataset split — metrics, overlays, PR curve.
+"""`freespace evaluate`: a model (checkpoint or ONNX) on labelled frames — metrics, per-frame scores, overlays, PR curve.
 
-Predictions are made at the checkpoint's training size and resized back (bilinear probabilities) to
-each frame's own size, where the metrics are counted (the benchmark's way). Outputs in ``OUT``:
-``metrics.json`` (accuracy, precision, recall, f_score, iou at p ≥ 0.5; max_f, ap from the 256
-thresholds; seconds per frame), ``overlays/<frame>.png`` (TP green, FN red, FP blue) and ``pr_curve.png``.
+Two sources of labelled frames: a dataset's split (``--dataset``/``--root``, the run's lists or all labelled frames)
+or a *labelled folder* (``--images``/``--labels`` in one of the formats of :mod:`freespace.evaluation.labelled`:
+KITTI road ground truth, binary masks, class ids, palette colours). Predictions are made at the model's input size
+and resized back (bilinear probabilities) to each frame's own size, where the metrics are counted (the benchmark's
+way). Outputs in ``OUT``: ``metrics.json`` (pooled accuracy, precision, recall, f_score, iou at p ≥ 0.5, with
+frame-level bootstrap intervals of precision, recall, F and IoU; the KITTI max_f and ap from the 256 thresholds;
+seconds per frame; what was evaluated), ``per_frame.csv`` (each frame's counts and scores), ``overlays/<frame>.png``
+(TP green, FN red, FP blue) and ``pr_curve.png``.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError, param
-from freespace.evaluation.metrics import RoadEvaluator
+from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError, param
+from freespace.evaluation.labelled import LabelFormat, PooledScores, pair_labelled_frames, read_label
+from freespace.evaluation.metrics import RoadEvaluator, confusion_counts
 from freespace.evaluation.viz import overlay_errors, write_pr_curve
 from freespace.inference.predictor import Predictor
-from freespace.io.codecs import write_image
-from freespace.io.files import PathLike, check_outputs, check_writable, write_json
+from freespace.io.codecs import read_image, write_image
+from freespace.io.files import PathLike, check_outputs, check_writable, write_csv, write_json
 from freespace.io.outdir import claim_folder
+from freespace.labels import RoadLabel
 
-__all__ = ["evaluate_checkpoint", "evaluate_frames"]
+__all__ = ["evaluate_checkpoint", "evaluate_frames", "evaluate_labelled", "score_frames"]
+
+#: what metrics.json and the command's line report of the pooled counts
+SUMMARY_KEYS = ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap")
+PER_FRAME_FIELDS = ("frame", "tp", "fp", "fn", "tn", "precision", "recall", "f_score", "iou")
+
+#: a frame to score: its name and a function that reads its image (H×W×3 RGB) and its label
+Frame = tuple[str, Callable[[], tuple[np.ndarray, RoadLabel]]]
 
 
-def _frames(ds, subset: str, checkpoint: Path, splits_dir: PathLike | None) -> list[str]:
+def _frames(ds, subset: str, checkpoint: Path | None, splits_dir: PathLike | None) -> list[str]:
     if subset == "all":
         return [f.name for f in ds.labelled()]
-    folder = Path(splits_dir) if splits_dir else checkpoint.parent.parent / "splits"
+    if splits_dir is None and checkpoint is None:
+        raise InvalidOptionError(f"an ONNX model has no run folder with split lists; give {param('splits_dir')} DIR "
+                                 f"(train.txt, val.txt, test.txt) or {param('subset')} all")
+    folder = Path(splits_dir) if splits_dir else checkpoint.parent.parent / "splits"  # type: ignore[union-attr]
     if not (folder / f"{subset}.txt").is_file():
         raise InputFileError(f"no split lists at {folder}; give {param('splits_dir')} DIR (train.txt, val.txt, "
                              f"test.txt) or {param('subset')} all")
     return read_splits(folder, known=[f.name for f in ds.frames])[subset]
+
+
+def score_frames(predictor: Predictor, frames: Iterable[Frame], *, overlays: Path | None = None,
+                 progress: bool = False, total: int | None = None) -> tuple[RoadEvaluator, PooledScores, float]:
+    """Predict each frame and count it against its label at the label's size.
+
+    Returns the filled :class:`RoadEvaluator` (pooled counts and the KITTI curve), the per-frame
+    :class:`~freespace.evaluation.labelled.PooledScores` and the seconds spent in the network; with ``overlays``,
+    writes ``<overlays>/<frame>.png`` (TP green, FN red, FP blue) too.
+
+    Raises:
+        ShapeMismatchError: a label's size differs from its image's.
+    """
+    from freespace.runtime.log import progress_bar
+
+    evaluator, scores, seconds = RoadEvaluator(), PooledScores(), 0.0
+    for name, load in progress_bar(frames, desc="evaluate", unit="frame", enabled=progress, total=total):
+        image, label = load()
+        if image.shape[:2] != label.shape:
+            raise ShapeMismatchError(f"the label of {name} is {label.shape[1]}×{label.shape[0]} but its image is "
+                                     f"{image.shape[1]}×{image.shape[0]} (W×H); pair each image with its own label")
+        t0 = time.perf_counter()
+        prob = predictor.predict([image])[0]
+        seconds += time.perf_counter() - t0
+        evaluator.process(prob, label.road, label.valid)
+        pred = prob >= evaluator.threshold
+        scores.add(name, confusion_counts(pred, label.road, label.valid))
+        if overlays is not None:
+            write_image(overlays / f"{name}.png", overlay_errors(image, pred, label.road, label.valid))
+    return evaluator, scores, seconds
 
 
 def evaluate_frames(predictor: Predictor, ds: StereoRoadDataset, names: list[str], *, overlays: Path | None = None,
@@ -43,43 +92,82 @@ def evaluate_frames(predictor: Predictor, ds: StereoRoadDataset, names: list[str
     Returns the filled :class:`RoadEvaluator` and the seconds spent in the network; with ``overlays``,
     writes ``<overlays>/<frame>.png`` (TP green, FN red, FP blue) too.
     """
-    from freespace.runtime.log import progress_bar
-
-    evaluator, seconds = RoadEvaluator(), 0.0
-    for name in progress_bar(names, desc="evaluate", unit="frame", enabled=progress):
-        sample = ds.load(ds.index(name), right=False, disparity=False)
-        t0 = time.perf_counter()
-        prob = predictor.predict([sample.left])[0]
-        seconds += time.perf_counter() - t0
-        label = sample.label
-        evaluator.process(prob, label.road, label.valid)
-        if overlays is not None:
-            write_image(overlays / f"{name}.png",
-                        overlay_errors(sample.left, prob >= evaluator.threshold, label.road, label.valid))
+    evaluator, _, seconds = score_frames(predictor, _dataset_frames(ds, names), overlays=overlays,
+                                         progress=progress, total=len(names))
     return evaluator, seconds
 
 
-def evaluate_checkpoint(checkpoint: PathLike, dataset: str, root: PathLike, out: PathLike, subset: str = "test",
-                        splits_dir: PathLike | None = None, split: str | None = None,
-                        progress: bool = True) -> dict[str, Any]:
-    """Evaluate ``checkpoint`` on ``subset`` (train/val/test from the run's lists, or all labelled frames) of
-    the on-disk ``split`` of a dataset."""
+def _dataset_frames(ds: StereoRoadDataset, names: list[str]) -> Iterable[Frame]:
+    def loader(name: str) -> Callable[[], tuple[np.ndarray, RoadLabel]]:
+        def load() -> tuple[np.ndarray, RoadLabel]:
+            sample = ds.load(ds.index(name), right=False, disparity=False)
+            return sample.left, sample.label
+        return load
+    return [(name, loader(name)) for name in names]
+
+
+def _write_results(staging: Path, evaluator: RoadEvaluator, scores: PooledScores, seconds: float,
+                   record: dict[str, Any]) -> dict[str, Any]:
+    pooled, kitti = scores.summary(), evaluator.evaluate()
+    metrics = {**{k: kitti[k] for k in SUMMARY_KEYS}, "intervals": pooled["intervals"],
+               "interval": "frame-level percentile bootstrap, 95 %, 2000 resamples, seed 0",
+               "frames": pooled["frames"], "seconds_per_frame": seconds / pooled["frames"], **record}
+    write_pr_curve(staging / "pr_curve.png", *evaluator.kitti.pr_curve())
+    write_csv(staging / "per_frame.csv", PER_FRAME_FIELDS, scores.rows)
+    write_json(staging / "metrics.json", metrics)
+    return metrics
+
+
+def _model(checkpoint: PathLike | None, onnx: PathLike | None, threads: int | None) -> tuple[Predictor, dict]:
+    predictor = Predictor(checkpoint=checkpoint, onnx=onnx, threads=threads)
+    return predictor, ({"checkpoint": str(checkpoint)} if checkpoint is not None else {"onnx": str(onnx)})
+
+
+def evaluate_checkpoint(checkpoint: PathLike | None, dataset: str, root: PathLike, out: PathLike,
+                        subset: str = "test", splits_dir: PathLike | None = None, split: str | None = None,
+                        progress: bool = True, onnx: PathLike | None = None,
+                        threads: int | None = None) -> dict[str, Any]:
+    """Evaluate a model (``checkpoint`` or ``onnx``) on ``subset`` (train/val/test from the run's lists, or all
+    labelled frames) of the on-disk ``split`` of a dataset; writes ``out`` (see the module docstring)."""
     if subset not in ("train", "val", "test", "all"):
         raise InvalidOptionError(f"{param('subset')} must be train, val, test or all, got {subset!r}")
-    checkpoint, out = Path(checkpoint), Path(out)
+    out = Path(out)
     check_writable(out, folder=True)
-    check_outputs({"out": out}, {"checkpoint": checkpoint, "root": root})
-    predictor = Predictor(checkpoint=checkpoint)
+    check_outputs({"out": out}, {"checkpoint": checkpoint, "onnx": onnx, "root": root, "splits_dir": splits_dir})
+    predictor, record = _model(checkpoint, onnx, threads)
     ds = get_dataset(dataset, root, split, disparity_source="none")
-    names = _frames(ds, subset, checkpoint, splits_dir)
+    if not any(ds.has_label(f) for f in ds.frames):
+        raise DatasetError(f"{dataset} at {root} has no road labels to evaluate against; evaluate on a labelled "
+                           f"folder instead ({param('images')} DIR {param('labels')} DIR {param('label_format')} ...)")
+    names = _frames(ds, subset, Path(checkpoint) if checkpoint is not None else None, splits_dir)
     if not names:
         raise DatasetError(f"subset {subset!r} has no labelled frames")
     with claim_folder(out, "evaluate") as folder, folder.staged() as staging:  # all or nothing
-        evaluator, seconds = evaluate_frames(predictor, ds, names, overlays=staging / "overlays", progress=progress)
-        scores = evaluator.evaluate()
-        metrics = {**{k: scores[k] for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap")},
-                   "seconds_per_frame": seconds / len(names), "frames": len(names), "split": subset,
-                   "checkpoint": str(checkpoint)}
-        write_pr_curve(staging / "pr_curve.png", *evaluator.kitti.pr_curve())
-        write_json(staging / "metrics.json", metrics)
-    return metrics
+        evaluator, scores, seconds = score_frames(predictor, _dataset_frames(ds, names), progress=progress,
+                                                  overlays=staging / "overlays", total=len(names))
+        return _write_results(staging, evaluator, scores, seconds,
+                              {"split": subset, "dataset": dataset, "root": str(root), **record})
+
+
+def evaluate_labelled(images: PathLike, labels: PathLike, label_format: LabelFormat, out: PathLike, *,
+                      checkpoint: PathLike | None = None, onnx: PathLike | None = None, threads: int | None = None,
+                      overlays: bool = True, progress: bool = True) -> dict[str, Any]:
+    """Evaluate a model (``checkpoint`` or ``onnx``) on a labelled folder: every label file of ``labels`` with the
+    image of the same name in ``images`` (:func:`~freespace.evaluation.labelled.pair_labelled_frames`), the labels
+    decoded by ``label_format``. Writes ``out`` (see the module docstring); returns ``metrics.json``'s content."""
+    out = Path(out)
+    check_writable(out, folder=True)
+    check_outputs({"out": out}, {"checkpoint": checkpoint, "onnx": onnx, "images": images, "labels": labels})
+    predictor, record = _model(checkpoint, onnx, threads)
+    frames = pair_labelled_frames(images, labels, label_format)
+
+    def loader(frame):  # -> a Frame's reader
+        return lambda: (read_image(frame.image), read_label(frame, label_format))
+
+    with claim_folder(out, "evaluate") as folder, folder.staged() as staging:  # all or nothing
+        evaluator, scores, seconds = score_frames(predictor, [(f.name, loader(f)) for f in frames],
+                                                  overlays=staging / "overlays" if overlays else None,
+                                                  progress=progress, total=len(frames))
+        return _write_results(staging, evaluator, scores, seconds,
+                              {"images": str(images), "labels": str(labels),
+                               "label_format": label_format.describe(), **record})
