@@ -402,6 +402,10 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     g.add_argument("--workers", type=_WORKERS, default=1, help="processes (default 1)")
     g.add_argument("--overwrite", action="store_true",
                    help="replace what an earlier run with other settings labelled in --out")
+    g.add_argument("--propagate-from", metavar="TREE",
+                   help="instead of labelling frames: carry the road that later frames of each drive saw near the "
+                        "car back into TREE's labels (an autolabel tree of this dataset), written to --out as a new "
+                        "tree; far road and road beyond parked cars get labels, conflicts become don't care")
     p.add_argument("--out", required=True, help="label image LABEL.png (one image) or folder (dataset)")
     d = AutolabelOptions()
     g = p.add_argument_group("method")
@@ -423,6 +427,8 @@ _AUTOLABEL_MODES = {
                                          "baseline"}),
                  ("reference",), hint=" and --target or --disparity (or --dataset and --root: a whole dataset)"),
     "dataset": _GENERATE_MODES["dataset"],
+    "propagate": _Mode("--propagate-from", frozenset({"dataset", "root", "split", "disparity_source", "lidar_densify",
+                                                      "cache_dir", "propagate_from"}), ("root",)),
 }
 
 
@@ -430,8 +436,10 @@ def cmd_autolabel(args: argparse.Namespace) -> int:
     """``freespace autolabel``: a road label from disparity, for one left image or a whole dataset."""
     from freespace.datagen.autolabel import AutolabelOptions, autolabel_dataset, autolabel_pair
 
-    mode = "dataset" if args.dataset else "one"
+    mode = "propagate" if args.propagate_from else "dataset" if args.dataset else "one"
     _check_mode(args.parser, args, _AUTOLABEL_MODES, mode)
+    if mode == "propagate":
+        return _propagate(args)
     _refuse_folders(args, ("reference", "target", "disparity", "calib"))
     options = AutolabelOptions(curb_height=args.curb_height, camera_height=args.camera_height, noise=args.noise,
                                max_disparity=args.max_disparity)
@@ -443,6 +451,22 @@ def cmd_autolabel(args: argparse.Namespace) -> int:
               f"{result.model.roll_deg:+.2f}°  noise {s['noise_px']:.2f} px  → {args.out}")
         return 0
     return _run_dataset(args, autolabel_dataset, options, "labelled")
+
+
+def _propagate(args: argparse.Namespace) -> int:
+    """``freespace autolabel --propagate-from TREE``: the tree's labels with the road later frames saw."""
+    from freespace.datagen.propagate import propagate_dataset
+
+    method = [f"--{a.dest.replace('_', '-')}" for a in args.parser._actions
+              if a.dest in ("curb_height", "camera_height", "noise", "max_disparity") and getattr(args, a.dest) != a.default]
+    if method:
+        raise InvalidOptionError(f"{', '.join(method)} set how frames are labelled, and --propagate-from labels none "
+                                 f"(it carries TREE's labels along each drive); leave them out")
+    s = propagate_dataset(_open_dataset(args), args.propagate_from, args.out)
+    print(f"{s['frames']} frames: labelled {100 * s['mean_coverage_before']:.1f}% → {100 * s['mean_coverage']:.1f}%, "
+          f"road {100 * s['mean_road_before']:.1f}% → {100 * s['mean_road_fraction']:.1f}% (gained "
+          f"{100 * s['mean_gained']:.2f}%, conflicts {100 * s['mean_conflicts']:.2f}%) → {args.out}")
+    return 0
 
 
 # --- synth ---------------------------------------------------------------------------------------------
