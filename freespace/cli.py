@@ -419,6 +419,10 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     g.add_argument("--noise", type=bounded_float(0, MAX_NOISE_PX, low_open=True), metavar="PX", help="disparity noise in pixels (default: estimated)")
     g.add_argument("--max-disparity", type=bounded_int(1, MAX_DISPARITY_PX), default=SGBM_MAX_DISPARITY, metavar="PX",
                    help="SGBM search range (default %(default)s)")
+    g.add_argument("--max-camber", dest="max_camber_deg", type=bounded_float(0, 30), default=d.max_camber_deg,
+                   metavar="DEG", help="lanes beside the road on a plane of their own that meets it without a step "
+                                       "and lies below it (a cambered street) are road when its roll differs by at "
+                                       "most DEG (default %(default)s; 0: one plane)")
     p.set_defaults(func=cmd_autolabel, parser=p)
 
 
@@ -442,7 +446,7 @@ def cmd_autolabel(args: argparse.Namespace) -> int:
         return _propagate(args)
     _refuse_folders(args, ("reference", "target", "disparity", "calib"))
     options = AutolabelOptions(curb_height=args.curb_height, camera_height=args.camera_height, noise=args.noise,
-                               max_disparity=args.max_disparity)
+                               max_disparity=args.max_disparity, max_camber_deg=args.max_camber_deg)
     if mode == "one":
         result = autolabel_pair(args.reference, args.target, args.disparity, out=args.out, confidence=args.confidence,
                                 calib=args.calib, baseline=args.baseline, model_json=args.model_json, options=options)
@@ -457,8 +461,9 @@ def _propagate(args: argparse.Namespace) -> int:
     """``freespace autolabel --propagate-from TREE``: the tree's labels with the road later frames saw."""
     from freespace.datagen.propagate import propagate_dataset
 
-    method = [f"--{a.dest.replace('_', '-')}" for a in args.parser._actions
-              if a.dest in ("curb_height", "camera_height", "noise", "max_disparity") and getattr(args, a.dest) != a.default]
+    method = [a.option_strings[0] for a in args.parser._actions
+              if a.dest in ("curb_height", "camera_height", "noise", "max_disparity", "max_camber_deg")
+              and getattr(args, a.dest) != a.default]
     if method:
         raise InvalidOptionError(f"{', '.join(method)} set how frames are labelled, and --propagate-from labels none "
                                  f"(it carries TREE's labels along each drive); leave them out")

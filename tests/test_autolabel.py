@@ -297,3 +297,37 @@ def test_human_share_keeps_the_datasets_labels_on_whole_drives(tmp_path: Path) -
     assert _human_drives(ds.frames, train, 0.5, 4) == human and _human_drives(ds.frames, train, 0.0, 4) == set()
     with pytest.raises(InvalidOptionError, match="give labels too"):
         TrainConfig(dataset="synth", root=str(root), out=str(tmp_path / "r2"), human_share=0.2).check()
+
+
+def _crowned_street(camber: float, kerb: float, shape: tuple[int, int] = (240, 640)) -> np.ndarray:
+    """The disparity of a street seen from 1.5 m (f 700 px, B 0.5 m, principal point (320, 120)): the road
+    falls away left of its crown at X = −1 m with the slope ``camber``; a pavement ``kerb`` metres high starts
+    at X = 3.5 m."""
+    h, w = shape
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    x, y = (u - 320) / 700, (v - 120) / 700
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = 1.5 / y                                            # the level road
+        left = (1.5 - camber * 1.0) / (y + camber * x)         # Y = 1.5 + camber·(−1 − X) left of the crown
+        z = np.where(x * z < -1.0, left, z)
+        pavement = (1.5 - kerb) / y
+        z = np.where(x * pavement > 3.5, pavement, z)
+        d = 700 * 0.5 / z
+    return np.where((y > 0.02) & (d > 0), d, np.nan).astype(np.float32)
+
+
+def test_a_cambered_street_is_road_and_a_pavement_is_not() -> None:
+    from freespace.datagen.labeller import AutolabelOptions, autolabel
+
+    disparity = _crowned_street(camber=0.04, kerb=0.15)
+    h, w = disparity.shape
+    v, u = np.mgrid[0:h, 0:w]
+    x = (u - 320) / 700 * 1.5 / np.maximum((v - 120) / 700, 1e-6)  # X on the level road, metres
+    falling = (x < -3.0) & (v > 170)        # the lanes 2 m and more left of the crown: 8 cm and more below the plane
+    pavement = (x > 4.0) & (v > 170)
+    one_plane = autolabel(disparity, baseline=0.5, options=AutolabelOptions(max_camber_deg=0))
+    both = autolabel(disparity, baseline=0.5)
+    assert (one_plane.label.road & falling).sum() < 0.5 * falling.sum()   # one plane loses the falling lanes
+    assert (both.label.road & falling).sum() > 0.9 * falling.sum()        # a second plane finds them
+    assert not (both.label.road & pavement).any()                          # and the pavement stays off the road
+    assert not (one_plane.label.road & pavement).any()

@@ -86,6 +86,9 @@ class AutolabelOptions:
         max_hole: don't-care holes enclosed by road and smaller than this share of the image become
             road (default 0.002).
         max_disparity: SGBM search range (pixels) when the disparity is computed from a stereo pair.
+        max_camber_deg: lanes beside the road on a plane of their own (a cambered street) are road when that
+            plane's roll differs from the road's by at most this many degrees and it meets the road without a
+            step (default 5; 0: one plane only).
     """
 
     curb_height: float = 0.10
@@ -100,6 +103,7 @@ class AutolabelOptions:
     min_speck: float = 0.0005
     max_hole: float = 0.002
     max_disparity: int = SGBM_MAX_DISPARITY
+    max_camber_deg: float = 5.0
 
     def check(self) -> None:
         """Raise :class:`InvalidOptionError` (one line) for a value out of range."""
@@ -121,6 +125,8 @@ class AutolabelOptions:
             raise InvalidOptionError(f"{param('window')} must be an odd number of pixels ≥ 1, got {self.window}")
         if not (0 <= self.min_speck < 1 and 0 <= self.max_hole < 1):
             raise InvalidOptionError(f"{param('min_speck')} and {param('max_hole')} are shares of the image, in [0, 1)")
+        if not 0 <= self.max_camber_deg <= 30:
+            raise InvalidOptionError(f"{param('max_camber_deg')} must be 0–30 degrees, got {self.max_camber_deg}")
         if not 1 <= self.max_disparity <= 1024:
             raise InvalidOptionError(f"{param('max_disparity')} must be in 1..1024 pixels, got {self.max_disparity}")
 
@@ -275,7 +281,60 @@ def _label_once(disparity: np.ndarray, valid: np.ndarray, model: RoadModel, road
     noise = noise_px
     roughness = slope * camera_height
     return {"m": m, "residual": residual, "ratio": ratio, "road": road, "nonroad": nonroad, "sky": sky,
-            "noise": noise, "roughness": roughness, "camera_height": camera_height, "m_far": m_far}
+            "noise": noise, "roughness": roughness, "camera_height": camera_height, "m_far": m_far, "tol": tol,
+            "near": near}
+
+
+def _side_planes(disparity: np.ndarray, valid: np.ndarray, model: RoadModel, road: np.ndarray, p: dict[str, Any],
+                 options: AutolabelOptions, min_size: int) -> np.ndarray:
+    """Road beside the labelled road on a plane of its own that meets it without a step (``bool H×W``): the lanes
+    of a cambered street, which fall away from its crown and leave the one fitted plane.
+
+    Candidates are pixels with a disparity, near enough for a curb to show (``p["near"]``), not road, and within
+    ``8·t`` of the road plane (four curb heights' worth of residual); each 8-connected group of them that touches the
+    road and has ``min_size`` pixels gets a plane of its own (MSAC + least squares). The group's road is the part
+    within the tolerance ``t`` of that plane (box-averaged, as in the first pass), kept when the plane slopes as a
+    road does, its roll differs from the road's by at most :attr:`AutolabelOptions.max_camber_deg`, its camera
+    height by at most 15 %, and it meets the road without a step: the road's own pixels along their border lie on the
+    group's plane (median residual below ``t``), where a curb would leave them about ``2t`` off it; and the group's road
+    lies below the road's plane (median), as lanes do that fall away from the crown to drain, where a pavement
+    stands above the road.
+    """
+    h, w = disparity.shape
+    tol, near = p["tol"], p["near"]
+    with np.errstate(invalid="ignore"):
+        off = np.abs(disparity - p["m"]) <= 8 * tol
+    candidates = valid & near & ~road & off
+    labels, sizes, _ = _components(candidates, min_size)
+    ring = cv2.dilate(road.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    extra = np.zeros((h, w), bool)
+    for k in np.unique(labels[ring & candidates]):
+        if k == 0 or sizes[k] < min_size:
+            continue
+        group = labels == k
+        try:
+            side = fit_road_model(disparity, group, inlier_threshold=max(1.0, options.noise_factor * p["noise"]))
+        except RoadFitError:
+            continue
+        if (side.affine[1] <= 0 or abs(side.roll_deg - model.roll_deg) > options.max_camber_deg
+                or abs(side.affine[1] / model.affine[1] - 1) > 0.15):
+            continue
+        residual, _ = _box_mean(disparity - side.disparity((h, w)), valid, options.window)
+        border = road & (cv2.dilate(group.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0) & np.isfinite(residual)
+        if not border.any() or np.median(np.abs(residual[border]) / tol[border]) >= 1:
+            continue  # the road beside it is off its plane: a step (a curb and a pavement), not a lane's camber
+        with np.errstate(invalid="ignore"):
+            lane = group & (np.abs(residual) <= tol)
+            if lane.any() and np.median((disparity - p["m"])[lane] / tol[lane]) <= 0:
+                extra |= lane  # below the road's plane, as a lane falling away from the crown; a pavement is above
+    return extra & _touching(extra, road)
+
+
+def _touching(mask: np.ndarray, road: np.ndarray) -> np.ndarray:
+    """The 8-connected parts of ``mask`` that touch ``road`` (``bool H×W``)."""
+    labels, _, _ = _components(mask | road, 1)
+    keep = np.unique(labels[road])
+    return np.isin(labels, keep[keep > 0]) & mask
 
 
 def _noise_model(residual: np.ndarray, m: np.ndarray, road: np.ndarray, bins: int = 8) -> tuple[float, float]:
@@ -354,6 +413,8 @@ def autolabel(disparity: np.ndarray, *, baseline: float | None = None,
         model = fit_road_model(disparity, road, inlier_threshold=max(1.0, options.noise_factor * p["noise"]))
         _check_road_plane(model, options.max_roll_deg)
         noise = options.noise
+    if options.max_camber_deg > 0:
+        road = road | _side_planes(disparity, valid, model, road, p, options, min_speck)
     nonroad = (p["nonroad"] | p["sky"]) & ~road
     _, _, nonroad_specks = _components(nonroad & ~p["sky"], min_speck)
     nonroad &= ~nonroad_specks
