@@ -549,9 +549,11 @@ def cmd_datasets_info(args: argparse.Namespace) -> int:
 
     from freespace.data.splits import parse_fractions
 
+    flags = _flags(build_parser({"datasets"}), ["datasets", "info"])
     info = dataset_info(args.dataset, args.root, progress=not args.no_progress, seed=args.seed,
                         disparity_dir=args.disparity_dir, by=args.by, gap=args.gap,
-                        fractions=parse_fractions(args.fractions) if args.fractions is not None else None)
+                        fractions=parse_fractions(args.fractions) if args.fractions is not None else None,
+                        spell=lambda name: flags.get(name, name))
     print(format_info(info))
     return 1 if info["problems"] else 0
 
