@@ -85,14 +85,15 @@ def _calibration_problem(dataset: StereoRoadDataset, frame: FrameRef, left: tupl
 def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[list[Problem], dict[str, tuple[int, int]]]:
     """:func:`check_dataset`, plus the ``(H, W)`` of every readable left image by frame name.
 
-    A calibration file that many frames share (a KITTI raw day, a folder layout's camera) is reported once, with
-    the number of frames it spoils, not once per frame."""
+    A problem that many frames share, a calibration (a KITTI raw day, a folder layout's camera) or right images
+    of another size or kind (grey or RGB) than the left ones in a scenario (a drive), is reported once, with the
+    frames it spoils, not once per frame."""
     from freespace.runtime.log import progress_bar
 
     problems = list(dataset.orphans())
     left_sizes: dict[str, tuple[int, int]] = {}
     expect = dataset.expected_partners()
-    bad_calib: dict[str, list[str]] = {}  # problem → the frames it spoils
+    shared: dict[str, list[str]] = {}  # a problem of many frames (a calibration, a drive's pairs) → those frames
     for frame in progress_bar(dataset.frames, desc="check", unit="frame", enabled=progress):
         shapes: dict[str, tuple[int, ...]] = {}
         for kind in ("left", "right", "label", "disparity", "depth", "velodyne"):
@@ -113,27 +114,29 @@ def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[li
         elif frame.calib is not None:
             problem = _calibration_problem(dataset, frame, shapes.get("left"))
             if problem is not None:
-                bad_calib.setdefault(problem, []).append(frame.name)
+                shared.setdefault(problem, []).append(frame.name)
         problems += _size_problems(frame.name, shapes)
+        if "right" in shapes and "left" in shapes and shapes["right"] != shapes["left"]:
+            shared.setdefault(f"right images are {describe_image(shapes['right'])} but the left ones "
+                              f"{describe_image(shapes['left'])} in {frame.scenario}; a stereo pair has two images of "
+                              f"one size and kind", []).append(frame.name)
         if "left" in shapes:
             left_sizes[frame.name] = shapes["left"][:2]  # type: ignore[assignment]
-    for problem, frames in bad_calib.items():
+    for problem, frames in shared.items():
         more = f" ({len(frames)} frames: {frames[0]} … {frames[-1]})" if len(frames) > 1 else ""
         problems.append(Problem(frames[0], problem + more))
     return problems, left_sizes
 
 
 def _size_problems(name: str, shapes: dict[str, tuple[int, ...]]) -> list[Problem]:
-    """A frame's files whose size differs from its left image's (the right image: size and kind, grey or RGB)."""
+    """A frame's files whose size differs from its left image's (but the right image's: its problem is its drive's,
+    :func:`scan_dataset`)."""
     ref = shapes.get("left")
     if ref is None:
         return []
     problems = []
     for kind, shape in shapes.items():
-        if kind == "right" and shape != ref:
-            problems.append(Problem(name, f"right image is {describe_image(shape)} but the left is "
-                                          f"{describe_image(ref)}; a stereo pair has two images of one size and kind"))
-        elif kind != "right" and shape[:2] != ref[:2]:
+        if kind != "right" and shape[:2] != ref[:2]:
             problems.append(Problem(name, f"{kind} is {shape[1]}×{shape[0]} but left is {ref[1]}×{ref[0]}"))
     return problems
 
