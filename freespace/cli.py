@@ -280,7 +280,7 @@ def _generate_labels(args: argparse.Namespace, dataset: Any) -> tuple[Any, dict[
     ``--labels`` when none of its frames has a label) and None."""
     import logging
 
-    from freespace.engine.config import check_label_tree, label_files, label_tree_sha256, resolved_path
+    from freespace.data.label_tree import check_label_tree, label_files, label_tree_sha256, resolved_path
     from freespace.errors import DatasetError
 
     if args.labels is None:

@@ -105,7 +105,7 @@ def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[li
             try:
                 shape = _read(dataset, frame, kind, path, problems)
             except FreespaceError as exc:
-                problems.append(Problem(frame.name, str(exc)))
+                problems.append(Problem(frame.name, exc.render(param)))  # its parameters rendered at the end
                 continue
             if shape is not None:
                 shapes[kind] = shape
@@ -188,22 +188,10 @@ def dataset_info(name: str, root: PathLike, *, progress: bool = True, seed: int 
         if labelled:
             try:
                 splits = split_frames(ds, by, seed=seed, fractions=fractions, gap=gap)
-            except DatasetError as exc:  # a drive too short for the time blocks asked
-                problems.append(Problem("split", str(exc)))
-                splits = None
-        if labelled and splits is not None:
-            entry["paper_split"] = {k: len(v) for k, v in splits.items()}
-            entry["split_by"] = by
-            empty = [k for k, v in entry["paper_split"].items() if not v]
-            if empty and by == "scenario":
-                sizes = "/".join(str(v) for v in entry["paper_split"].values())
-                blocks = "" if own_labels else f", or split each drive into time blocks ({param('by')} time)"
-                problems.append(Problem("split", f"the train/val/test split by scenario ({sizes}, seed {seed}) leaves "
-                                                 f"{' and '.join(empty)} empty: {len(labelled)} "
-                                                 f"{'labelled ' if own_labels else ''}frames in "
-                                                 f"{len({s for _, s in labelled})} scenarios; train needs frames "
-                                                 f"in each, so add frames of more scenarios or give "
-                                                 f"freespace train --splits{blocks}"))
+                entry["paper_split"] = {k: len(v) for k, v in splits.items()}
+                entry["split_by"] = by
+            except DatasetError as exc:  # a split left empty: one drive by scenario, drives too short for blocks
+                problems.append(Problem("split", exc.render(param)))
         info["splits"][split] = entry
         info["problems"] += [f"[{split}] {render(str(p), spell)}" for p in problems]
     if not info["splits"]:

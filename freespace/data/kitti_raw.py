@@ -227,7 +227,7 @@ class KittiRaw(StereoRoadDataset):
             try:
                 calib = self._read_calib(cam_file, velo_file if velo_file.is_file() else None)
             except FreespaceError as exc:
-                raise _TreeProblem(name, str(exc), type(exc)) from None
+                raise _TreeProblem(name, exc.render(param), type(exc)) from None
         velodyne_dir = drive / VELODYNE_DIR
         scans = _files(velodyne_dir, ".bin")
         if scans and calib is not None and "Tr_velo_to_cam" not in calib:
