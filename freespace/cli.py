@@ -1056,6 +1056,11 @@ def _flags(parser: argparse.ArgumentParser, argv: Sequence[str]) -> dict[str, st
     return flags
 
 
+#: the modules of the optional extras (pyproject.toml) by top-level name, and the extra that installs each
+_EXTRAS = {**dict.fromkeys(("torch", "torchvision", "segmentation_models_pytorch", "lightning", "albumentations",
+                            "pydantic", "matplotlib", "scipy"), "train"), "onnx": "export", "onnxruntime": "export"}
+
+
 def _raise_terminated(signum: int, frame: Any) -> None:
     """``SIGTERM`` handler: raise :class:`~freespace.errors.Terminated` once (so that clean-ups run, as on
     Ctrl-C); further ``SIGTERM`` signals are ignored while they do."""
@@ -1096,6 +1101,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Terminated as exc:
         print("freespace: terminated (SIGTERM)", file=sys.stderr)
         return exc.exit_code
+    except ModuleNotFoundError as exc:  # a command of an extra run in the base install (`pip install freespace`)
+        extra = _EXTRAS.get((exc.name or "").partition(".")[0])
+        if extra is None:
+            raise
+        print(f"freespace: error: `freespace {command}` needs {exc.name}, which this install lacks; install the "
+              f"extra: pip install 'freespace[{extra}]'", file=sys.stderr)
+        return 2
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
