@@ -159,8 +159,13 @@ _FORMATS = "PNG, JPEG, BMP, TIFF, PPM/PGM/PAM, GIF or WebP"
 
 def image_header_size(data: bytes) -> tuple[int, int] | None:
     """The size ``(W, H)`` in pixels that an image file's header states (read from its first bytes, nothing
-    decoded), or None when ``data`` is no image of a format read here (:data:`_FORMATS`) or its header is cut
-    short or states no size."""
+    decoded), or None when ``data`` is no image of a format read here (PNG, JPEG, BMP, TIFF, PPM/PGM/PAM/PFM, GIF,
+    WebP) or its header is cut short or states no size.
+
+    Example:
+        >>> image_header_size(b"P5\n640 480\n255\n")
+        (640, 480)
+    """
     for signatures, size in _HEADERS:
         if data.startswith(signatures):
             try:
