@@ -25,8 +25,8 @@ from typing import Any
 from freespace import __version__
 from freespace.errors import MAX_SEED, FreespaceError, InvalidOptionError, Terminated, param
 from freespace.limits import (MAX_BASELINE_M, MAX_BATCH_SIZE, MAX_CURB_HEIGHT_M, MAX_DISPARITY_PX, MAX_EPOCHS, MAX_FRAME_COUNT,
-                              MAX_INLIER_THRESHOLD_PX, MAX_LIDAR_FILL_PX, MAX_NOISE_PX, MAX_POSE, WORKERS_PER_CORE,
-                              bounded_float, bounded_int, bounded_triple, max_workers)
+                              MAX_INLIER_THRESHOLD_PX, MAX_LIDAR_FILL_PX, MAX_NOISE_PX, MAX_POSE, MIN_BASELINE_M,
+                              WORKERS_PER_CORE, bounded_float, bounded_int, bounded_triple, max_workers)
 
 # --- options shared by several commands ----------------------------------------------------------------
 
@@ -387,7 +387,7 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     one.add_argument("--confidence", metavar="C.png", help="also write the label's confidence (8-bit grey PNG)")
     one.add_argument("--model-json", metavar="M.json", help="also write the road model and statistics as JSON")
     one.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration: the baseline from P2/P3")
-    one.add_argument("--baseline", type=bounded_float(0, MAX_BASELINE_M, low_open=True), metavar="B", help="the baseline in metres (instead of --calib)")
+    one.add_argument("--baseline", type=bounded_float(MIN_BASELINE_M, MAX_BASELINE_M), metavar="B", help="the baseline in metres (instead of --calib)")
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
@@ -470,7 +470,7 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames-per-scenario", type=bounded_int(1, MAX_FRAMES), default=10,
                    help="frames per drive (default 10)")
     p.add_argument("--non-planar", action="store_true", help="roads with slopes and camber")
-    p.add_argument("--baseline", type=bounded_float(0, MAX_BASELINE_M, low_open=True), help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
+    p.add_argument("--baseline", type=bounded_float(MIN_BASELINE_M, MAX_BASELINE_M), help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
     p.add_argument("--max-roll", dest="max_roll_deg", type=bounded_float(0, MAX_ROLL_DEG), default=3.0,
                    help="rig roll range ± degrees, at most 15 (default 3)")
     p.add_argument("--baselines", type=_range, default=(0.3, 1.6), metavar="MIN,MAX",

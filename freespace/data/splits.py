@@ -181,12 +181,13 @@ def split_frames(dataset: StereoRoadDataset, by: str = "scenario", *, seed: int 
     empty = [k for k, share in zip(SPLIT_NAMES, shares) if share > 0 and not splits[k]]
     if empty:
         sizes = "/".join(str(len(splits[k])) for k in SPLIT_NAMES)
+        scenarios = len({s for _, s in pairs})
         blocks = f"split each drive into time blocks ({param('by')} time), " if by == "scenario" else ""
         raise DatasetError(f"the train/val/test split by {by} ({sizes}, seed {seed}) leaves {' and '.join(empty)} "
-                           f"empty: {len(pairs)} {'labelled ' if own_labels else ''}frames in "
-                           f"{len({s for _, s in pairs})} scenario{'s' if len({s for _, s in pairs}) > 1 else ''}; "
-                           f"add frames{' of more scenarios' if by == 'scenario' else ''}, {blocks}or give "
-                           f"{param('fractions')} with 0 for a split you leave empty")
+                           f"empty: {len(pairs)} {'labelled ' if own_labels else ''}frames in {scenarios} "
+                           f"scenario{'s' if scenarios > 1 else ''}; add frames"
+                           f"{' of more scenarios' if by == 'scenario' else ''}, {blocks}or give {param('fractions')} "
+                           f"with 0 for a split you leave empty")
     return splits
 
 

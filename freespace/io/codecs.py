@@ -163,7 +163,7 @@ def image_header_size(data: bytes) -> tuple[int, int] | None:
     WebP) or its header is cut short or states no size.
 
     Example:
-        >>> image_header_size(b"P5\n640 480\n255\n")
+        >>> image_header_size(b"P5 640 480 255 ")  # a PGM header
         (640, 480)
     """
     for signatures, size in _HEADERS:
