@@ -251,6 +251,43 @@ def markdown(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _repeat(text: str) -> int:
+    """``--repeat``: a count of timings in 1…10000 (argparse's one-line refusal otherwise)."""
+    from freespace.errors import InvalidOptionError
+    from freespace.limits import bounded_int
+
+    try:
+        return int(bounded_int(1, 10_000)(text))
+    except InvalidOptionError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def check_inputs(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[Path]:
+    """The frames of ``--frames``, once every input is known to be there and the frames share one size (the video
+    made of them and the per-frame figures need it); else ``parser.error``'s one line (exit 2), before any work."""
+    from freespace.io.codecs import image_header_size
+
+    for flag, path, kind in (("--fast", args.fast, "file"), ("--best", args.best, "file"),
+                             ("--split-file", args.split_file, "file"), ("--frames", args.frames, "dir"),
+                             ("--rendered", args.rendered, "dir")):
+        if path is not None and not (path.is_file() if kind == "file" else path.is_dir()):
+            parser.error(f"{flag} {path}: no such {'file' if kind == 'file' else 'folder'}")
+    frames = sorted(args.frames.glob("*.png"))
+    if not frames:
+        parser.error(f"--frames {args.frames}: no PNG frames")
+    first = None
+    for path in frames:
+        with path.open("rb") as f:
+            size = image_header_size(f.read(1 << 16))
+        if size is None:
+            parser.error(f"--frames: {path} is no readable PNG")
+        first = first or (path, size)
+        if size != first[1]:
+            parser.error(f"--frames: {path} is {size[0]}×{size[1]} but {first[0]} is {first[1][0]}×{first[1][1]}; "
+                         f"give frames of one size (one camera)")
+    return frames
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--fast", type=Path, help="the fast model's checkpoint (default: train a placeholder)")
@@ -262,11 +299,13 @@ def main() -> None:
     parser.add_argument("--split-file", type=Path, help="frame names of --rendered to score (default: all)")
     parser.add_argument("--work", type=Path, help="where placeholders are trained (default: a temporary folder "
                                                   "that is kept)")
-    parser.add_argument("--repeat", type=int, default=30, help="network-alone timings per model (median)")
+    parser.add_argument("--repeat", type=_repeat, default=30, help="network-alone timings per model (median), "
+                                                                  "1…10000")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out")
     parser.add_argument("--section-file", type=Path)
     parser.add_argument("--write-benchmarks", action="store_true")
     args = parser.parse_args()
+    frames = check_inputs(parser, args)
 
     from freespace.inference.predictor import machine_threads
     from freespace.io.codecs import read_image
@@ -274,9 +313,6 @@ def main() -> None:
 
     desc = machine()  # the load average at the start
     load = os.getloadavg()
-    frames = sorted(args.frames.glob("*.png"))
-    if not frames:
-        sys.exit(f"--frames {args.frames}: no PNG frames")
     note = "Models: the given checkpoints."
     rendered, split = args.rendered, args.split_file
     if args.fast is None or args.best is None:

@@ -25,8 +25,8 @@ from typing import Any
 from freespace import __version__
 from freespace.errors import MAX_SEED, FreespaceError, InvalidOptionError, Terminated, param
 from freespace.limits import (MAX_BASELINE_M, MAX_BATCH_SIZE, MAX_CURB_HEIGHT_M, MAX_DISPARITY_PX, MAX_EPOCHS, MAX_FRAME_COUNT,
-                              MAX_INLIER_THRESHOLD_PX, MAX_LIDAR_FILL_PX, MAX_NOISE_PX, MAX_POSE, WORKERS_PER_CORE,
-                              bounded_float, bounded_int, bounded_triple, max_workers)
+                              MAX_INLIER_THRESHOLD_PX, MAX_LIDAR_FILL_PX, MAX_NOISE_PX, MAX_POSE, MIN_BASELINE_M,
+                              WORKERS_PER_CORE, bounded_float, bounded_int, bounded_triple, max_workers)
 
 # --- options shared by several commands ----------------------------------------------------------------
 
@@ -280,7 +280,7 @@ def _generate_labels(args: argparse.Namespace, dataset: Any) -> tuple[Any, dict[
     ``--labels`` when none of its frames has a label) and None."""
     import logging
 
-    from freespace.engine.config import check_label_tree, label_files, label_tree_sha256, resolved_path
+    from freespace.data.label_tree import check_label_tree, label_files, label_tree_sha256, resolved_path
     from freespace.errors import DatasetError
 
     if args.labels is None:
@@ -387,7 +387,7 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     one.add_argument("--confidence", metavar="C.png", help="also write the label's confidence (8-bit grey PNG)")
     one.add_argument("--model-json", metavar="M.json", help="also write the road model and statistics as JSON")
     one.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration: the baseline from P2/P3")
-    one.add_argument("--baseline", type=bounded_float(0, MAX_BASELINE_M, low_open=True), metavar="B", help="the baseline in metres (instead of --calib)")
+    one.add_argument("--baseline", type=bounded_float(MIN_BASELINE_M, MAX_BASELINE_M), metavar="B", help="the baseline in metres (instead of --calib)")
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
@@ -499,7 +499,7 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames-per-scenario", type=bounded_int(1, MAX_FRAMES), default=10,
                    help="frames per drive (default 10)")
     p.add_argument("--non-planar", action="store_true", help="roads with slopes and camber")
-    p.add_argument("--baseline", type=bounded_float(0, MAX_BASELINE_M, low_open=True), help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
+    p.add_argument("--baseline", type=bounded_float(MIN_BASELINE_M, MAX_BASELINE_M), help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
     p.add_argument("--max-roll", dest="max_roll_deg", type=bounded_float(0, MAX_ROLL_DEG), default=3.0,
                    help="rig roll range ± degrees, at most 15 (default 3)")
     p.add_argument("--baselines", type=_range, default=(0.3, 1.6), metavar="MIN,MAX",
@@ -578,9 +578,11 @@ def cmd_datasets_info(args: argparse.Namespace) -> int:
 
     from freespace.data.splits import parse_fractions
 
+    flags = _flags(build_parser({"datasets"}), ["datasets", "info"])
     info = dataset_info(args.dataset, args.root, progress=not args.no_progress, seed=args.seed,
                         disparity_dir=args.disparity_dir, by=args.by, gap=args.gap,
-                        fractions=parse_fractions(args.fractions) if args.fractions is not None else None)
+                        fractions=parse_fractions(args.fractions) if args.fractions is not None else None,
+                        spell=lambda name: flags.get(name, name))
     print(format_info(info))
     return 1 if info["problems"] else 0
 
@@ -1126,6 +1128,11 @@ def _flags(parser: argparse.ArgumentParser, argv: Sequence[str]) -> dict[str, st
     return flags
 
 
+#: the modules of the optional extras (pyproject.toml) by top-level name, and the extra that installs each
+_EXTRAS = {**dict.fromkeys(("torch", "torchvision", "segmentation_models_pytorch", "lightning", "albumentations",
+                            "pydantic", "matplotlib", "scipy"), "train"), "onnx": "export", "onnxruntime": "export"}
+
+
 def _raise_terminated(signum: int, frame: Any) -> None:
     """``SIGTERM`` handler: raise :class:`~freespace.errors.Terminated` once (so that clean-ups run, as on
     Ctrl-C); further ``SIGTERM`` signals are ignored while they do."""
@@ -1166,6 +1173,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Terminated as exc:
         print("freespace: terminated (SIGTERM)", file=sys.stderr)
         return exc.exit_code
+    except ModuleNotFoundError as exc:  # a command of an extra run in the base install (`pip install freespace`)
+        extra = _EXTRAS.get((exc.name or "").partition(".")[0])
+        if extra is None:
+            raise
+        print(f"freespace: error: `freespace {command}` needs {exc.name}, which this install lacks; install the "
+              f"extra: pip install 'freespace[{extra}]'", file=sys.stderr)
+        return 2
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)

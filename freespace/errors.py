@@ -27,6 +27,12 @@ def param(name: str) -> str:
     return f"\x00{name}\x00"
 
 
+def render(text: str, spell: Callable[[str], str] = str) -> str:
+    """``text`` with every :func:`param` written as ``spell(name)`` (default: the name itself): how a message
+    that is no error (a problem :func:`freespace.data.info.dataset_info` lists) names its parameters."""
+    return _PARAM.sub(lambda m: spell(m.group(1)), text)
+
+
 class FreespaceError(Exception):
     """Base class of every error ``freespace`` raises for bad input or bad options."""
 
@@ -34,7 +40,7 @@ class FreespaceError(Exception):
 
     def render(self, spell: Callable[[str], str] = str) -> str:
         """The message with every :func:`param` written as ``spell(name)`` (default: the name itself)."""
-        return _PARAM.sub(lambda m: spell(m.group(1)), super().__str__())
+        return render(super().__str__(), spell)
 
     def __str__(self) -> str:
         return self.render()

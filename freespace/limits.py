@@ -27,7 +27,8 @@ from freespace.errors import InvalidOptionError, param
 __all__ = ["Bounded", "bounded_int", "bounded_float", "usable_cores", "max_workers", "check_workers",
            "WORKERS_PER_CORE", "MAX_WORKERS", "MAX_BATCH_SIZE", "MAX_EPOCHS", "MAX_WEIGHT_DECAY", "MAX_DEVICES",
            "MAX_NODES", "MAX_DISPARITY_PX", "MAX_CURB_HEIGHT_M", "MAX_BASELINE_M", "MAX_NOISE_PX", "MAX_LIDAR_FILL_PX",
-           "MAX_INLIER_THRESHOLD_PX", "MAX_FRAME_COUNT", "MAX_POSE", "bounded_triple"]
+           "MAX_INLIER_THRESHOLD_PX", "MAX_FRAME_COUNT", "MAX_POSE", "bounded_triple", "MAX_IMAGE_PIXELS",
+           "MAX_IMAGE_FILE_BYTES", "MAX_SCAN_POINTS", "MIN_BASELINE_M", "MAX_FOCAL_PX"]
 
 #: worker processes per CPU core at most (frame processing and data loading are CPU-bound)
 WORKERS_PER_CORE = 4
@@ -50,6 +51,19 @@ MAX_DISPARITY_PX = 1024
 MAX_CURB_HEIGHT_M = 1.0
 #: a stereo baseline at most, metres (road rigs: 0.1–1.6 m)
 MAX_BASELINE_M = 10.0
+#: a stereo baseline at least, metres: a calibration that gives less is no stereo rig (or is in other units)
+MIN_BASELINE_M = 0.01
+#: a focal length at most, pixels (a 1242-pixel-wide image at this focal length sees 0.7 degrees)
+MAX_FOCAL_PX = 100_000.0
+#: the pixels (W·H) an image file may state in its header at most, checked before it is decoded: 2²⁵, so 8K video
+#: (7680×4320) fits, while a 1 MB PNG whose header says 30000×30000 (6 GB decoded) is refused
+MAX_IMAGE_PIXELS = 2**25
+#: the bytes an image, disparity or depth file may have at most, checked before it is read: MAX_IMAGE_PIXELS
+#: pixels of four float32 channels (the largest uncompressed file of an image that may be decoded), and 1 MiB
+MAX_IMAGE_FILE_BYTES = MAX_IMAGE_PIXELS * 16 + 2**20
+#: the points a LiDAR scan may hold at most, checked from its size before it is read (a KITTI HDL-64E scan holds
+#: about 120 000)
+MAX_SCAN_POINTS = 4_000_000
 #: a disparity noise at most, pixels (beyond it no road fit is meaningful)
 MAX_NOISE_PX = 100.0
 #: the LiDAR hole filling at most, pixels

@@ -430,7 +430,11 @@ def test_torch_dataset_flip_and_photometric(tmp_path: Path) -> None:
 
 
 def test_datasets_split_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    synthia_tree(tmp_path / "s", n=5)
+    synthia_tree(tmp_path / "two", n=5)  # two scenarios cannot fill three splits: refused, nothing written
+    assert main(["datasets", "split", "--dataset", "synthia", "--root", str(tmp_path / "two"), "--out",
+                 str(tmp_path / "none")]) == 2
+    assert "leaves val empty" in capsys.readouterr().err and not (tmp_path / "none").exists()
+    synthia_tree(tmp_path / "s", seqs=tuple(f"SYNTHIA-SEQS-0{i}-SPRING" for i in range(1, 6)))  # 5 × 3 frames: 9/3/3
     out = tmp_path / "lists"
     assert main(["datasets", "split", "--dataset", "synthia", "--root", str(tmp_path / "s"), "--out", str(out)]) == 0
     lists = read_splits(out)

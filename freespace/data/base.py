@@ -20,7 +20,7 @@ import numpy as np
 from freespace.data.disparity import DisparityCache, check_disparity_source, resolve_disparity
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError, param
 from freespace.geometry import SGBM_MAX_DISPARITY, StereoCalibration
-from freespace.io.codecs import read_image, read_road_label
+from freespace.io.codecs import describe_image, read_image, read_road_label
 from freespace.io.files import PathLike
 from freespace.labels import RoadLabel
 
@@ -228,8 +228,9 @@ class StereoRoadDataset(ABC):
         left_img = read_image(frame.left, what="left image")
         right_img = read_image(frame.right, what="right image") if right and frame.right else None
         if right_img is not None and right_img.shape != left_img.shape:
-            raise ShapeMismatchError(f"{frame.name}: right image is {right_img.shape[1]}×{right_img.shape[0]} but the "
-                                     f"left is {left_img.shape[1]}×{left_img.shape[0]}")
+            raise ShapeMismatchError(f"{frame.name}: right image {frame.right} is {describe_image(right_img.shape)} "
+                                     f"but the left is {describe_image(left_img.shape)}; a stereo pair has two images "
+                                     f"of one size and kind")
         if label and frame.name in self.label_files:
             lab = read_road_label(self.label_files[frame.name])
         else:

@@ -39,6 +39,7 @@ from freespace.geometry import RoadPlane, StereoCalibration
 from freespace.io.codecs import DISPARITY_SUFFIXES, IMAGE_SUFFIXES, read_disparity, read_raw, read_road_label
 from freespace.io.files import PathLike
 from freespace.labels import RoadLabel
+from freespace.limits import MAX_BASELINE_M, MAX_FOCAL_PX, MIN_BASELINE_M
 
 __all__ = ["FolderSpec", "GenericStereo", "SynthiaStereo", "CarlaStereo", "CONFIG_NAME"]
 
@@ -129,12 +130,32 @@ class FolderSpec:
                 if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
                                           or not math.isfinite(value)):
                     raise InvalidOptionError(f"{where}: camera {key} must be a number, got {value!r}")
+            _check_rig(where, self.camera)
             if "height" in self.camera and not self.camera["height"] > 0:
                 raise InvalidOptionError(f"{where}: camera height must be > 0 metres above the road, got "
                                          f"{self.camera['height']}")
             if "pitch" in self.camera and not abs(self.camera["pitch"]) < 90:
                 raise InvalidOptionError(f"{where}: camera pitch must be within ±90 degrees, got "
                                          f"{self.camera['pitch']}")
+
+
+def _check_rig(where: Path | str, camera: dict[str, float]) -> None:
+    """Refuse a camera no rig has: a focal length not in (0, MAX_FOCAL_PX] px, a principal point left of or above
+    the image (< 0), a baseline outside MIN_BASELINE_M…MAX_BASELINE_M m (0 only for a monocular camera, which
+    gives its ``height``)."""
+    for key in ("fx", "fy"):
+        if key in camera and not 0 < camera[key] <= MAX_FOCAL_PX:
+            raise InvalidOptionError(f"{where}: camera {key} must be a focal length in (0, {MAX_FOCAL_PX:g}] pixels, "
+                                     f"got {camera[key]}")
+    for key in ("cx", "cy"):
+        if key in camera and camera[key] < 0:
+            raise InvalidOptionError(f"{where}: camera {key} must be a principal point inside the image (≥ 0 px), got "
+                                     f"{camera[key]}")
+    baseline = camera.get("baseline")
+    if baseline is not None and not (MIN_BASELINE_M <= baseline <= MAX_BASELINE_M
+                                     or (baseline == 0 and "height" in camera)):
+        raise InvalidOptionError(f"{where}: camera baseline must be {MIN_BASELINE_M:g}–{MAX_BASELINE_M:g} metres "
+                                 f"(0 only for a monocular camera, with its height), got {baseline}")
 
 
 def _channel(img: np.ndarray, channel: int) -> np.ndarray:
@@ -390,4 +411,7 @@ class CarlaStereo(SequenceDataset):
         cam = load_yaml(path)  # a key given twice is refused
         if not isinstance(cam, dict) or not {"fx", "cx", "cy", "baseline"} <= set(cam):
             raise CorruptFileError(f"{path} must give fx, cx, cy (pixels) and baseline (metres)")
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in cam.values()):
+            raise CorruptFileError(f"{path}: every value must be a finite number, got {cam!r}")
+        _check_rig(path, cam)
         return cam

@@ -65,16 +65,42 @@ _DRIVE = re.compile(r"^(\d{4}_\d{2}_\d{2})_drive_(\d{4})_sync$")
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-def _png_size(path: Path) -> tuple[int, int] | None:
-    """``(W, H)`` from a PNG file's header (24 bytes read), or None when it is no PNG (decoded later)."""
+def _png_header(path: Path) -> tuple[int, int, bool] | None:
+    """``(W, H, grey)`` from a PNG file's header (26 bytes read; ``grey``: its colour type is grey, with or
+    without alpha, as :func:`~freespace.io.codecs.read_image` reads it: ``H×W``), or None when it is no PNG
+    (decoded later)."""
     try:
         with path.open("rb") as f:
-            head = f.read(24)
+            head = f.read(26)
     except OSError:
         return None
-    if len(head) < 24 or not head.startswith(_PNG_SIGNATURE) or head[12:16] != b"IHDR":
+    if len(head) < 26 or not head.startswith(_PNG_SIGNATURE) or head[12:16] != b"IHDR":
         return None
-    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big"), head[25] in (0, 4)
+
+
+def _png_size(path: Path) -> tuple[int, int] | None:
+    """``(W, H)`` from a PNG file's header, or None when it is no PNG."""
+    header = _png_header(path)
+    return header[:2] if header is not None else None
+
+
+def _mixed_kinds(name: str, lefts: dict[str, Path], rights: dict[str, Path]) -> _TreeProblem | None:
+    """One problem for the pairs of drive ``name`` whose left and right PNGs differ in kind (grey or colour), or
+    None."""
+    mixed = []
+    for stem in sorted(set(lefts) & set(rights)):
+        left, right = _png_header(lefts[stem]), _png_header(rights[stem])
+        if left is not None and right is not None and left[2] != right[2]:
+            mixed.append((stem, left[2]))
+    if not mixed:
+        return None
+    stem, grey = mixed[0]
+    kinds = ("grey", "colour") if grey else ("colour", "grey")
+    return _TreeProblem(f"{name}/{stem}", f"{rights[stem]} is {kinds[1]} but its left image {lefts[stem]} is "
+                                          f"{kinds[0]} ({len(mixed)} pair{'s' if len(mixed) > 1 else ''} of drive "
+                                          f"{name}); give the colour cameras' images (image_02, image_03) to both "
+                                          f"sides", ShapeMismatchError)
 
 
 def _files(folder: Path, suffix: str) -> dict[str, Path]:
@@ -201,7 +227,7 @@ class KittiRaw(StereoRoadDataset):
             try:
                 calib = self._read_calib(cam_file, velo_file if velo_file.is_file() else None)
             except FreespaceError as exc:
-                raise _TreeProblem(name, str(exc), type(exc)) from None
+                raise _TreeProblem(name, exc.render(param), type(exc)) from None
         velodyne_dir = drive / VELODYNE_DIR
         scans = _files(velodyne_dir, ".bin")
         if scans and calib is not None and "Tr_velo_to_cam" not in calib:
@@ -224,6 +250,9 @@ class KittiRaw(StereoRoadDataset):
             if no_left:
                 problems.append(_unpaired(name, no_left, ("right", right_dir), ("left", drive / LEFT_DIR),
                                           "copy the missing left images or delete those right images"))
+        mixed = _mixed_kinds(name, lefts, rights) if self.strict else None  # datasets info: the scan, per drive
+        if mixed is not None:
+            problems.append(mixed)
         width, height = (int(x) for x in calib["S_rect_02"]) if calib is not None else (0, 0)
         wrong = []
         for stem, path in (list(lefts.items()) + [(s, p) for s, p in rights.items() if s in lefts]

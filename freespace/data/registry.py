@@ -6,11 +6,12 @@ layout, so importing this module (which imports the package first) makes all of 
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from typing import Any
 
 from freespace.data.base import StereoRoadDataset
-from freespace.errors import InvalidOptionError
+from freespace.errors import InvalidOptionError, param
 from freespace.io.files import PathLike
 
 __all__ = ["register_dataset", "list_datasets", "get_dataset_class", "get_dataset"]
@@ -45,5 +46,28 @@ def get_dataset(name: str, root: PathLike, split: str | None = None, **options: 
 
     Options: ``disparity_source``, ``cache_dir``, ``max_disparity`` (:class:`~freespace.data.base.StereoRoadDataset`)
     and the layout's own (e.g. KITTI's ``disparity_dir``).
+
+    Raises:
+        InvalidOptionError: an unknown layout, or an option the layout does not take (named).
     """
-    return get_dataset_class(name)(root, split, **options)
+    layout = get_dataset_class(name)
+    unknown = sorted(set(options) - _options_of(layout))
+    if unknown:
+        raise InvalidOptionError(f"{param(unknown[0])} is not an option of the {name} layout (it takes "
+                                 f"{', '.join(sorted(_options_of(layout)))}); leave it out")
+    return layout(root, split, **options)
+
+
+def _options_of(layout: type[StereoRoadDataset]) -> set[str]:
+    """The keyword options the constructors of ``layout`` take, down its classes as far as each passes
+    ``**options`` on (so that an option no layout reads is refused, not a TypeError)."""
+    names: set[str] = set()
+    for klass in layout.__mro__:
+        init = klass.__dict__.get("__init__")
+        if init is None:
+            continue
+        params = inspect.signature(init).parameters.values()
+        names |= {p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
+        if not any(p.kind == p.VAR_KEYWORD for p in params):
+            break
+    return names - {"self", "root", "split"}

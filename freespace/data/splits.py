@@ -164,6 +164,8 @@ def split_frames(dataset: StereoRoadDataset, by: str = "scenario", *, seed: int 
 
     Raises:
         InvalidOptionError: an unknown ``by``, ``gap`` without ``time``, or no frame to split.
+        DatasetError: a split that ``fractions`` gives a share (every split, without ``fractions``) would be
+            empty (one drive split by scenario; drives too short for time blocks), which training refuses.
     """
     check_split_by(by, gap)
     own_labels = getattr(type(dataset), "has_labels", True)
@@ -171,10 +173,22 @@ def split_frames(dataset: StereoRoadDataset, by: str = "scenario", *, seed: int 
     if not frames:
         raise InvalidOptionError(f"split {dataset.split!r} of {dataset.root} has no labelled frames to split")
     pairs = [(f.name, f.scenario) for f in frames]
+    shares = parse_fractions(fractions) if fractions is not None else (1.0, 1.0, 1.0)
     if by == "time":
-        return make_block_splits(pairs, fractions if fractions is not None else DEFAULT_FRACTIONS, gap)
-    sizes = _sizes_of(len(pairs), parse_fractions(fractions)) if fractions is not None else None
-    return make_splits(pairs, seed=seed, sizes=sizes)
+        splits = make_block_splits(pairs, fractions if fractions is not None else DEFAULT_FRACTIONS, gap)
+    else:
+        splits = make_splits(pairs, seed=seed, sizes=_sizes_of(len(pairs), shares) if fractions is not None else None)
+    empty = [k for k, share in zip(SPLIT_NAMES, shares) if share > 0 and not splits[k]]
+    if empty:
+        sizes = "/".join(str(len(splits[k])) for k in SPLIT_NAMES)
+        scenarios = len({s for _, s in pairs})
+        blocks = f"split each drive into time blocks ({param('by')} time), " if by == "scenario" else ""
+        raise DatasetError(f"the train/val/test split by {by} ({sizes}, seed {seed}) leaves {' and '.join(empty)} "
+                           f"empty: {len(pairs)} {'labelled ' if own_labels else ''}frames in {scenarios} "
+                           f"scenario{'s' if scenarios > 1 else ''}; add frames"
+                           f"{' of more scenarios' if by == 'scenario' else ''}, {blocks}or give {param('fractions')} "
+                           f"with 0 for a split you leave empty")
+    return splits
 
 
 def write_splits(folder: PathLike, splits: dict[str, list[str]]) -> list[Path]:

@@ -24,7 +24,7 @@ from freespace.datagen.runner import FrameCommand, check_run, run_dataset
 from freespace.errors import (CorruptFileError, DatasetError, FreespaceError, InvalidOptionError, RoadFitError,
                               ShapeMismatchError, param)
 from freespace.geometry import compute_disparity
-from freespace.io.codecs import encode_image, read_disparity, read_image
+from freespace.io.codecs import describe_image, encode_image, read_disparity, read_image
 from freespace.io.files import PathLike, check_outputs, check_writable_files, encode_json, write_files_together
 from freespace.io.kitti import read_kitti_calib
 
@@ -133,7 +133,7 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
                                      f"and the right image of one rectified stereo pair")
         right = read_image(target, what="target image")
         if right.shape != left.shape:
-            raise ShapeMismatchError(f"reference is {_size(left.shape)} but target is {_size(right.shape)}; give the "
+            raise ShapeMismatchError(f"reference is {describe_image(left.shape)} but target is {describe_image(right.shape)}; give the "
                                      f"two images of one rectified stereo pair")
         disp = compute_disparity(left, right, max_disparity=options.max_disparity)
         source = "sgbm"

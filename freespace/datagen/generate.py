@@ -23,7 +23,8 @@ from freespace.datagen.runner import FrameCommand, check_run, run_dataset
 from freespace.errors import DatasetError, FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError, param
 from freespace.geometry import (SGBM_MAX_DISPARITY, RoadModel, RoadPlane, StereoCalibration, compute_disparity,
                                 fit_road_model, generate_view)
-from freespace.io.codecs import IMAGE_SUFFIXES, encode_image, read_disparity, read_image, read_road_label
+from freespace.io.codecs import IMAGE_SUFFIXES, describe_image, encode_image, read_disparity, read_image, \
+    read_road_label
 from freespace.io.files import (PathLike, atomic_write_bytes, check_outputs, check_writable_files, encode_json,
                                 write_files_together)
 from freespace.labels import RoadLabel
@@ -125,7 +126,7 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
     """
     timings: dict[str, float] = {}
     if reference.shape != target.shape:
-        raise ShapeMismatchError(f"reference is {_size(reference.shape)} but target is {_size(target.shape)}; "
+        raise ShapeMismatchError(f"reference is {describe_image(reference.shape)} but target is {describe_image(target.shape)}; "
                                  f"give the two images of one rectified stereo pair")
     if road.shape != reference.shape[:2]:
         raise ShapeMismatchError(f"road mask is {_size(road.shape)} but the images are {_size(reference.shape)}; "

@@ -16,19 +16,22 @@ from __future__ import annotations
 import functools
 import io as _io
 import math
+import re
 import warnings
 import zlib
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import cv2
 import numpy as np
 
 from freespace.errors import CorruptFileError, InvalidOptionError, ShapeMismatchError
 from freespace.io.files import PathLike, atomic_write_bytes, read_bytes
+from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS
 from freespace.labels import RoadLabel
 
-__all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "read_raw",
+__all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image",
+           "image_header_size", "check_image_pixels", "describe_image", "read_raw",
            "write_image", "encode_image", "read_disparity", "write_disparity", "png_disparity_overflow",
            "read_depth", "read_road_label",
            "road_label_from_image", "road_label_to_kitti"]
@@ -42,6 +45,8 @@ MAX_IMAGE_SIDE = 8192
 
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: the file limit as the messages name it
+_FILE_LIMIT = f"image file limit of {MAX_IMAGE_FILE_BYTES:,} bytes (MAX_IMAGE_FILE_BYTES)"
 _PNG_DISPARITY_MAX = 65535  # the largest value of a KITTI disparity PNG: 255.996 px
 
 
@@ -68,12 +73,129 @@ def _png_damage(data: bytes) -> str | None:
     return "cut short (no IEND chunk)"
 
 
+def _u(data: bytes, at: int, n: int, order: str = "big") -> int:
+    """The unsigned ``n``-byte integer at ``at`` (IndexError when the data ends before it)."""
+    if at < 0 or at + n > len(data):
+        raise IndexError(at)
+    return int.from_bytes(data[at:at + n], order)  # type: ignore[arg-type]
+
+
+def _jpeg_size(data: bytes) -> tuple[int, int]:
+    pos = 2
+    while True:  # the markers up to the frame header (SOFn), skipping fill bytes and each segment
+        if data[pos] != 0xFF:
+            raise ValueError("not a marker")
+        marker = data[pos + 1]
+        if marker == 0xFF:
+            pos += 1
+        elif marker == 0x01 or 0xD0 <= marker <= 0xD8:  # markers without a segment
+            pos += 2
+        elif 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            return _u(data, pos + 7, 2), _u(data, pos + 5, 2)
+        elif marker in (0xD9, 0xDA):
+            raise ValueError("no frame header")
+        else:
+            pos += 2 + _u(data, pos + 2, 2)
+
+
+def _tiff_size(data: bytes) -> tuple[int, int]:
+    order = "little" if data[:2] == b"II" else "big"
+    big = _u(data, 2, 2, order) == 43  # BigTIFF: 8-byte offsets and counts
+    width = 8 if big else 4
+    ifd = _u(data, 8 if big else 4, width, order)
+    entries = min(_u(data, ifd, 8 if big else 2, order), 4096)
+    found: dict[int, int] = {}
+    for k in range(entries):
+        at = ifd + (8 if big else 2) + k * (20 if big else 12)
+        tag, kind = _u(data, at, 2, order), _u(data, at + 2, 2, order)
+        if tag in (256, 257):  # ImageWidth, ImageLength: SHORT, LONG or LONG8
+            found[tag] = _u(data, at + 4 + width, {3: 2, 4: 4, 16: 8}[kind], order)
+    return found[256], found[257]
+
+
+def _bmp_size(data: bytes) -> tuple[int, int]:
+    if _u(data, 14, 4, "little") == 12:  # OS/2 header: 16-bit sizes
+        return _u(data, 18, 2, "little"), _u(data, 20, 2, "little")
+    w, h = _u(data, 18, 4, "little"), _u(data, 22, 4, "little")
+    return w, min(h, 2**32 - h)  # a negative height (two's complement): rows stored top to bottom
+
+
+def _webp_size(data: bytes) -> tuple[int, int]:
+    chunk = data[12:16]
+    if chunk == b"VP8 ":
+        return _u(data, 26, 2, "little") & 0x3FFF, _u(data, 28, 2, "little") & 0x3FFF
+    if chunk == b"VP8L":
+        bits = _u(data, 21, 4, "little")
+        return 1 + (bits & 0x3FFF), 1 + ((bits >> 14) & 0x3FFF)
+    if chunk == b"VP8X":
+        return 1 + _u(data, 24, 3, "little"), 1 + _u(data, 27, 3, "little")
+    raise ValueError("unknown WebP chunk")
+
+
+_PNM = re.compile(rb"P[1-6Ff](?:\s|#[^\n]*\n)+(\d+)(?:\s|#[^\n]*\n)+(\d+)")
+
+
+def _pnm_size(data: bytes) -> tuple[int, int]:
+    head = data[:4096]
+    if head.startswith(b"P7"):  # PAM: WIDTH and HEIGHT lines
+        w, h = (re.search(rb"\n\s*" + key + rb"\s+(\d+)", head) for key in (b"WIDTH", b"HEIGHT"))
+        return int(w.group(1)), int(h.group(1))  # type: ignore[union-attr]
+    m = _PNM.match(head)
+    return int(m.group(1)), int(m.group(2))  # type: ignore[union-attr]
+
+
+#: the image formats read here: how each begins, and how its header states its size (W, H)
+_HEADERS: tuple[tuple[tuple[bytes, ...], Callable[[bytes], tuple[int, int]]], ...] = (
+    ((_PNG_SIGNATURE,), lambda d: (_u(d, 16, 4), _u(d, 20, 4)) if d[12:16] == b"IHDR" else (0, 0)),
+    ((b"\xff\xd8\xff",), _jpeg_size),
+    ((b"BM",), _bmp_size),
+    ((b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"), _tiff_size),
+    ((b"P1", b"P2", b"P3", b"P4", b"P5", b"P6", b"P7", b"Pf", b"PF"), _pnm_size),
+    ((b"GIF87a", b"GIF89a"), lambda d: (_u(d, 6, 2, "little"), _u(d, 8, 2, "little"))),
+    ((b"RIFF",), lambda d: _webp_size(d) if d[8:12] == b"WEBP" else (0, 0)),
+)
+_FORMATS = "PNG, JPEG, BMP, TIFF, PPM/PGM/PAM, GIF or WebP"
+
+
+def image_header_size(data: bytes) -> tuple[int, int] | None:
+    """The size ``(W, H)`` in pixels that an image file's header states (read from its first bytes, nothing
+    decoded), or None when ``data`` is no image of a format read here (PNG, JPEG, BMP, TIFF, PPM/PGM/PAM/PFM, GIF,
+    WebP) or its header is cut short or states no size.
+
+    Example:
+        >>> image_header_size(b"P5 640 480 255 ")  # a PGM header
+        (640, 480)
+    """
+    for signatures, size in _HEADERS:
+        if data.startswith(signatures):
+            try:
+                w, h = size(data)
+            except (IndexError, KeyError, ValueError, AttributeError):
+                return None
+            return (w, h) if w >= 1 and h >= 1 else None
+    return None
+
+
+def check_image_pixels(width: int, height: int, what: str) -> None:
+    """Refuse (CorruptFileError, naming ``what`` and :data:`~freespace.limits.MAX_IMAGE_PIXELS`) an image of
+    ``width × height`` pixels beyond the limit, before anything of that size is made."""
+    if width * height > MAX_IMAGE_PIXELS:
+        raise CorruptFileError(f"{what} is {width}×{height} pixels (W×H), {width * height:,} in all: more than the "
+                               f"image limit of {MAX_IMAGE_PIXELS:,} pixels (MAX_IMAGE_PIXELS; 8K video's 7680×4320 "
+                               f"fits); give a smaller image (or check the file: a crafted header?)")
+
+
 def _decode(path: PathLike, what: str, flags: int) -> np.ndarray:
-    data = read_bytes(path, what)
+    data = read_bytes(path, what, MAX_IMAGE_FILE_BYTES, _FILE_LIMIT)
     damage = _png_damage(data)
     if damage is not None:
         raise CorruptFileError(f"cannot decode {what} {path}: a damaged PNG file ({damage})")
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
+    size = image_header_size(data)
+    if size is None:
+        raise CorruptFileError(f"cannot decode {what} {path}: not a readable image file (empty, truncated or another "
+                               f"format; read here: {_FORMATS})")
+    check_image_pixels(*size, f"{what} {path}")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
     if img is None:
         raise CorruptFileError(f"cannot decode {what} {path}: not a readable image file (empty, truncated or "
                                f"another format)")
@@ -116,6 +238,14 @@ def read_image(path: PathLike, *, what: str = "image") -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
+def describe_image(shape: tuple[int, ...]) -> str:
+    """An image's size (W×H) and kind as a message says it: ``"1242×375 RGB"`` for ``H×W×3`` (a colour image as
+    :func:`read_image` returns it), ``"1242×375 grey"`` for ``H×W``; so that two images of one size and
+    different channels are told apart (a grey left image with a colour right one)."""
+    kind = "grey" if len(shape) == 2 or shape[2] == 1 else "RGB" if shape[2] == 3 else f"{shape[2]}-channel"
+    return f"{shape[1]}×{shape[0]} {kind}"
+
+
 def encode_image(image: np.ndarray, suffix: str = ".png") -> bytes:
     """Encode an ``H×W×3`` RGB or ``H×W`` grey uint8 (or uint16 grey, PNG only) image to file bytes."""
     if image.ndim == 3:
@@ -143,7 +273,7 @@ def _invalid_to_nan(disp: np.ndarray) -> np.ndarray:
 
 
 def _read_pfm(path: PathLike, what: str = "disparity") -> np.ndarray:
-    data = read_bytes(path, what)
+    data = read_bytes(path, what, MAX_IMAGE_FILE_BYTES, _FILE_LIMIT)
     try:
         header, rest = data.split(b"\n", 1)
         dims, rest = rest.split(b"\n", 1)
@@ -161,6 +291,7 @@ def _read_pfm(path: PathLike, what: str = "disparity") -> np.ndarray:
     if not (math.isfinite(scale) and scale != 0):
         raise CorruptFileError(f"cannot decode {what} {path}: its PFM scale is {scale}; it must be a finite, "
                                f"non-zero number (negative = little-endian)")
+    check_image_pixels(width, height, f"{what} {path}")
     channels = 3 if header == b"PF" else 1
     dtype = "<f4" if scale < 0 else ">f4"
     count = width * height * channels
@@ -175,13 +306,21 @@ def _read_pfm(path: PathLike, what: str = "disparity") -> np.ndarray:
 
 def _read_npy_2d(path: Path, what: str, expected: str) -> np.ndarray:
     """A real-valued 2-D array from a ``.npy`` file (no pickles), or a one-line error naming ``what``."""
-    read_bytes(path, what)
-    try:
-        arr = np.load(path, allow_pickle=False)
+    data = read_bytes(path, what, MAX_IMAGE_FILE_BYTES, _FILE_LIMIT)
+    try:  # the header first: what the array is and its size, before anything is made
+        f = _io.BytesIO(data)
+        version = np.lib.format.read_magic(f)
+        header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, _, dtype = header(f)
     except (ValueError, OSError, EOFError) as exc:
         raise CorruptFileError(f"cannot decode {what} {path}: {str(exc).splitlines()[0]}") from None
-    if arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
-        raise CorruptFileError(f"{what} {path} holds a {arr.dtype} array of shape {arr.shape}; expected {expected}")
+    if len(shape) != 2 or not np.issubdtype(dtype, np.number) or np.issubdtype(dtype, np.complexfloating):
+        raise CorruptFileError(f"{what} {path} holds a {dtype} array of shape {shape}; expected {expected}")
+    check_image_pixels(shape[1], shape[0], f"{what} {path}")
+    try:
+        arr = np.load(_io.BytesIO(data), allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise CorruptFileError(f"cannot decode {what} {path}: {str(exc).splitlines()[0]}") from None
     return arr
 
 

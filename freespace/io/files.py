@@ -31,7 +31,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-from freespace.errors import InputFileError, InvalidOptionError, OutputError, param
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, param
 
 PathLike = str | os.PathLike[str]
 
@@ -381,16 +381,32 @@ def missing_input(path: PathLike, what: str, kind: Literal["file", "folder"] = "
     return InputFileError(f"{what} not found: {path}")
 
 
-def read_bytes(path: PathLike, what: str) -> bytes:
+def read_bytes(path: PathLike, what: str, max_bytes: int | None = None, limit: str = "") -> bytes:
     """The bytes of the input file ``path``; ``what`` names it in the one-line error (InputFileError) for a
-    missing, folder or unreadable path."""
+    missing, folder or unreadable path.
+
+    Args:
+        max_bytes: the most bytes the file may have, checked before it is read (None: no limit); a larger file
+            is refused (CorruptFileError) with ``limit``, the text that names the limit
+            (``"MAX_IMAGE_FILE_BYTES (…)"``).
+    """
     path = Path(path)
     if not path.is_file():
         hint = "it is a folder, name a file" if path.is_dir() else "check the path"
         raise InputFileError(f"{what} not found: {path} ({hint})")
     try:
-        return path.read_bytes()
+        with path.open("rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            if max_bytes is None:
+                data = f.read()
+            else:  # not read at all when too large; at most one byte more when it grew since
+                data = f.read(max_bytes + 1) if size <= max_bytes else b""
     except OSError as exc:
         raise InputFileError(f"cannot read {what} {path}: {exc.strerror}") from None
+    if max_bytes is not None and max(size, len(data)) > max_bytes:
+        raise CorruptFileError(f"{what} {path} has {max(size, len(data)):,} bytes, more than the "
+                               f"{limit or f'{max_bytes:,} bytes'} read here; give a smaller file (or check it: a "
+                               f"wrong file, or a crafted one?)")
+    return data
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from freespace.errors import CorruptFileError
 from freespace.io.files import PathLike, read_bytes
+from freespace.limits import MAX_BASELINE_M, MAX_FOCAL_PX, MAX_IMAGE_PIXELS, MAX_SCAN_POINTS, MIN_BASELINE_M
 
 __all__ = ["read_kitti_calib", "read_kitti_raw_calib", "read_velodyne", "VELODYNE_POINT_BYTES"]
 
@@ -20,17 +21,25 @@ VELODYNE_POINT_BYTES = 16
 # ---------------------------------------------------------------------------------------------------
 # KITTI calibration
 
+_CALIB_MAX_BYTES = 2**20
+
 
 def _parse_calib(path: PathLike, text_keys: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     """``KEY: v1 v2 ...`` lines of a KITTI calibration file as flat float64 arrays (``text_keys``, such as
     KITTI raw's ``calib_time``, are skipped: their values are not numbers)."""
-    text = read_bytes(path, "calibration file").decode("utf-8", errors="replace")
+    text = read_bytes(path, "calibration file", _CALIB_MAX_BYTES, "1 MiB a calibration file may have (KITTI's have "
+                      "about 3 KB)").decode("utf-8", errors="replace")
     calib: dict[str, np.ndarray] = {}
+    lines: dict[str, int] = {}
     for lineno, line in enumerate(text.splitlines(), 1):
         if not line.strip():
             continue
         key, sep, values = line.partition(":")
         key = key.strip()
+        if sep and key in lines:
+            raise CorruptFileError(f"calibration file {path}: {key} is given twice (lines {lines[key]} and {lineno}); "
+                                   f"keep the right one")
+        lines[key] = lineno
         if sep and key in text_keys:
             continue
         try:
@@ -58,6 +67,12 @@ def read_kitti_calib(path: PathLike) -> dict[str, np.ndarray]:
     Returns:
         A dict of float64 arrays: ``P0``–``P3`` are 3×4, ``R0_rect`` (or ``R_rect``) 3×3, ``Tr_*`` 3×4;
         other keys keep their flat values.
+
+    Raises:
+        InputFileError: missing or unreadable. CorruptFileError: a line that is not ``KEY: numbers``, a key given
+        twice, a matrix of the wrong size, no ``P2``, a rotation that is none (``R0_rect``, ``Tr_*``), or a rig no
+        camera has: ``P2`` singular, a focal length ≤ 0 or beyond ``MAX_FOCAL_PX``, ``P3`` with other intrinsics,
+        or a baseline outside ``MIN_BASELINE_M``…``MAX_BASELINE_M`` (``freespace.limits``).
     """
     calib = _parse_calib(path)
     for key, arr in calib.items():
@@ -68,19 +83,56 @@ def read_kitti_calib(path: PathLike) -> dict[str, np.ndarray]:
     if "P2" not in calib:
         raise CorruptFileError(f"calibration file {path} has no P2 line; expected a KITTI calibration file")
     for key in [k for k in calib if k.startswith("Tr_")] + [k for k in ("R0_rect", "R_rect") if k in calib]:
-        rotation = calib[key][:, :3]
-        if abs(np.linalg.det(rotation)) < 1e-6:
-            raise CorruptFileError(f"calibration file {path}: {key} is singular (its rotation part has "
-                                   f"determinant {np.linalg.det(rotation):.1e}); expected a rigid transform")
-    if abs(np.linalg.det(calib["P2"][:, :3])) < 1e-9:
-        raise CorruptFileError(f"calibration file {path}: P2 is singular; expected a camera projection matrix")
+        _check_rotation(path, key, calib[key][:, :3])
+    _check_rig(path, calib, ("P2", "P3"))
     return calib
 
 
 def _check_rotation(path: PathLike, key: str, rotation: np.ndarray) -> None:
-    if abs(np.linalg.det(rotation)) < 1e-6:
+    """Refuse a rotation (part) ``key`` that is singular or no rotation (``R·Rᵀ`` off the identity by more than
+    1e-3: KITTI's are within 1e-6)."""
+    det = np.linalg.det(rotation)
+    if abs(det) < 1e-6:
         raise CorruptFileError(f"calibration file {path}: {key} is singular (its rotation part has "
-                               f"determinant {np.linalg.det(rotation):.1e}); expected a rigid transform")
+                               f"determinant {det:.1e}); expected a rigid transform")
+    error = float(np.abs(rotation @ rotation.T - np.eye(3)).max())
+    if error > 1e-3 or det < 0:
+        raise CorruptFileError(f"calibration file {path}: {key}'s rotation part is no rotation (determinant {det:.3g},"
+                               f" R·Rᵀ off the identity by {error:.2g}); expected a rigid transform")
+
+
+def _check_rig(path: PathLike, calib: dict[str, np.ndarray], keys: tuple[str, str], names: tuple[str, str] = ("", ""),
+               size: tuple[int, int] | None = None) -> None:
+    """Refuse a stereo rig no camera has: the left projection ``keys[0]`` (and the right ``keys[1]`` if the file has
+    it) singular, a focal length that is not positive or beyond :data:`~freespace.limits.MAX_FOCAL_PX`, a principal
+    point outside the image of ``size`` ``(W, H)`` (when known), intrinsics that differ between the two (not one
+    rectified pair), or a baseline (metres, from the 4th columns) outside
+    :data:`~freespace.limits.MIN_BASELINE_M`…:data:`~freespace.limits.MAX_BASELINE_M`. ``names``: the keys as the
+    file spells them (``P_rect_02``), when they differ."""
+    left, right = (name or key for name, key in zip(names, keys))
+    P = calib[keys[0]]
+    if abs(np.linalg.det(P[:, :3])) < 1e-9:
+        raise CorruptFileError(f"calibration file {path}: {left} is singular; expected a camera projection matrix")
+    fx, fy, cx, cy = P[0, 0], P[1, 1], P[0, 2], P[1, 2]
+    if not (0 < fx <= MAX_FOCAL_PX and 0 < fy <= MAX_FOCAL_PX):
+        raise CorruptFileError(f"calibration file {path}: {left} gives a focal length of {fx:g}×{fy:g} px (fx×fy); "
+                               f"a camera's is positive and at most {MAX_FOCAL_PX:g} px: check the file's numbers")
+    if size is not None and not (0 <= cx <= size[0] and 0 <= cy <= size[1]):
+        raise CorruptFileError(f"calibration file {path}: {left} puts the principal point at ({cx:g}, {cy:g}) px, "
+                               f"outside the {size[0]}×{size[1]} image; check the file's numbers")
+    if keys[1] not in calib:
+        return
+    Q = calib[keys[1]]
+    if not np.allclose(Q[:, :3], P[:, :3], rtol=1e-3, atol=1e-3):
+        raise CorruptFileError(f"calibration file {path}: {right} has other intrinsics than {left} (first three "
+                               f"columns differ), so the two are no rectified stereo pair; check the file")
+    K = P[:, :3]
+    baseline = float(np.linalg.solve(K, P[:, 3])[0] - np.linalg.solve(K, Q[:, 3])[0])
+    if not MIN_BASELINE_M <= baseline <= MAX_BASELINE_M:
+        where = "left of" if baseline < 0 else "from"
+        raise CorruptFileError(f"calibration file {path}: {right} puts the right camera {abs(baseline):.4g} m {where} "
+                               f"{left}'s; a stereo rig's baseline is {MIN_BASELINE_M:g}–{MAX_BASELINE_M:g} m to the "
+                               f"right: check the file's 4th columns")
 
 
 def read_kitti_raw_calib(cam_to_cam: PathLike, velo_to_cam: PathLike | None = None) -> dict[str, np.ndarray]:
@@ -100,7 +152,8 @@ def read_kitti_raw_calib(cam_to_cam: PathLike, velo_to_cam: PathLike | None = No
 
     Raises:
         InputFileError: a file is missing or unreadable. CorruptFileError: a line that is not
-        ``KEY: numbers``, a missing or malformed key, a singular rotation or projection.
+        ``KEY: numbers``, a key given twice, a missing or malformed key, a singular rotation or projection, or a
+        rig no camera has (:func:`read_kitti_calib`'s checks, and a principal point outside ``S_rect_02``).
     """
     cam = _parse_calib(cam_to_cam, text_keys=("calib_time",))
     calib: dict[str, np.ndarray] = {}
@@ -117,11 +170,11 @@ def read_kitti_raw_calib(cam_to_cam: PathLike, velo_to_cam: PathLike | None = No
     if not (w >= 1 and h >= 1 and w == int(w) and h == int(h)):
         raise CorruptFileError(f"calibration file {cam_to_cam}: S_rect_02 must be the image's width and height in "
                                f"pixels, got {w:g} {h:g}")
+    if w * h > MAX_IMAGE_PIXELS:
+        raise CorruptFileError(f"calibration file {cam_to_cam}: S_rect_02 gives images of {w:g}×{h:g} pixels, more "
+                               f"than the image limit of {MAX_IMAGE_PIXELS:,} (MAX_IMAGE_PIXELS); check the file")
     _check_rotation(cam_to_cam, "R_rect_00", calib["R0_rect"])
-    for key in ("P2", "P3"):
-        if key in calib and abs(np.linalg.det(calib[key][:, :3])) < 1e-9:
-            raise CorruptFileError(f"calibration file {cam_to_cam}: P_rect_0{key[1]} is singular; expected a camera "
-                                   f"projection matrix")
+    _check_rig(cam_to_cam, calib, ("P2", "P3"), ("P_rect_02", "P_rect_03"), (int(w), int(h)))
     if velo_to_cam is not None:
         velo = _parse_calib(velo_to_cam, text_keys=("calib_time",))
         missing = [k for k in ("R", "T") if k not in velo]
@@ -143,9 +196,12 @@ def read_velodyne(path: PathLike) -> np.ndarray:
 
     Raises:
         InputFileError: missing or unreadable file. CorruptFileError: empty, a size that is not a
-        multiple of 16 bytes (4 float32 per point), or NaN/inf values.
+        multiple of 16 bytes (4 float32 per point), more than :data:`~freespace.limits.MAX_SCAN_POINTS` points
+        (refused from its size, before it is read), or NaN/inf values.
     """
-    data = read_bytes(path, "Velodyne scan")
+    data = read_bytes(path, "Velodyne scan", MAX_SCAN_POINTS * VELODYNE_POINT_BYTES,
+                      f"scan limit of {MAX_SCAN_POINTS:,} points of {VELODYNE_POINT_BYTES} bytes (MAX_SCAN_POINTS; a "
+                      f"KITTI scan holds about 120 000)")
     if not data or len(data) % VELODYNE_POINT_BYTES:
         raise CorruptFileError(f"Velodyne scan {path} has {len(data)} bytes; expected a non-empty multiple of 16 "
                                f"(float32 x, y, z, reflectance per point): a truncated copy? copy the scan again "

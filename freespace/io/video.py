@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
-from freespace.io.codecs import IMAGE_SUFFIXES, read_image
+from freespace.io.codecs import IMAGE_SUFFIXES, check_image_pixels, read_image
 from freespace.io.files import PathLike, keep_mode, replaceable
 
 __all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path",
@@ -149,6 +149,12 @@ def _open_capture(path: Path) -> cv2.VideoCapture:
         cap.release()
         raise CorruptFileError(f"cannot decode video {path}: not a video file OpenCV/FFmpeg can read (corrupt, "
                                f"truncated or an unsupported codec)")
+    try:  # the size its stream states, before a frame is decoded
+        check_image_pixels(int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)),
+                           f"the frames of video {path}")
+    except CorruptFileError:
+        cap.release()
+        raise
     return cap
 
 

@@ -8,15 +8,25 @@ HERE=$(cd "$(dirname "$0")" && pwd)
 for run in "$WORK"/runs/*/; do
     run=${run%/}
     [ -f "$run/real.json" ] || continue  # unfinished, or not evaluated yet
-    dest=$HERE/runs/$(basename "$run")
+    name=$(basename "$run")
+    dest=$HERE/runs/$name
     if [ -f "$dest/metrics.json" ] && ! cmp -s "$run/metrics.json" "$dest/metrics.json"; then
         echo "kept $dest: its record is of another run of that cell (a rerun, or another commit); rename one" >&2
         continue
     fi
-    mkdir -p "$dest/splits"
+    missing=""
+    for f in config.yaml metrics.json splits/train.txt; do [ -f "$run/$f" ] || missing="$missing $f"; done
+    if [ -n "$missing" ]; then
+        echo "skipped $run: no$missing (a record is copied whole or not at all)" >&2
+        continue
+    fi
+    # copied into a hidden staging folder (the table reads */real.json only), then moved into place whole
+    part=$HERE/runs/.$name.part
+    rm -rf "$part" && mkdir -p "$part/splits"
     for f in config.yaml inputs.json metrics.csv metrics.json real.json rendered.json; do
-        [ -f "$run/$f" ] && cp "$run/$f" "$dest/$f"
+        if [ -f "$run/$f" ]; then cp "$run/$f" "$part/$f"; fi
     done
-    cp "$run"/splits/*.txt "$dest/splits/"
+    cp "$run"/splits/*.txt "$part/splits/"
+    rm -rf "$dest" && mv -T "$part" "$dest"
 done
 "${PYTHON:-python}" "$HERE/evaluate.py" --table "$HERE/runs" > "$HERE/results.md.tmp" && mv "$HERE/results.md.tmp" "$HERE/results.md"

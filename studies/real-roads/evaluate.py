@@ -79,8 +79,14 @@ def evaluate(run: Path) -> dict:
             frames[frame.name] = {"kind": "mask", **{k: v for k, v in counts.metrics().items() if k != "accuracy"}}
         else:
             frames[frame.name] = {"kind": "polygon", "recall": float(pred[frame.road].mean())}
+    if not frames:  # no figure at all: never write the scores of an empty set (F = 1 of no pixel)
+        why = (f"all {len(left_out)} are in its splits/train.txt or val.txt" if left_out else
+               "none is here: put the KITTI stereo 2015 frames under FREESPACE_SHARED_DATA, or give "
+               "FREESPACE_KITTI_RAW=DIR for the raw frames")
+        raise SystemExit(f"evaluate.py: error: no real frame to evaluate {run} on ({why}); nothing written")
+    masks = any(v["kind"] == "mask" for v in frames.values())
     result = {"checkpoint": str(run / "checkpoints" / "best.ckpt"), "threshold": THRESHOLD, "frames": frames,
-              "pooled_masks": {k: v for k, v in pooled.metrics().items() if k != "accuracy"},
+              "pooled_masks": {k: (v if masks else math.nan) for k, v in pooled.metrics().items() if k != "accuracy"},
               "left_out": left_out}
     atomic_write_text(run / "real.json", json.dumps(result, indent=2) + "\n")
     return result
@@ -122,7 +128,7 @@ def _figures(result: dict) -> dict[str, float]:
     masks = [v for v in frames.values() if v["kind"] == "mask"]
     polygons = [v["recall"] for v in frames.values() if v["kind"] == "polygon"]
     out = {f"F {name}": v["f_score"] for name, v in frames.items() if v["kind"] == "mask"}
-    out["mean F (masks)"] = float(np.mean([v["f_score"] for v in masks]))
+    out["mean F (masks)"] = float(np.mean([v["f_score"] for v in masks])) if masks else float("nan")
     out.update({f"pooled {k}": result["pooled_masks"][k] for k in ("precision", "recall", "f_score", "iou")})
     out["polygon recall"] = float(np.mean(polygons)) if polygons else float("nan")
     return out
@@ -178,6 +184,8 @@ def main() -> None:
     ap.add_argument("--rendered", type=Path, metavar="TREE", help="also score each run on this rendered tree "
                     "(RUN/rendered.json)")
     a = ap.parse_args()
+    if not a.table and not a.runs:
+        ap.error("give run folders to evaluate, or --table RUNS")
     if a.table:
         print(table(a.table), end="")
     for run in a.runs:

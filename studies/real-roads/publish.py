@@ -58,6 +58,49 @@ def failures(run: Path, out: Path) -> None:
     out.write_bytes(data.tobytes())
 
 
+def _inputs(run: Path, raw: Path) -> dict[str, Path]:
+    """Every file the model folder is made from, checked before anything is written: the run's best checkpoint,
+    ``real.json`` and ``metrics.json``, and the example frames under ``raw`` (by their names in ``examples/``)."""
+    needed = {"checkpoint": run / "checkpoints" / "best.ckpt", "real.json": run / "real.json",
+              "metrics.json": run / "metrics.json"}
+    drives = {p.name: p for p in raw.rglob("*_drive_*_sync") if p.is_dir()} if raw.is_dir() else {}
+    examples = {f"{drive[:-5]}_{frame}.png": drives.get(drive, raw / drive) / "image_02" / "data" / f"{frame}.png"
+                for drive, frame in EXAMPLES}
+    missing = [f"{what} {path}" for what, path in {**needed, **examples}.items() if not path.is_file()]
+    if missing:
+        raise SystemExit(f"publish.py: error: {missing[0]} not found{f' (and {len(missing) - 1} more)' if len(missing) > 1 else ''}"
+                         f"; nothing written (give the run folder and the KITTI raw root with drives "
+                         f"{', '.join(d for d, _ in EXAMPLES)})")
+    return examples
+
+
+def publish(run: Path, name: str, raw: Path, fp16: bool = False) -> Path:
+    """Make ``models/NAME/`` (model.onnx, examples/, failures.jpg) in a staging folder beside it, moved into place
+    once complete: a failure leaves no model folder (no model without its examples and pictures)."""
+    import tempfile
+
+    folder = ROOT / "models" / name
+    if folder.exists():
+        raise SystemExit(f"publish.py: error: {folder} exists; remove it first")
+    examples = _inputs(run, raw)
+    stage = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=folder.parent))
+    try:
+        (stage / "examples").mkdir()
+        subprocess.run([sys.executable, "-m", "freespace.cli", "export", "--checkpoint",
+                        str(run / "checkpoints" / "best.ckpt"), "--format", "onnx", "--out", str(stage / "model.onnx"),
+                        *(["--fp16"] if fp16 else [])], check=True)
+        for target, source in examples.items():
+            shutil.copyfile(source, stage / "examples" / target)
+        (stage / "examples" / "LICENSE").write_text(LICENSE)
+        failures(run, stage / "failures.jpg")
+        stage.chmod(0o755)
+        stage.rename(folder)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    return folder
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)
@@ -65,18 +108,7 @@ def main() -> None:
     ap.add_argument("--raw", type=Path, required=True, help="the KITTI raw root the examples come from")
     ap.add_argument("--fp16", action="store_true")
     a = ap.parse_args()
-    folder = ROOT / "models" / a.name
-    if folder.exists():
-        raise SystemExit(f"{folder} exists; remove it first")
-    (folder / "examples").mkdir(parents=True)
-    subprocess.run([sys.executable, "-m", "freespace.cli", "export", "--checkpoint", str(a.run / "checkpoints" / "best.ckpt"),
-                    "--format", "onnx", "--out", str(folder / "model.onnx"), *(["--fp16"] if a.fp16 else [])], check=True)
-    drives = {p.name: p for p in a.raw.rglob("*_drive_*_sync") if p.is_dir()}
-    for drive, frame in EXAMPLES:
-        shutil.copyfile(drives[drive] / "image_02" / "data" / f"{frame}.png",
-                        folder / "examples" / f"{drive[:-5]}_{frame}.png")
-    (folder / "examples" / "LICENSE").write_text(LICENSE)
-    failures(a.run, folder / "failures.jpg")
+    folder = publish(a.run, a.name, a.raw, a.fp16)
     real = json.loads((a.run / "real.json").read_text())
     metrics = json.loads((a.run / "metrics.json").read_text())
     print(json.dumps({"real": real, "test_on_autolabels": {k: metrics.get(k) for k in

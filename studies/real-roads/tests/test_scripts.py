@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -127,3 +129,95 @@ def test_mix_links_both_sources_and_splits_them(tmp_path: Path) -> None:
     assert "label_encoding: kitti" in (out / "freespace.yaml").read_text()
     with pytest.raises(SystemExit, match="exists"):
         mix.build(tmp_path / "syn", tmp_path / "raw", tmp_path / "al", splits, out)
+
+
+# --- hostile probe 4 (issue 59): no false success, nothing half made ---------------------------------------
+
+def test_evaluate_with_no_real_frame_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """No real frame here (or every one trained on): a refusal, not F = 1 of no pixel."""
+    import real_frames
+
+    from helpers import tiny_road_checkpoint
+
+    evaluate = _load("evaluate")
+    run = tmp_path / "fastscnn-s-s0"
+    (run / "checkpoints").mkdir(parents=True)
+    tiny_road_checkpoint(run / "checkpoints" / "best.ckpt", (32, 96), width=0.5)
+    monkeypatch.setattr(real_frames, "available", lambda: [])
+    with pytest.raises(SystemExit, match="no real frame"):
+        evaluate.evaluate(run)
+    assert not (run / "real.json").exists()
+
+
+def test_publish_with_a_missing_example_leaves_no_model(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    publish = _load("publish")
+    monkeypatch.setattr(publish, "ROOT", tmp_path)
+    (tmp_path / "models").mkdir()
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    for name in ("checkpoints/best.ckpt", "real.json", "metrics.json"):
+        (run / name).write_text("{}")
+    raw = tmp_path / "raw" / "2011_09_26"
+    for drive, frame in publish.EXAMPLES[:1]:  # the second example is missing
+        (raw / drive / "image_02" / "data").mkdir(parents=True)
+        (raw / drive / "image_02" / "data" / f"{frame}.png").write_bytes(b"png")
+    with pytest.raises(SystemExit, match="not found.*nothing written"):
+        publish.publish(run, "m", tmp_path / "raw")
+    assert list((tmp_path / "models").iterdir()) == []
+
+
+def _git_repo(folder: Path, files: dict[str, str]) -> Path:
+    for name, text in files.items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text(text)
+    env = {"GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t", "GIT_COMMITTER_EMAIL": "t@t",
+           "HOME": str(folder), "PATH": "/usr/bin:/bin"}
+    for cmd in (["init", "-q"], ["add", "."], ["commit", "-qm", "x"]):
+        subprocess.run(["git", "-C", str(folder), *cmd], check=True, env=env)
+    return folder / ".git"
+
+
+def test_fetch_never_nests_a_drive_into_an_incomplete_one(tmp_path: Path) -> None:
+    day = tmp_path / "raw" / "2011_09_26"
+    d1 = day / "2011_09_26_drive_0001_sync" / "image_03" / "data"  # drive 0001 complete: skipped
+    d1.mkdir(parents=True)
+    (d1.parent.parent / "image_02" / "data").mkdir(parents=True)
+    (d1.parent.parent / "image_02" / "data" / "0.png").write_bytes(b"png")
+    for f in ("calib_cam_to_cam.txt", "calib_velo_to_cam.txt"):
+        (day / f).write_text("x\n")
+    d0 = day / "2011_09_26_drive_0000_sync"
+    (d0 / "image_02").mkdir(parents=True)  # drive 0000 there but cut short: no velodyne_points
+    udacity = _git_repo(tmp_path / "udacity", {"images/KITTI/2011_09_26/image_02/data/0.png": "png",
+                                              "images/KITTI/2011_09_26/velodyne_points/data/0.bin": "bin"})
+    env = {"SOFT": str(tmp_path / "nosoft"), "UDACITY": str(udacity), "RAW": str(tmp_path / "raw"),
+           "PATH": "/usr/bin:/bin"}
+    res = subprocess.run(["bash", str(STUDY / "fetch.sh")], capture_output=True, text=True, env=env)
+    assert res.returncode == 2 and "exists but lacks velodyne_points/data" in res.stderr, res.stderr
+    assert not (d0 / f"{d0.name}.part").exists() and "KITTI raw root" not in res.stdout
+    (d0 / "image_02").rmdir()
+    d0.rmdir()
+    res = subprocess.run(["bash", str(STUDY / "fetch.sh")], capture_output=True, text=True, env=env)
+    assert res.returncode == 0 and (d0 / "velodyne_points" / "data" / "0.bin").is_file(), res.stderr
+    assert not list(day.glob("*.part"))
+
+
+def test_collect_copies_a_record_whole_or_not_at_all(tmp_path: Path) -> None:
+    import shutil
+
+    study = tmp_path / "study"
+    (study / "runs").mkdir(parents=True)
+    for name in ("collect.sh", "evaluate.py"):
+        shutil.copy(STUDY / name, study / name)
+    work = tmp_path / "work" / "runs"
+    for run, splits in (("unet-s-s0", True), ("unet-r-auto-s0", False)):
+        _real_json(work / run, 0.5, 0.5, 0.5)
+        (work / run / "config.yaml").write_text("model: unet\n")
+        (work / run / "metrics.json").write_text("{}")
+        if splits:
+            (work / run / "splits").mkdir()
+            (work / run / "splits" / "train.txt").write_text("a\n")
+    res = subprocess.run(["bash", str(study / "collect.sh")], capture_output=True, text=True,
+                         env={"WORK": str(tmp_path / "work"), "PYTHON": sys.executable, "PATH": "/usr/bin:/bin"})
+    assert "skipped" in res.stderr and "unet-r-auto-s0" in res.stderr, res.stderr
+    assert sorted(p.name for p in (study / "runs").iterdir()) == ["unet-s-s0"]
+    assert (study / "runs" / "unet-s-s0" / "splits" / "train.txt").is_file()
