@@ -765,10 +765,10 @@ def cmd_predict(args: argparse.Namespace) -> int:
     from freespace.io.video import is_video_path
     from freespace.runtime.shard import parse_shard
 
-    check_writable(args.out, folder=not is_video_path(args.out))  # before the model is loaded
+    video = is_video_path(args.out)
+    check_writable(args.out, folder=not video, suffixes=(".mp4",))  # before the model is loaded
     check_outputs({"out": args.out}, {"input": args.input, "checkpoint": args.checkpoint, "onnx": args.onnx})
     shard = parse_shard(args.shard) if args.shard is not None else None
-    video = is_video_path(args.out)
     if video and shard:
         raise InvalidOptionError("--shard writes frames into a folder; a video --out is one file: leave out --shard")
     if video and args.no_overlays:
@@ -1067,6 +1067,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     Ctrl-C ends a command with "interrupted" and exit code 130, ``SIGTERM`` (SLURM's time limit, ``kill``)
     with "terminated" and 143; both after the command's clean-ups (``finally`` blocks) have run.
     """
+    from freespace.io.files import writing_as
     from freespace.runtime.log import setup_logging
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -1081,7 +1082,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if extra:
             _refuse_extra_arguments(parser, extra)
         setup_logging(-1 if args.quiet else args.verbose)
-        return int(args.func(args))
+        with writing_as(command or ""):  # the mark of the files it writes (freespace.io.files)
+            return int(args.func(args))
     except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
         flags = _flags(parser or build_parser({command} if command else ()), argv)
         text = exc.render(lambda name: flags.get(name, name))

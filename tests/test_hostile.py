@@ -1266,7 +1266,7 @@ def test_onnx_failing_at_run_time(trained: dict[str, Path], tmp_path: Path, caps
     shape = helper.make_tensor("shape", TensorProto.INT64, [4], [1, 2, 10, 10])
     model = _onnx_model(tmp_path / "reshape.onnx", [x], [y], [helper.make_node("Reshape", ["image", "shape"], ["y"])],
                         [shape])
-    _predict_refused(capsys, trained, tmp_path, ["--onnx", str(model)], "the ONNX model failed")
+    _predict_refused(capsys, trained, tmp_path, ["--onnx", str(model)], "reshape.onnx failed on a batch")
 
 
 def _reproduce_folder(out: Path):

@@ -16,18 +16,29 @@ is written, so every writer follows it):
 * never a name in ``/proc``, ``/sys`` or ``/dev`` (``/dev/shm`` aside) or on another kernel's pseudo file
   system, wherever it leads (``/dev/stdout`` may lead to a regular file), nor a link that cannot be followed;
 * never inside a ``.freespace`` folder (where an output folder keeps its manifest, lock and stages; checked
-  by :func:`check_writable` and :func:`freespace.io.outdir.claim_folder`, as the package itself writes there).
+  by :func:`check_writable` and :func:`freespace.io.outdir.claim_folder`, as the package itself writes there);
+* an existing regular file that the running command did not write is never replaced. Every file the writers
+  here (and :class:`freespace.io.video.VideoWriter`) put in place carries a mark, the extended attribute
+  :data:`MARK` naming the command that wrote it (:func:`writing_as`); a file output checked by
+  :func:`check_writable` is replaced only when it carries the running command's mark (a symbolic link is
+  replaced as a link: the file it leads to is never written). Files in output folders follow their
+  manifest instead (:mod:`freespace.io.outdir`);
+* its suffix fits what is written: a file output ends in one of the suffixes its command writes (``.onnx``,
+  ``.mp4``, …), never in ``/``; an output folder's name does not end in a file's suffix
+  (:data:`FILE_SUFFIXES`: ``out.png`` or ``out.mp4`` is no folder).
 """
 
 from __future__ import annotations
 
 import csv
+import errno
 import io as _io
 import json
 import os
 import stat
 import tempfile
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Literal
 
@@ -38,7 +49,7 @@ PathLike = str | os.PathLike[str]
 __all__ = ["PathLike", "atomic_write_bytes", "write_files_together", "atomic_write_text", "encode_json", "write_json",
            "write_csv", "check_outputs", "check_writable", "check_output_kind", "check_writable_files", "missing_input",
            "read_bytes", "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "unfollowable_link",
-           "META"]
+           "META", "MARK", "FILE_SUFFIXES", "writing_as", "mark_written"]
 
 # ---------------------------------------------------------------------------------------------------
 # atomic writes
@@ -53,6 +64,18 @@ _PSEUDO_FS = frozenset({"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup
                         "securityfs", "pstore", "bpf", "configfs", "fusectl", "mqueue", "efivarfs", "binfmt_misc",
                         "selinuxfs", "hugetlbfs", "rpc_pipefs", "nsfs", "autofs"})
 _FS_TYPES: dict[int, str] | None = None
+#: the extended attribute that marks a file freespace wrote: the name of the command that wrote it
+MARK = "user.freespace"
+#: the mark of a file written through the Python API, outside a command
+_API = "api"
+#: the running command (:func:`writing_as`), for every thread of the process
+_COMMAND = [_API]
+#: the file outputs checked by :func:`check_writable` (absolute paths): replaced only when the command wrote them
+_FILE_OUTPUTS: set[str] = set()
+#: suffixes of files (images, videos, models, tables, archives): no output folder is named with one
+FILE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".pfm", ".webp",
+                           ".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".json", ".csv", ".txt", ".yaml", ".yml",
+                           ".onnx", ".pt", ".pth", ".ckpt", ".zip", ".npy", ".npz", ".pdf", ".svg"})
 
 
 def special_kind(mode: int) -> str | None:
@@ -145,7 +168,8 @@ def replaceable(path: PathLike, what: str = "output") -> os.stat_result | None:
 
     Raises:
         OutputError: ``path`` is (or is a link to) a device, pipe, socket or other special file, a link
-            that cannot be followed (a loop), a file its mode makes read-only, or lies where no output
+            that cannot be followed (a loop), a file its mode makes read-only, a file output
+            (:func:`check_writable`) that the running command did not write, or lies where no output
             belongs.
     """
     path = Path(path)
@@ -170,7 +194,52 @@ def replaceable(path: PathLike, what: str = "output") -> os.stat_result | None:
     where = on_pseudo_fs(path)
     if where is not None:
         raise OutputError(f"{what} {path} {where}")
+    if st is not None and os.path.abspath(path) in _FILE_OUTPUTS:
+        _refuse_foreign(path, what)
     return st
+
+
+@contextmanager
+def writing_as(command: str) -> Iterator[None]:
+    """Mark the files written in the block (by any thread) as written by ``command`` (e.g. ``"export"``;
+    :data:`MARK`), and replace a file output only when ``command`` wrote it."""
+    _COMMAND.append(command)
+    try:
+        yield
+    finally:
+        _COMMAND.pop()
+
+
+def mark_written(tmp: PathLike) -> None:
+    """Mark the new file ``tmp`` (before it is renamed into place) as written by the running command
+    (:data:`MARK`). A file system that keeps no extended attributes keeps no mark: the file is then not
+    known as freespace's, and a later run refuses to replace it (:func:`replaceable`)."""
+    try:
+        os.setxattr(tmp, MARK, _COMMAND[-1].encode("utf-8"))
+    except OSError:
+        pass
+
+
+def _who(command: str) -> str:
+    return "freespace's Python API" if command == _API else f"freespace {command}"
+
+
+def _refuse_foreign(path: Path, what: str) -> None:
+    """Refuse the existing regular file ``path`` (a file output) unless the running command wrote it (its
+    :data:`MARK`); a symbolic link is replaced as a link, so it passes."""
+    if path.is_symlink() or not path.is_file():
+        return
+    command = _COMMAND[-1]
+    try:
+        mark: str | None = os.getxattr(path, MARK).decode("utf-8", "replace")
+        why = f"it is the output of {_who(mark)}"
+    except OSError as exc:
+        mark = None
+        why = ("this file system keeps no extended attributes, where freespace marks its files"
+               if exc.errno in (errno.ENOTSUP, errno.EOPNOTSUPP) else "it carries no mark of a freespace output")
+    if mark != command:
+        raise OutputError(f"{what} {path} is a file that {_who(command)} did not write ({why}); freespace never "
+                          f"replaces such a file: move it away or choose another path")
 
 
 def keep_mode(tmp: PathLike, old: os.stat_result | None) -> None:
@@ -218,6 +287,7 @@ def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:
                 with os.fdopen(fd, "wb") as f:
                     f.write(data)
                 keep_mode(tmp, before)
+                mark_written(tmp)
             except OSError as exc:
                 raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
         for tmp, target in staged:
@@ -264,21 +334,42 @@ def check_output_kind(path: Path, flag: str, folder: bool) -> None:
         raise InvalidOptionError(f"{flag} {path} is a folder; give a file name")
 
 
-def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -> Path:
+def _check_suffix(text: str, path: Path, flag: str, folder: bool, suffixes: Sequence[str] | None) -> None:
+    """Refuse an output whose name does not fit its kind (the module docstring): a file named ``…/``, or not
+    ending in one of ``suffixes`` (when given); a folder ending in a file's suffix (:data:`FILE_SUFFIXES`)."""
+    suffix = path.suffix.lower()
+    if folder and suffix in FILE_SUFFIXES:
+        raise InvalidOptionError(f"{flag} {path} is an output folder but ends in {suffix}, the suffix of a file; "
+                                 f"name the folder without it")
+    if not folder and text.endswith(("/", os.sep)):
+        raise InvalidOptionError(f"{flag} {text} ends in /, which names a folder, but this output is a file; leave "
+                                 f"out the /")
+    if not folder and suffixes and suffix not in suffixes:
+        raise InvalidOptionError(f"{flag} {path} must end in {' or '.join(suffixes)}, the kind of file written "
+                                 f"there; rename it")
+
+
+def check_writable(path: PathLike, name: str = "out", *, folder: bool = False,
+                   suffixes: Sequence[str] | None = None) -> Path:
     """Refuse, before any work, an output that cannot be written where it is named.
 
     Args:
         path: the output file (``folder=False``) or folder (``folder=True``); it need not exist.
         name: the parameter that named it, for the message (:func:`freespace.errors.param`).
+        suffixes: the suffixes (lower case, with the dot) a file output may end in; None: any.
 
     Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
-    folder is, is (or leads by a link to) a device, pipe, socket or other special file, or lies inside a
-    ``.freespace`` folder; :class:`OutputError` when a file output may not be replaced
-    (:func:`replaceable`: read-only, on ``/proc``, …), a folder on the way to it is a file, or the nearest
-    existing folder is not writable (folders on the way are created by the writers). Nothing is created.
+    folder is, is (or leads by a link to) a device, pipe, socket or other special file, lies inside a
+    ``.freespace`` folder, or its name does not fit its kind (:func:`_check_suffix`); :class:`OutputError`
+    when a file output may not be replaced (:func:`replaceable`: read-only, on ``/proc``, a file the running
+    command did not write, …), a folder on the way to it is a file, or the nearest existing folder is not
+    writable (folders on the way are created by the writers). Nothing is created. A file output is
+    remembered, so that its writer checks again, when it writes, that the command wrote what it replaces.
     """
-    path, flag = Path(os.path.expanduser(os.fspath(path))), param(name)
+    text = os.path.expanduser(os.fspath(path))
+    path, flag = Path(text), param(name)
     check_output_kind(path, flag, folder)
+    _check_suffix(text, path, flag, folder, suffixes)
     meta = inside_meta(path)
     if meta is not None:
         raise InvalidOptionError(f"{flag} {path} lies inside {meta}, where freespace keeps an output folder's "
@@ -294,6 +385,7 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -
             what = unfollowable_link(existing, folder=True) or "is no folder; choose another path"
         raise OutputError(f"cannot write {flag} {path}: {existing} {what}")
     if not folder:
+        _FILE_OUTPUTS.add(os.path.abspath(path))
         replaceable(path, flag)
     elif (where := on_pseudo_fs(path, folder=True)) is not None:
         raise OutputError(f"{flag} {path} {where}")
