@@ -727,7 +727,7 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     if args.calib and not args.bev:
         raise InvalidOptionError("--calib is only used with --bev (the bird's-eye view); add --bev, or leave out "
                                  "--calib for the perspective view")
-    check_writable(args.out)
+    check_writable(args.out, suffixes=(".json",))
     check_outputs({"out": args.out}, {"gt": args.gt, "pred": args.pred, "calib": args.calib})
     results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib)
     write_json(args.out, results)

@@ -7,7 +7,7 @@
 3. A model that returns nothing. An ONNX model or a checkpoint whose class scores hold NaN or infinity (all
    of them, or a few pixels) is refused in one line naming the model file; no mask, no video is written.
 4. Outputs that replace a user's file. A file output (``export --out``, ``predict --out V.mp4``,
-   ``evaluate-kitti --out``, ``generate``'s and ``autolabel``'s files) that exists and was not written by
+   ``evaluate-kitti --out``, ``generate``'s files) that exists and was not written by
    the same command is refused and left as it was, also when it is planted after the up-front check; the
    command's own output is replaced on a rerun. The name fits the output: ``export`` writes ``.onnx`` or
    ``.pt``, a video ``--out`` is ``.mp4`` (never ``x.mp4/``), an output folder never ends in a file's suffix
@@ -306,6 +306,14 @@ def test_the_name_fits_the_output(case: str, models: dict[str, Path], tmp_path: 
         ["--onnx", str(models["good"]), "--input", str(folder)]
     refused(capsys, [*command, *model, "--out", out], match=match)  # the --out as typed: a trailing / kept
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
+def test_evaluate_kitti_writes_json_only(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    (tmp_path / "gt").mkdir()
+    (tmp_path / "pred").mkdir()
+    refused(capsys, ["evaluate-kitti", "--gt", str(tmp_path / "gt"), "--pred", str(tmp_path / "pred"), "--out",
+                     str(tmp_path / "holiday.mp4")], match="must end in .json")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gt", "pred"]
 
 
 @pytest.mark.parametrize("command", ["evaluate", "train", "kitti-submit"])

@@ -361,10 +361,11 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False,
     Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
     folder is, is (or leads by a link to) a device, pipe, socket or other special file, lies inside a
     ``.freespace`` folder, or its name does not fit its kind (:func:`_check_suffix`); :class:`OutputError`
-    when a file output may not be replaced (:func:`replaceable`: read-only, on ``/proc``, a file the running
-    command did not write, …), a folder on the way to it is a file, or the nearest existing folder is not
+    when a file output may not be replaced (:func:`replaceable`: read-only, on ``/proc``, …), a folder on
+    the way to it is a file, or the nearest existing folder is not
     writable (folders on the way are created by the writers). Nothing is created. A file output is
-    remembered, so that its writer checks again, when it writes, that the command wrote what it replaces.
+    remembered: :func:`check_outputs` (after the check that it is no input) and its writer refuse it when it
+    exists and the running command did not write it.
     """
     text = os.path.expanduser(os.fspath(path))
     path, flag = Path(text), param(name)
@@ -385,8 +386,8 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False,
             what = unfollowable_link(existing, folder=True) or "is no folder; choose another path"
         raise OutputError(f"cannot write {flag} {path}: {existing} {what}")
     if not folder:
-        _FILE_OUTPUTS.add(os.path.abspath(path))
         replaceable(path, flag)
+        _FILE_OUTPUTS.add(os.path.abspath(path))  # who wrote it: checked by check_outputs and by its writer
     elif (where := on_pseudo_fs(path, folder=True)) is not None:
         raise OutputError(f"{flag} {path} {where}")
     if not os.access(existing, os.W_OK | os.X_OK):
@@ -417,7 +418,8 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
 
     Raises :class:`InvalidOptionError` when an output is an input, lies inside an input folder, or is a
     folder that holds an input, or when two outputs are the same path. Symbolic links are resolved
-    first, so a link to an input counts as the input.
+    first, so a link to an input counts as the input. Then :class:`OutputError` for a file output
+    (:func:`check_writable`) that exists and that the running command did not write.
     """
     def real(p: PathLike) -> Path:
         return Path(os.path.realpath(os.path.expanduser(os.fspath(p))))
@@ -444,6 +446,10 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
         if out in seen:
             raise InvalidOptionError(f"{out_name} and {seen[out]} are the same path {out}; give two paths")
         seen[out] = out_name
+    for key, path in outputs.items():
+        given = Path(os.path.expanduser(os.fspath(path))) if path is not None else None
+        if given is not None and os.path.abspath(given) in _FILE_OUTPUTS:
+            _refuse_foreign(given, named(key))
 
 
 def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str, Any]],
