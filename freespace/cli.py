@@ -1082,7 +1082,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if extra:
             _refuse_extra_arguments(parser, extra)
         setup_logging(-1 if args.quiet else args.verbose)
-        with writing_as(command or ""):  # the mark of the files it writes (freespace.io.files)
+        with writing_as(command or "freespace"):  # the mark of the files it writes (freespace.io.files)
             return int(args.func(args))
     except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
         flags = _flags(parser or build_parser({command} if command else ()), argv)

@@ -170,6 +170,15 @@ def test_a_few_nan_pixels_are_refused(models: dict[str, Path], tmp_path: Path, c
     assert "log.onnx" in err and not (tmp_path / "p").exists()
 
 
+@pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
+def test_a_checkpoint_with_nan_or_infinite_scores_is_not_exported(fmt: str, models: dict[str, Path], tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / ("m.onnx" if fmt == "onnx" else "m.pt")
+    err = refused(capsys, ["export", "--checkpoint", str(models["overflow"]), "--format", fmt, "--out", str(out)],
+                  match="NaN or infinite")
+    assert "overflow.ckpt" in err and not out.exists()
+
+
 def test_a_broken_model_leaves_an_earlier_output_as_it_was(models: dict[str, Path], tmp_path: Path,
                                                            capsys: pytest.CaptureFixture) -> None:
     folder = _frames(tmp_path / "in", ["a.png", "b.png"])
@@ -241,6 +250,21 @@ def test_a_file_the_command_did_not_write_is_never_replaced(option: str, models:
     assert main(argv(own)) == 0
     shutil.copyfile(own, mine)
     refused(capsys, argv(mine), match="did not write")
+
+
+@pytest.mark.parametrize("option", ["--out", "--confidence", "--model-json"])
+def test_a_users_file_is_refused_before_any_work(option: str, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """``autolabel`` checks its inputs against its outputs first: the mark is checked there too (on this
+    pair the work itself would fail, with another message)."""
+    left, right, _, _ = synthetic_pair((96, 160))
+    write_image(tmp_path / "L.png", left)
+    write_image(tmp_path / "R.png", right)
+    mine = tmp_path / ("mine.json" if option == "--model-json" else "mine.png")
+    mine.write_bytes(b"mine")
+    argv = ["autolabel", "--reference", str(tmp_path / "L.png"), "--target", str(tmp_path / "R.png")]
+    argv += [option, str(mine)] if option == "--out" else ["--out", str(tmp_path / "A.png"), option, str(mine)]
+    refused(capsys, argv, match="did not write")
+    assert mine.read_bytes() == b"mine" and not (tmp_path / "A.png").exists()
 
 
 def test_a_file_another_command_wrote_is_not_replaced(models: dict[str, Path], tmp_path: Path,

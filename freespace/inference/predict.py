@@ -23,7 +23,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from freespace.errors import InputFileError, InvalidOptionError, param
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, param
 from freespace.evaluation.metrics import to_confidence
 from freespace.inference.predictor import Predictor, load_checkpoint
 from freespace.io.codecs import write_image
@@ -277,16 +277,15 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
     check_outputs({"out": out}, {"input": inputs})
     source = open_frames(inputs)
     check_outputs({"out": out}, _input_paths(source))
+    frames = _shard_source(source, shard) if shard is not None else source
     record = _run_record(predictor, source, shard, overlays)
-    if shard is not None:
-        source = _shard_source(source, shard)
     with claim_folder(out, "predict", shared=shard is not None) as folder:
         if shard is not None:
             _join_run(folder, record)
         with folder.staged(replace=shard is None) as staging:
             if shard is None:
                 write_json(staging / RUN_RECORD, record)
-            summary = _predict_into(predictor, source, staging, batch_size, progress, shard, overlays, pipeline)
+            summary = _predict_into(predictor, frames, staging, batch_size, progress, shard, overlays, pipeline)
         if shard is not None:
             _join_summaries(folder, shard[1])
     return summary
@@ -348,18 +347,16 @@ def _join_summaries(folder: OwnedFolder, n: int) -> None:
     ``frames`` (all shards), ``seconds_per_frame`` (the network, over all frames), ``model``, ``image_size``,
     ``shards``."""
     with folder.alone():
-        parts = []
-        for k in range(1, n + 1):
-            try:
-                parts.append(json.loads((folder.path / _shard_marker((k, n))).read_text()))
-            except (OSError, ValueError):
-                return  # a shard still to run
-        frames = sum(p["frames"] for p in parts)
-        network = sum((p["seconds_per_frame"] or 0.0) * p["frames"] for p in parts)
+        try:
+            parts = [json.loads((folder.path / _shard_marker((k, n))).read_text()) for k in range(1, n + 1)]
+            frames = sum(p["frames"] for p in parts)
+            network = sum((p["seconds_per_frame"] or 0.0) * p["frames"] for p in parts)
+            summary = {"frames": frames, "seconds_per_frame": network / frames if frames else None,
+                       "model": parts[0]["model"], "image_size": parts[0]["image_size"], "shards": n}
+        except (OSError, ValueError, KeyError, TypeError):
+            return  # a shard still to run (or a summary that is not one)
         folder.record(["summary.json"])
-        write_json(folder.path / "summary.json", {"frames": frames, "seconds_per_frame": network / frames if frames
-                                                  else None, "model": parts[0]["model"],
-                                                  "image_size": parts[0]["image_size"], "shards": n})
+        write_json(folder.path / "summary.json", summary)
 
 
 def _summary(predictor: Predictor, stats: RunStats, **extra: Any) -> dict[str, Any]:
@@ -454,8 +451,8 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
     if fp16 and calibration is not None:
         raise InvalidOptionError(f"{param('fp16')} and int8 quantisation ({param('calibration')}) exclude each other: "
                                  f"a model is exported in float16 or in int8; leave out one of them")
-    check_writable(out, suffixes=EXPORT_SUFFIXES[fmt])
     check_outputs({"out": out}, {"checkpoint": checkpoint, **({"calibration": calibration} if calibration else {})})
+    check_writable(out, suffixes=EXPORT_SUFFIXES[fmt])
     import torch
 
     model, hp = load_checkpoint(checkpoint)
@@ -505,6 +502,9 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
             references = [model(x).numpy() for x in checks]
         for x, ref in zip(checks, references):
             diffs.append(float(np.abs(run(x) - ref).max()))
+    if not np.isfinite(diffs).all():  # NaN or infinite class scores: of the checkpoint or of the export
+        raise CorruptFileError(f"the model {checkpoint} gives NaN or infinite class scores on the check inputs, so it "
+                               f"predicts no road probability; it is broken (e.g. an overflow): train it anew")
     result = {"format": fmt, "path": str(out), "max_abs_diff": max(diffs),
               "checked_sizes": [list(x.shape) for x in checks]}
     if fp16:

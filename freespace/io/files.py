@@ -216,7 +216,7 @@ def mark_written(tmp: PathLike) -> None:
     known as freespace's, and a later run refuses to replace it (:func:`replaceable`)."""
     try:
         os.setxattr(tmp, MARK, _COMMAND[-1].encode("utf-8"))
-    except OSError:
+    except (OSError, AttributeError):  # (AttributeError: a platform without extended attributes)
         pass
 
 
@@ -233,10 +233,11 @@ def _refuse_foreign(path: Path, what: str) -> None:
     try:
         mark: str | None = os.getxattr(path, MARK).decode("utf-8", "replace")
         why = f"it is the output of {_who(mark)}"
-    except OSError as exc:
+    except (OSError, AttributeError) as exc:  # ENODATA: no mark
         mark = None
         why = ("this file system keeps no extended attributes, where freespace marks its files"
-               if exc.errno in (errno.ENOTSUP, errno.EOPNOTSUPP) else "it carries no mark of a freespace output")
+               if getattr(exc, "errno", errno.ENOTSUP) in (errno.ENOTSUP, errno.EOPNOTSUPP)
+               else "it carries no mark of a freespace output")
     if mark != command:
         raise OutputError(f"{what} {path} is a file that {_who(command)} did not write ({why}); freespace never "
                           f"replaces such a file: move it away or choose another path")
@@ -364,8 +365,8 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False,
     when a file output may not be replaced (:func:`replaceable`: read-only, on ``/proc``, …), a folder on
     the way to it is a file, or the nearest existing folder is not
     writable (folders on the way are created by the writers). Nothing is created. A file output is
-    remembered: :func:`check_outputs` (after the check that it is no input) and its writer refuse it when it
-    exists and the running command did not write it.
+    remembered, so that its writer refuses it when it exists and the running command did not write it
+    (:func:`check_outputs` refuses that before any work, after the check that it is no input).
     """
     text = os.path.expanduser(os.fspath(path))
     path, flag = Path(text), param(name)
@@ -418,8 +419,8 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
 
     Raises :class:`InvalidOptionError` when an output is an input, lies inside an input folder, or is a
     folder that holds an input, or when two outputs are the same path. Symbolic links are resolved
-    first, so a link to an input counts as the input. Then :class:`OutputError` for a file output
-    (:func:`check_writable`) that exists and that the running command did not write.
+    first, so a link to an input counts as the input. Then :class:`OutputError` for an output that is an
+    existing regular file that the running command did not write.
     """
     def real(p: PathLike) -> Path:
         return Path(os.path.realpath(os.path.expanduser(os.fspath(p))))
@@ -446,10 +447,9 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
         if out in seen:
             raise InvalidOptionError(f"{out_name} and {seen[out]} are the same path {out}; give two paths")
         seen[out] = out_name
-    for key, path in outputs.items():
-        given = Path(os.path.expanduser(os.fspath(path))) if path is not None else None
-        if given is not None and os.path.abspath(given) in _FILE_OUTPUTS:
-            _refuse_foreign(given, named(key))
+    for key, path in outputs.items():  # a regular file there is a file output (a folder output is no file)
+        if path is not None:
+            _refuse_foreign(Path(os.path.expanduser(os.fspath(path))), named(key))
 
 
 def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str, Any]],
