@@ -720,15 +720,16 @@ def _evaluate_kitti_parser(p: argparse.ArgumentParser) -> None:
 def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
     from freespace.evaluation.kitti import evaluate_kitti_dirs
-    from freespace.io.files import check_outputs, check_writable, write_json
+    from freespace.io.files import check_outputs, check_suffix, check_writable, write_json
 
     if args.bev and not args.calib:
         raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
     if args.calib and not args.bev:
         raise InvalidOptionError("--calib is only used with --bev (the bird's-eye view); add --bev, or leave out "
                                  "--calib for the perspective view")
-    check_writable(args.out, suffixes=(".json",))
+    check_writable(args.out)
     check_outputs({"out": args.out}, {"gt": args.gt, "pred": args.pred, "calib": args.calib})
+    check_suffix(args.out, (".json",))
     results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib)
     write_json(args.out, results)
     print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
@@ -761,13 +762,15 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
 def cmd_predict(args: argparse.Namespace) -> int:
     """``freespace predict``: road confidence PNGs (KITTI format) and overlays, or the overlaid video."""
     from freespace.inference.predict import Predictor, predict_folder, predict_video
-    from freespace.io.files import check_outputs, check_writable
+    from freespace.io.files import check_outputs, check_suffix, check_writable
     from freespace.io.video import is_video_path
     from freespace.runtime.shard import parse_shard
 
     video = is_video_path(args.out)
-    check_writable(args.out, folder=not video, suffixes=(".mp4",))  # before the model is loaded
+    check_writable(args.out, folder=not video)  # before the model is loaded
     check_outputs({"out": args.out}, {"input": args.input, "checkpoint": args.checkpoint, "onnx": args.onnx})
+    if video:
+        check_suffix(args.out, (".mp4",))
     shard = parse_shard(args.shard) if args.shard is not None else None
     if video and shard:
         raise InvalidOptionError("--shard writes frames into a folder; a video --out is one file: leave out --shard")

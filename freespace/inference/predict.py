@@ -27,7 +27,8 @@ from freespace.errors import CorruptFileError, InputFileError, InvalidOptionErro
 from freespace.evaluation.metrics import to_confidence
 from freespace.inference.predictor import Predictor, load_checkpoint
 from freespace.io.codecs import write_image
-from freespace.io.files import PathLike, atomic_write_bytes, check_outputs, check_writable, write_json
+from freespace.io.files import (PathLike, atomic_write_bytes, check_outputs, check_suffix, check_writable,
+                                write_json)
 from freespace.io.kitti import read_kitti_calib
 from freespace.io.outdir import OwnedFolder, claim_folder
 from freespace.io.video import FrameSource, VideoFrame, VideoWriter, open_frames
@@ -407,8 +408,9 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
 
     if batch_size < 1:
         raise InvalidOptionError(f"{param('batch_size')} must be ≥ 1")
-    out = check_writable(out, suffixes=(".mp4",))
+    out = check_writable(out)
     check_outputs({"out": out}, {"input": inputs})
+    check_suffix(out, (".mp4",))
     source = open_frames(inputs)
     check_outputs({"out": out}, _input_paths(source))
     bar = progress_bar(None, total=len(source), desc="predict", unit="frame", enabled=progress)
@@ -451,8 +453,9 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
     if fp16 and calibration is not None:
         raise InvalidOptionError(f"{param('fp16')} and int8 quantisation ({param('calibration')}) exclude each other: "
                                  f"a model is exported in float16 or in int8; leave out one of them")
+    check_writable(out)
     check_outputs({"out": out}, {"checkpoint": checkpoint, **({"calibration": calibration} if calibration else {})})
-    check_writable(out, suffixes=EXPORT_SUFFIXES[fmt])
+    check_suffix(out, EXPORT_SUFFIXES[fmt])
     import torch
 
     model, hp = load_checkpoint(checkpoint)

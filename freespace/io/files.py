@@ -49,7 +49,7 @@ PathLike = str | os.PathLike[str]
 __all__ = ["PathLike", "atomic_write_bytes", "write_files_together", "atomic_write_text", "encode_json", "write_json",
            "write_csv", "check_outputs", "check_writable", "check_output_kind", "check_writable_files", "missing_input",
            "read_bytes", "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "unfollowable_link",
-           "META", "MARK", "FILE_SUFFIXES", "writing_as", "mark_written"]
+           "META", "MARK", "FILE_SUFFIXES", "writing_as", "mark_written", "check_suffix"]
 
 # ---------------------------------------------------------------------------------------------------
 # atomic writes
@@ -335,9 +335,17 @@ def check_output_kind(path: Path, flag: str, folder: bool) -> None:
         raise InvalidOptionError(f"{flag} {path} is a folder; give a file name")
 
 
-def _check_suffix(text: str, path: Path, flag: str, folder: bool, suffixes: Sequence[str] | None) -> None:
-    """Refuse an output whose name does not fit its kind (the module docstring): a file named ``…/``, or not
-    ending in one of ``suffixes`` (when given); a folder ending in a file's suffix (:data:`FILE_SUFFIXES`)."""
+def check_suffix(path: PathLike, suffixes: Sequence[str], name: str = "out") -> None:
+    """Refuse a file output ``path`` that does not end in one of ``suffixes`` (lower case, with the dot: the
+    kinds of file the command writes there), before any work: :class:`InvalidOptionError`."""
+    if Path(path).suffix.lower() not in suffixes:
+        raise InvalidOptionError(f"{param(name)} {path} must end in {' or '.join(suffixes)}, the kind of file written "
+                                 f"there; rename it")
+
+
+def _check_name(text: str, path: Path, flag: str, folder: bool) -> None:
+    """Refuse an output whose name does not fit a file or a folder: a file named ``…/``, a folder ending in a
+    file's suffix (:data:`FILE_SUFFIXES`)."""
     suffix = path.suffix.lower()
     if folder and suffix in FILE_SUFFIXES:
         raise InvalidOptionError(f"{flag} {path} is an output folder but ends in {suffix}, the suffix of a file; "
@@ -345,33 +353,28 @@ def _check_suffix(text: str, path: Path, flag: str, folder: bool, suffixes: Sequ
     if not folder and text.endswith(("/", os.sep)):
         raise InvalidOptionError(f"{flag} {text} ends in /, which names a folder, but this output is a file; leave "
                                  f"out the /")
-    if not folder and suffixes and suffix not in suffixes:
-        raise InvalidOptionError(f"{flag} {path} must end in {' or '.join(suffixes)}, the kind of file written "
-                                 f"there; rename it")
 
 
-def check_writable(path: PathLike, name: str = "out", *, folder: bool = False,
-                   suffixes: Sequence[str] | None = None) -> Path:
+def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -> Path:
     """Refuse, before any work, an output that cannot be written where it is named.
 
     Args:
         path: the output file (``folder=False``) or folder (``folder=True``); it need not exist.
         name: the parameter that named it, for the message (:func:`freespace.errors.param`).
-        suffixes: the suffixes (lower case, with the dot) a file output may end in; None: any.
 
     Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
     folder is, is (or leads by a link to) a device, pipe, socket or other special file, lies inside a
-    ``.freespace`` folder, or its name does not fit its kind (:func:`_check_suffix`); :class:`OutputError`
-    when a file output may not be replaced (:func:`replaceable`: read-only, on ``/proc``, …), a folder on
-    the way to it is a file, or the nearest existing folder is not
-    writable (folders on the way are created by the writers). Nothing is created. A file output is
-    remembered, so that its writer refuses it when it exists and the running command did not write it
-    (:func:`check_outputs` refuses that before any work, after the check that it is no input).
+    ``.freespace`` folder, or is a file named ``…/`` or a folder named like a file (``x.png``:
+    :data:`FILE_SUFFIXES`; a file's own suffix is :func:`check_suffix`'s); :class:`OutputError` when a file
+    output may not be replaced (:func:`replaceable`: read-only, on ``/proc``, …), a folder on the way to it
+    is a file, or the nearest existing folder is not writable (folders on the way are created by the
+    writers). Nothing is created. A file output is remembered, so that its writer refuses it when it exists
+    and the running command did not write it (:func:`check_outputs` refuses that before any work, after the
+    check that it is no input).
     """
     text = os.path.expanduser(os.fspath(path))
     path, flag = Path(text), param(name)
     check_output_kind(path, flag, folder)
-    _check_suffix(text, path, flag, folder, suffixes)
     meta = inside_meta(path)
     if meta is not None:
         raise InvalidOptionError(f"{flag} {path} lies inside {meta}, where freespace keeps an output folder's "
@@ -394,6 +397,7 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False,
     if not os.access(existing, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write {flag} {path}: no permission to write in {existing}; choose a writable "
                           f"folder")
+    _check_name(text, path, flag, folder)
     return path
 
 
