@@ -792,7 +792,7 @@ def _evaluate_kitti_parser(p: argparse.ArgumentParser) -> None:
 def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
     from freespace.evaluation.kitti import evaluate_kitti_dirs
-    from freespace.io.files import check_outputs, check_writable, write_json
+    from freespace.io.files import check_outputs, check_suffix, check_writable, write_json
 
     if args.bev and not args.calib:
         raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
@@ -801,6 +801,7 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
                                  "--calib for the perspective view")
     check_writable(args.out)
     check_outputs({"out": args.out}, {"gt": args.gt, "pred": args.pred, "calib": args.calib})
+    check_suffix(args.out, (".json",))
     results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib)
     write_json(args.out, results)
     print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
@@ -833,14 +834,16 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
 def cmd_predict(args: argparse.Namespace) -> int:
     """``freespace predict``: road confidence PNGs (KITTI format) and overlays, or the overlaid video."""
     from freespace.inference.predict import Predictor, predict_folder, predict_video
-    from freespace.io.files import check_outputs, check_writable
+    from freespace.io.files import check_outputs, check_suffix, check_writable
     from freespace.io.video import is_video_path
     from freespace.runtime.shard import parse_shard
 
-    check_writable(args.out, folder=not is_video_path(args.out))  # before the model is loaded
-    check_outputs({"out": args.out}, {"input": args.input, "checkpoint": args.checkpoint, "onnx": args.onnx})
-    shard = parse_shard(args.shard) if args.shard is not None else None
     video = is_video_path(args.out)
+    check_writable(args.out, folder=not video)  # before the model is loaded
+    check_outputs({"out": args.out}, {"input": args.input, "checkpoint": args.checkpoint, "onnx": args.onnx})
+    if video:
+        check_suffix(args.out, (".mp4",))
+    shard = parse_shard(args.shard) if args.shard is not None else None
     if video and shard:
         raise InvalidOptionError("--shard writes frames into a folder; a video --out is one file: leave out --shard")
     if video and args.no_overlays:
@@ -1146,6 +1149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     Ctrl-C ends a command with "interrupted" and exit code 130, ``SIGTERM`` (SLURM's time limit, ``kill``)
     with "terminated" and 143; both after the command's clean-ups (``finally`` blocks) have run.
     """
+    from freespace.io.files import writing_as
     from freespace.runtime.log import setup_logging
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -1160,7 +1164,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if extra:
             _refuse_extra_arguments(parser, extra)
         setup_logging(-1 if args.quiet else args.verbose)
-        return int(args.func(args))
+        with writing_as(command or "freespace"):  # the mark of the files it writes (freespace.io.files)
+            return int(args.func(args))
     except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
         flags = _flags(parser or build_parser({command} if command else ()), argv)
         text = exc.render(lambda name: flags.get(name, name))

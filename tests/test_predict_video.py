@@ -147,12 +147,13 @@ def test_predict_shards_cover_every_frame_once(files: dict[str, Path], tmp_path:
     assert overlays[0] == overlays[1]
     for path in whole.glob("*.png"):
         assert np.abs(read_image(path).astype(int) - read_image(shared / path.name).astype(int)).max() <= 1
-    assert not (shared / "summary.json").exists()
+    assert json.loads((shared / "summary.json").read_text())["frames"] == 7  # the third shard completed the run
     # a shard past the end writes its (empty) summary; an unsharded run then replaces the folder whole
-    assert _predict(files, "--input", str(files["frames"]), "--out", str(shared), "--shard", "9/9") == 0
-    assert json.loads((shared / "summary.shard-9-of-9.json").read_text())["frames"] == 0
-    assert _predict(files, "--input", str(files["frames"]), "--out", str(shared)) == 0
-    assert sorted(p.name for p in shared.glob("*.json")) == ["summary.json"]
+    few = tmp_path / "few"
+    assert _predict(files, "--input", str(files["frames"]), "--out", str(few), "--shard", "9/9") == 0
+    assert json.loads((few / "summary.shard-9-of-9.json").read_text())["frames"] == 0
+    assert _predict(files, "--input", str(files["frames"]), "--out", str(few)) == 0
+    assert sorted(p.name for p in few.glob("*.json")) == ["predict.json", "summary.json"]
 
 
 def test_predict_mistakes_are_one_line(files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

@@ -137,7 +137,7 @@ def test_masks_at_the_input_size_from_a_folder(files: dict[str, Path], tmp_path:
     assert printed.startswith("9 frames in ") and " s: " in printed and "frames per second end to end" in printed
     assert "ms per frame" in printed and "% of the time" in printed and printed.count("\n") == 0
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == \
-        sorted([f"f{i}.png" for i in range(9)] + ["summary.json"])      # no overlays/
+        sorted([f"f{i}.png" for i in range(9)] + ["predict.json", "summary.json"])      # no overlays/
     predictor = Predictor(onnx=files["onnx"])
     assert predictor.resize_to == TRAIN_SIZE
     for i, frame in enumerate(_frames(9)):

@@ -4,10 +4,12 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import io as _io
 import itertools
 import json
 import logging
+import os
 import queue
 import tempfile
 import threading
@@ -21,13 +23,14 @@ from typing import Any
 import cv2
 import numpy as np
 
-from freespace.errors import InputFileError, InvalidOptionError, param
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, param
 from freespace.evaluation.metrics import to_confidence
 from freespace.inference.predictor import Predictor, load_checkpoint
 from freespace.io.codecs import write_image
-from freespace.io.files import PathLike, atomic_write_bytes, check_outputs, check_writable, write_json
+from freespace.io.files import (PathLike, atomic_write_bytes, check_outputs, check_suffix, check_writable,
+                                write_json)
 from freespace.io.kitti import read_kitti_calib
-from freespace.io.outdir import claim_folder
+from freespace.io.outdir import OwnedFolder, claim_folder
 from freespace.io.video import FrameSource, VideoFrame, VideoWriter, open_frames
 from freespace.runtime.shard import select_shard
 
@@ -38,6 +41,8 @@ __all__ = ["predict_folder", "predict_video", "export_model", "to_float16", "kit
 #: the size (H, W) of the example input an export is traced and checked with when the checkpoint states no
 #: training size: KITTI road's
 EXPORT_EXAMPLE_SIZE = (384, 1248)
+#: the suffixes an export's file may end in, by format
+EXPORT_SUFFIXES = {"onnx": (".onnx",), "torchscript": (".pt", ".pth")}
 
 
 def _input_paths(source: FrameSource) -> dict[str, Path]:
@@ -64,6 +69,10 @@ def _shard_source(source: FrameSource, shard: tuple[int, int]) -> FrameSource:
 
 def _shard_marker(shard: tuple[int, int]) -> str:
     return f"summary.shard-{shard[0]}-of-{shard[1]}.json"
+
+
+#: what made a ``predict`` output folder (:func:`_run_record`): the shards of one run share it, others are refused
+RUN_RECORD = "predict.json"
 
 
 #: predictions a pipeline holds waiting to be written (its writer always has the next one at hand); decoded
@@ -240,15 +249,17 @@ _OVERLAY_LUT = _overlay_lut()
 def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_size: int = 4,
                    progress: bool = True, shard: tuple[int, int] | None = None, overlays: bool = True,
                    pipeline: bool = True) -> dict[str, Any]:
-    """Write ``OUT/<name>.png`` (8-bit road confidence, the input's size), ``OUT/overlays/<name>.png`` and
-    ``OUT/summary.json`` for every frame of ``inputs``.
+    """Write ``OUT/<name>.png`` (8-bit road confidence, the input's size), ``OUT/overlays/<name>.png``,
+    ``OUT/summary.json`` and ``OUT/predict.json`` (:data:`RUN_RECORD`: what made it) for every frame of ``inputs``.
 
     Args:
         inputs: an image, a folder of images, a glob of images or a video (frames named
             ``<video stem>_<index>``; :func:`freespace.io.video.open_frames`), decoded one batch at a time.
         out: the output folder (:mod:`freespace.io.outdir`), written all or nothing: it replaces the files of
             an earlier ``predict`` output there. With ``shard`` only that shard's frames are written, beside
-            the other shards' in the same folder, and its summary is ``summary.shard-K-of-N.json``.
+            the other shards' in the same folder, and its summary is ``summary.shard-K-of-N.json``; the first
+            shard writes ``predict.json``, a shard made otherwise (another model, input, N or overlays) is
+            refused, and the shard that completes the N writes ``summary.json`` (all frames).
         batch_size: frames per network call (≥ 1). shard: ``(K, N)``, 1-based (:mod:`freespace.runtime.shard`);
             images only.
         overlays: also write ``overlays/`` (an RGB PNG per frame: its encoding costs about three times the
@@ -267,11 +278,86 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
     check_outputs({"out": out}, {"input": inputs})
     source = open_frames(inputs)
     check_outputs({"out": out}, _input_paths(source))
-    if shard is not None:
-        source = _shard_source(source, shard)
-    with claim_folder(out, "predict", shared=shard is not None) as folder, \
-            folder.staged(replace=shard is None) as staging:
-        return _predict_into(predictor, source, staging, batch_size, progress, shard, overlays, pipeline)
+    frames = _shard_source(source, shard) if shard is not None else source
+    record = _run_record(predictor, source, shard, overlays)
+    with claim_folder(out, "predict", shared=shard is not None) as folder:
+        if shard is not None:
+            _join_run(folder, record)
+        with folder.staged(replace=shard is None) as staging:
+            if shard is None:
+                write_json(staging / RUN_RECORD, record)
+            summary = _predict_into(predictor, frames, staging, batch_size, progress, shard, overlays, pipeline)
+        if shard is not None:
+            _join_summaries(folder, shard[1])
+    return summary
+
+
+def _run_record(predictor: Predictor, source: FrameSource, shard: tuple[int, int] | None,
+                overlays: bool) -> dict[str, Any]:
+    """What makes a ``predict`` output folder (:data:`RUN_RECORD`): the model (its name, size and the SHA-256
+    of its file), the input (its path, absolute, links resolved; a glob as written, absolute) and its frame
+    names (count and SHA-256, before sharding), the number of shards (None: one whole run) and overlays."""
+    from freespace.engine.config import file_sha256
+
+    path = getattr(predictor, "path", None)
+    spec = os.path.abspath(source.spec) if source.kind == "glob" else os.path.realpath(source.spec)
+    names = "\n".join(sorted(p.stem for p in source.paths)).encode("utf-8")
+    size = getattr(predictor, "resize_to", None)
+    return {"model": getattr(predictor, "name", None), "model_sha256": file_sha256(path) if path else None,
+            "image_size": list(size) if size is not None else None, "input": spec, "frames": len(source.paths),
+            "frames_sha256": hashlib.sha256(names).hexdigest(), "shards": shard[1] if shard else None,
+            "overlays": overlays}
+
+
+def _join_run(folder: OwnedFolder, record: dict[str, Any]) -> None:
+    """Let a shard into ``folder``: write ``record`` (:func:`_run_record`) there when it holds nothing yet,
+    else refuse when its record differs (another model, input, number of shards, overlays; a whole run) or it
+    has none; one shard at a time (:meth:`OwnedFolder.alone`).
+
+    Raises:
+        InvalidOptionError: naming the settings that differ.
+    """
+    path = folder.path / RUN_RECORD
+    with folder.alone():
+        try:
+            old = json.loads(path.read_text())
+        except FileNotFoundError:
+            old = {} if folder.entries() else None
+        except (OSError, ValueError):
+            old = {}
+        if old is None:
+            folder.record([RUN_RECORD])
+            write_json(path, record)
+            return
+        differ = [k for k in record if not isinstance(old, dict) or old.get(k) != record[k]]
+        if differ:
+            made = ("; ".join(f"{k} {_short(old.get(k))} → {_short(record[k])}" for k in differ)
+                    if isinstance(old, dict) and old else f"no readable {RUN_RECORD} says how")
+            raise InvalidOptionError(f"{param('out')} {folder.path} holds predictions made otherwise ({made}); give "
+                                     f"every shard the same model, input, {param('shard')} count and overlays, or "
+                                     f"choose another {param('out')} (a run without {param('shard')} replaces them)")
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "…"
+
+
+def _join_summaries(folder: OwnedFolder, n: int) -> None:
+    """Write ``summary.json`` of a sharded run once every one of its ``n`` shard summaries is in ``folder``:
+    ``frames`` (all shards), ``seconds_per_frame`` (the network, over all frames), ``model``, ``image_size``,
+    ``shards``."""
+    with folder.alone():
+        try:
+            parts = [json.loads((folder.path / _shard_marker((k, n))).read_text()) for k in range(1, n + 1)]
+            frames = sum(p["frames"] for p in parts)
+            network = sum((p["seconds_per_frame"] or 0.0) * p["frames"] for p in parts)
+            summary = {"frames": frames, "seconds_per_frame": network / frames if frames else None,
+                       "model": parts[0]["model"], "image_size": parts[0]["image_size"], "shards": n}
+        except (OSError, ValueError, KeyError, TypeError):
+            return  # a shard still to run (or a summary that is not one)
+        folder.record(["summary.json"])
+        write_json(folder.path / "summary.json", summary)
 
 
 def _summary(predictor: Predictor, stats: RunStats, **extra: Any) -> dict[str, Any]:
@@ -322,11 +408,9 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
 
     if batch_size < 1:
         raise InvalidOptionError(f"{param('batch_size')} must be ≥ 1")
-    out = Path(out)
-    if out.suffix.lower() != ".mp4":
-        raise InvalidOptionError(f"{param('out')} {out}: a video output must end in .mp4 (or give a folder for PNGs)")
-    check_writable(out)
+    out = check_writable(out)
     check_outputs({"out": out}, {"input": inputs})
+    check_suffix(out, (".mp4",))
     source = open_frames(inputs)
     check_outputs({"out": out}, _input_paths(source))
     bar = progress_bar(None, total=len(source), desc="predict", unit="frame", enabled=progress)
@@ -371,6 +455,7 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
                                  f"a model is exported in float16 or in int8; leave out one of them")
     check_writable(out)
     check_outputs({"out": out}, {"checkpoint": checkpoint, **({"calibration": calibration} if calibration else {})})
+    check_suffix(out, EXPORT_SUFFIXES[fmt])
     import torch
 
     model, hp = load_checkpoint(checkpoint)
@@ -420,6 +505,9 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
             references = [model(x).numpy() for x in checks]
         for x, ref in zip(checks, references):
             diffs.append(float(np.abs(run(x) - ref).max()))
+    if not np.isfinite(diffs).all():  # NaN or infinite class scores: of the checkpoint or of the export
+        raise CorruptFileError(f"the model {checkpoint} gives NaN or infinite class scores on the check inputs, so it "
+                               f"predicts no road probability; it is broken (e.g. an overflow): train it anew")
     result = {"format": fmt, "path": str(out), "max_abs_diff": max(diffs),
               "checked_sizes": [list(x.shape) for x in checks]}
     if fp16:

@@ -220,6 +220,7 @@ class Predictor:
         if (checkpoint is None) == (onnx is None):
             raise InvalidOptionError(f"give exactly one of {param('checkpoint')} and {param('onnx')}")
         self.resize_to: tuple[int, int] | None = None
+        self.path = Path(checkpoint if checkpoint is not None else onnx)  # type: ignore[arg-type]
         if checkpoint is not None:
             import torch
 
@@ -259,11 +260,18 @@ class Predictor:
             self.model = None
 
     def _run(self, batch: np.ndarray) -> np.ndarray:
+        """Road probabilities (``float32 N×h×w``) of a prepared batch (``float32 N×3×h×w``).
+
+        Raises:
+            CorruptFileError: the network fails on it, or gives scores of another shape or not finite.
+        """
         if self.session is None:
             import torch
 
             with torch.no_grad():
-                return torch.softmax(self.model(torch.from_numpy(batch).to(self.device)), 1)[:, 1].cpu().numpy()
+                logits = self.model(torch.from_numpy(batch).to(self.device))
+                self._check_finite(bool(torch.isfinite(logits).all()), batch)
+                return torch.softmax(logits, 1)[:, 1].cpu().numpy()
         n = len(batch)
         if self.batch is not None and n != self.batch:  # a fixed batch size: chunks of it, the last padded
             chunks = [batch[i:i + self.batch] for i in range(0, n, self.batch)]
@@ -273,13 +281,22 @@ class Predictor:
         try:
             logits = self.session.run(None, {self.session.get_inputs()[0].name: batch})[0]
         except Exception as exc:  # onnxruntime's own error types: the graph cannot run on this input
-            raise CorruptFileError(f"the ONNX model failed on a batch of {n}×3×{batch.shape[2]}×{batch.shape[3]} "
-                                   f"images: {str(exc).splitlines()[0][:200]}") from None
+            raise CorruptFileError(f"the ONNX model {self.path} failed on a batch of {n}×3×{batch.shape[2]}×"
+                                   f"{batch.shape[3]} images: {str(exc).splitlines()[0][:200]}") from None
         if logits.ndim != 4 or logits.shape[0] != n or logits.shape[1] < 2:
-            raise CorruptFileError(f"the ONNX model gave {list(logits.shape)} for {n} images, expected {n}×C×H×W "
-                                   f"class scores with C ≥ 2 ({_EXPORT_HINT})")
+            raise CorruptFileError(f"the ONNX model {self.path} gave {list(logits.shape)} for {n} images, expected "
+                                   f"{n}×C×H×W class scores with C ≥ 2 ({_EXPORT_HINT})")
+        self._check_finite(bool(np.isfinite(logits).all()), batch)
         e = np.exp(logits - logits.max(1, keepdims=True))
         return (e[:, 1] / e.sum(1)).astype(np.float32)
+
+    def _check_finite(self, finite: bool, batch: np.ndarray) -> None:
+        """Refuse the model when its class scores for ``batch`` (``N×3×h×w``) were not all ``finite``: NaN or
+        infinity gives no road probability (it would be written as a mask of no road)."""
+        if not finite:
+            raise CorruptFileError(f"the model {self.path} gave NaN or infinite class scores on a batch of "
+                                   f"{len(batch)}×3×{batch.shape[2]}×{batch.shape[3]} images, so it predicts no road "
+                                   f"probability; it is broken (e.g. an overflow): train or export it anew")
 
     def prepare(self, image: np.ndarray) -> np.ndarray:
         """The network's input for one ``H×W×3 uint8`` RGB image: ``float32 3×h×w`` in [0, 1], resized to

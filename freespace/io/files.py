@@ -16,18 +16,29 @@ is written, so every writer follows it):
 * never a name in ``/proc``, ``/sys`` or ``/dev`` (``/dev/shm`` aside) or on another kernel's pseudo file
   system, wherever it leads (``/dev/stdout`` may lead to a regular file), nor a link that cannot be followed;
 * never inside a ``.freespace`` folder (where an output folder keeps its manifest, lock and stages; checked
-  by :func:`check_writable` and :func:`freespace.io.outdir.claim_folder`, as the package itself writes there).
+  by :func:`check_writable` and :func:`freespace.io.outdir.claim_folder`, as the package itself writes there);
+* an existing regular file that the running command did not write is never replaced. Every file the writers
+  here (and :class:`freespace.io.video.VideoWriter`) put in place carries a mark, the extended attribute
+  :data:`MARK` naming the command that wrote it (:func:`writing_as`); a file output checked by
+  :func:`check_writable` is replaced only when it carries the running command's mark (a symbolic link is
+  replaced as a link: the file it leads to is never written). Files in output folders follow their
+  manifest instead (:mod:`freespace.io.outdir`);
+* its suffix fits what is written: a file output ends in one of the suffixes its command writes (``.onnx``,
+  ``.mp4``, …), never in ``/``; an output folder's name does not end in a file's suffix
+  (:data:`FILE_SUFFIXES`: ``out.png`` or ``out.mp4`` is no folder).
 """
 
 from __future__ import annotations
 
 import csv
+import errno
 import io as _io
 import json
 import os
 import stat
 import tempfile
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Literal
 
@@ -38,7 +49,7 @@ PathLike = str | os.PathLike[str]
 __all__ = ["PathLike", "atomic_write_bytes", "write_files_together", "atomic_write_text", "encode_json", "write_json",
            "write_csv", "check_outputs", "check_writable", "check_output_kind", "check_writable_files", "missing_input",
            "read_bytes", "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "unfollowable_link",
-           "META"]
+           "META", "MARK", "FILE_SUFFIXES", "writing_as", "mark_written", "check_suffix"]
 
 # ---------------------------------------------------------------------------------------------------
 # atomic writes
@@ -53,6 +64,18 @@ _PSEUDO_FS = frozenset({"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup
                         "securityfs", "pstore", "bpf", "configfs", "fusectl", "mqueue", "efivarfs", "binfmt_misc",
                         "selinuxfs", "hugetlbfs", "rpc_pipefs", "nsfs", "autofs"})
 _FS_TYPES: dict[int, str] | None = None
+#: the extended attribute that marks a file freespace wrote: the name of the command that wrote it
+MARK = "user.freespace"
+#: the mark of a file written through the Python API, outside a command
+_API = "api"
+#: the running command (:func:`writing_as`), for every thread of the process
+_COMMAND = [_API]
+#: the file outputs checked by :func:`check_writable` (absolute paths): replaced only when the command wrote them
+_FILE_OUTPUTS: set[str] = set()
+#: suffixes of files (images, videos, models, tables, archives): no output folder is named with one
+FILE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".pfm", ".webp",
+                           ".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".json", ".csv", ".txt", ".yaml", ".yml",
+                           ".onnx", ".pt", ".pth", ".ckpt", ".zip", ".npy", ".npz", ".pdf", ".svg"})
 
 
 def special_kind(mode: int) -> str | None:
@@ -145,7 +168,8 @@ def replaceable(path: PathLike, what: str = "output") -> os.stat_result | None:
 
     Raises:
         OutputError: ``path`` is (or is a link to) a device, pipe, socket or other special file, a link
-            that cannot be followed (a loop), a file its mode makes read-only, or lies where no output
+            that cannot be followed (a loop), a file its mode makes read-only, a file output
+            (:func:`check_writable`) that the running command did not write, or lies where no output
             belongs.
     """
     path = Path(path)
@@ -170,7 +194,53 @@ def replaceable(path: PathLike, what: str = "output") -> os.stat_result | None:
     where = on_pseudo_fs(path)
     if where is not None:
         raise OutputError(f"{what} {path} {where}")
+    if st is not None and os.path.abspath(path) in _FILE_OUTPUTS:
+        _refuse_foreign(path, what)
     return st
+
+
+@contextmanager
+def writing_as(command: str) -> Iterator[None]:
+    """Mark the files written in the block (by any thread) as written by ``command`` (e.g. ``"export"``;
+    :data:`MARK`), and replace a file output only when ``command`` wrote it."""
+    _COMMAND.append(command)
+    try:
+        yield
+    finally:
+        _COMMAND.pop()
+
+
+def mark_written(tmp: PathLike) -> None:
+    """Mark the new file ``tmp`` (before it is renamed into place) as written by the running command
+    (:data:`MARK`). A file system that keeps no extended attributes keeps no mark: the file is then not
+    known as freespace's, and a later run refuses to replace it (:func:`replaceable`)."""
+    try:
+        os.setxattr(tmp, MARK, _COMMAND[-1].encode("utf-8"))
+    except (OSError, AttributeError):  # (AttributeError: a platform without extended attributes)
+        pass
+
+
+def _who(command: str) -> str:
+    return "freespace's Python API" if command == _API else f"freespace {command}"
+
+
+def _refuse_foreign(path: Path, what: str) -> None:
+    """Refuse the existing regular file ``path`` (a file output) unless the running command wrote it (its
+    :data:`MARK`); a symbolic link is replaced as a link, so it passes."""
+    if path.is_symlink() or not path.is_file():
+        return
+    command = _COMMAND[-1]
+    try:
+        mark: str | None = os.getxattr(path, MARK).decode("utf-8", "replace")
+        why = f"it is the output of {_who(mark)}"
+    except (OSError, AttributeError) as exc:  # ENODATA: no mark
+        mark = None
+        why = ("this file system keeps no extended attributes, where freespace marks its files"
+               if getattr(exc, "errno", errno.ENOTSUP) in (errno.ENOTSUP, errno.EOPNOTSUPP)
+               else "it carries no mark of a freespace output")
+    if mark != command:
+        raise OutputError(f"{what} {path} is a file that {_who(command)} did not write ({why}); freespace never "
+                          f"replaces such a file: move it away or choose another path")
 
 
 def keep_mode(tmp: PathLike, old: os.stat_result | None) -> None:
@@ -218,6 +288,7 @@ def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:
                 with os.fdopen(fd, "wb") as f:
                     f.write(data)
                 keep_mode(tmp, before)
+                mark_written(tmp)
             except OSError as exc:
                 raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
         for tmp, target in staged:
@@ -264,6 +335,26 @@ def check_output_kind(path: Path, flag: str, folder: bool) -> None:
         raise InvalidOptionError(f"{flag} {path} is a folder; give a file name")
 
 
+def check_suffix(path: PathLike, suffixes: Sequence[str], name: str = "out") -> None:
+    """Refuse a file output ``path`` that does not end in one of ``suffixes`` (lower case, with the dot: the
+    kinds of file the command writes there), before any work: :class:`InvalidOptionError`."""
+    if Path(path).suffix.lower() not in suffixes:
+        raise InvalidOptionError(f"{param(name)} {path} must end in {' or '.join(suffixes)}, the kind of file written "
+                                 f"there; rename it")
+
+
+def _check_name(text: str, path: Path, flag: str, folder: bool) -> None:
+    """Refuse an output whose name does not fit a file or a folder: a file named ``…/``, a folder ending in a
+    file's suffix (:data:`FILE_SUFFIXES`)."""
+    suffix = path.suffix.lower()
+    if folder and suffix in FILE_SUFFIXES:
+        raise InvalidOptionError(f"{flag} {path} is an output folder but ends in {suffix}, the suffix of a file; "
+                                 f"name the folder without it")
+    if not folder and text.endswith(("/", os.sep)):
+        raise InvalidOptionError(f"{flag} {text} ends in /, which names a folder, but this output is a file; leave "
+                                 f"out the /")
+
+
 def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -> Path:
     """Refuse, before any work, an output that cannot be written where it is named.
 
@@ -272,12 +363,17 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -
         name: the parameter that named it, for the message (:func:`freespace.errors.param`).
 
     Raises :class:`InvalidOptionError` when ``path`` is a folder where a file is wanted or a file where a
-    folder is, is (or leads by a link to) a device, pipe, socket or other special file, or lies inside a
-    ``.freespace`` folder; :class:`OutputError` when a file output may not be replaced
-    (:func:`replaceable`: read-only, on ``/proc``, …), a folder on the way to it is a file, or the nearest
-    existing folder is not writable (folders on the way are created by the writers). Nothing is created.
+    folder is, is (or leads by a link to) a device, pipe, socket or other special file, lies inside a
+    ``.freespace`` folder, or is a file named ``…/`` or a folder named like a file (``x.png``:
+    :data:`FILE_SUFFIXES`; a file's own suffix is :func:`check_suffix`'s); :class:`OutputError` when a file
+    output may not be replaced (:func:`replaceable`: read-only, on ``/proc``, …), a folder on the way to it
+    is a file, or the nearest existing folder is not writable (folders on the way are created by the
+    writers). Nothing is created. A file output is remembered, so that its writer refuses it when it exists
+    and the running command did not write it (:func:`check_outputs` refuses that before any work, after the
+    check that it is no input).
     """
-    path, flag = Path(os.path.expanduser(os.fspath(path))), param(name)
+    text = os.path.expanduser(os.fspath(path))
+    path, flag = Path(text), param(name)
     check_output_kind(path, flag, folder)
     meta = inside_meta(path)
     if meta is not None:
@@ -295,11 +391,13 @@ def check_writable(path: PathLike, name: str = "out", *, folder: bool = False) -
         raise OutputError(f"cannot write {flag} {path}: {existing} {what}")
     if not folder:
         replaceable(path, flag)
+        _FILE_OUTPUTS.add(os.path.abspath(path))  # who wrote it: checked by check_outputs and by its writer
     elif (where := on_pseudo_fs(path, folder=True)) is not None:
         raise OutputError(f"{flag} {path} {where}")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write {flag} {path}: no permission to write in {existing}; choose a writable "
                           f"folder")
+    _check_name(text, path, flag, folder)
     return path
 
 
@@ -325,7 +423,8 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
 
     Raises :class:`InvalidOptionError` when an output is an input, lies inside an input folder, or is a
     folder that holds an input, or when two outputs are the same path. Symbolic links are resolved
-    first, so a link to an input counts as the input.
+    first, so a link to an input counts as the input. Then :class:`OutputError` for an output that is an
+    existing regular file that the running command did not write.
     """
     def real(p: PathLike) -> Path:
         return Path(os.path.realpath(os.path.expanduser(os.fspath(p))))
@@ -352,6 +451,9 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
         if out in seen:
             raise InvalidOptionError(f"{out_name} and {seen[out]} are the same path {out}; give two paths")
         seen[out] = out_name
+    for key, path in outputs.items():  # a regular file there is a file output (a folder output is no file)
+        if path is not None:
+            _refuse_foreign(Path(os.path.expanduser(os.fspath(path))), named(key))
 
 
 def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str, Any]],

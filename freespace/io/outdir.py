@@ -170,6 +170,13 @@ class OwnedFolder:
                     target.unlink(missing_ok=True)  # a link is removed as a link, never followed
             _write_manifest(self._meta / MANIFEST, self.command, known - gone)
 
+    @contextmanager
+    def alone(self) -> Iterator[None]:
+        """Keep the other runs that share the folder (the shards of one run) out of the block: e.g. to check a
+        record of what made the folder and write it when there is none, as one step."""
+        with _exclusive(self._meta / "record.lock"):
+            yield
+
     def _inside(self, rel: str) -> Path:
         """``self.path / rel``, after checking that its parent folder lies inside the folder (no symbolic
         link on the way leads out of it)."""

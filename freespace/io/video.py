@@ -34,7 +34,7 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
 from freespace.io.codecs import IMAGE_SUFFIXES, check_image_pixels, read_image
-from freespace.io.files import PathLike, keep_mode, replaceable
+from freespace.io.files import PathLike, keep_mode, mark_written, replaceable
 
 __all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path",
            "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "DEFAULT_FPS"]
@@ -85,8 +85,8 @@ class VideoFrame:
 
     Attributes:
         index: 0-based position in the source.
-        name: a file-name stem for per-frame outputs: the image's stem (folder/glob) or
-            ``<video stem>_<index, 6 digits>`` (video).
+        name: a file-name stem for per-frame outputs: the image's stem (folder/glob), unique within the
+            source letter case aside, or ``<video stem>_<index, 6 digits>`` (video).
         image: ``H×W×3 uint8`` RGB.
     """
 
@@ -174,8 +174,25 @@ def _probe_video(path: Path, default_fps: float) -> FrameSource:
 
 
 def _image_source(kind: str, spec: str, paths: list[Path], fps: float) -> FrameSource:
+    _refuse_name_clash(spec, paths)
     first = _rgb(read_image(paths[0], what="frame"))
     return FrameSource(kind, spec, tuple(paths), fps, first.shape[:2], len(paths))
+
+
+def _refuse_name_clash(spec: str, paths: list[Path]) -> None:
+    """Refuse images whose frame names (:attr:`VideoFrame.name`, the file stem) are one name, letter case
+    aside (``a.png`` and ``a.jpg``, ``a.PNG`` and ``A.png``): their outputs (``<name>.png``) would be one file.
+
+    Raises:
+        InputFileError: naming the two files.
+    """
+    seen: dict[str, Path] = {}
+    for path in paths:
+        other = seen.setdefault(path.stem.casefold(), path)
+        if other is not path:
+            raise InputFileError(f"{spec}: {other} and {path} give one frame name {path.stem!r} (outputs are named "
+                                 f"by the file name without its suffix, letter case aside); rename or move one of "
+                                 f"them, or narrow the input")
 
 
 def open_frames(source: PathLike, *, fps: float | None = None, default_fps: float = DEFAULT_FPS) -> FrameSource:
@@ -195,7 +212,8 @@ def open_frames(source: PathLike, *, fps: float | None = None, default_fps: floa
         The :class:`FrameSource` (iterate it for the frames).
 
     Raises:
-        InputFileError: the path does not exist, the folder has no images, the glob matches no image.
+        InputFileError: the path does not exist, the folder has no images, the glob matches no image, or
+            two of its images give one frame name (``a.png`` and ``a.jpg``; letter case aside).
         CorruptFileError: the video cannot be decoded or has no frames; the first image is not an image.
         InvalidOptionError: a frame rate ≤ 0.
     """
@@ -326,6 +344,7 @@ class VideoWriter:
             if tmp.stat().st_size == 0:
                 raise OutputError(f"the MP4 encoder wrote nothing for {self.path}")
             keep_mode(tmp, replaceable(self.path))  # mkstemp makes 0600 files: a replaced file's mode, or 0666 & ~umask
+            mark_written(tmp)
             os.replace(tmp, self.path)
         except OSError as exc:
             self.abort()
