@@ -40,8 +40,7 @@ import cv2
 import numpy as np
 
 from freespace.data.base import StereoRoadDataset
-from freespace.datagen.inputs import dataset_settings
-from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError, param
+from freespace.errors import CorruptFileError, DatasetError, InvalidOptionError, param
 from freespace.geometry import RoadModel
 from freespace.geometry.homography import homography_from_pose
 from freespace.geometry.plane import RoadPlane
@@ -267,22 +266,17 @@ def propagate_frame(image: np.ndarray, label: RoadLabel, model: RoadModel, K: np
 
 
 def _read_tree_settings(tree: Path, dataset: StereoRoadDataset) -> dict[str, Any]:
-    """The settings of the autolabel tree ``tree``, checked to label ``dataset`` (layout, root and split)."""
-    path = tree / "settings.json"
-    if not tree.is_dir():
-        raise InputFileError(f"{param('propagate_from')} {tree} not found; give the folder `freespace autolabel` wrote")
+    """The settings of the autolabel tree ``tree``, checked to label ``dataset`` and not to be propagated already."""
+    from freespace.data.label_tree import check_label_tree
+
+    check_label_tree(tree, dataset.name, dataset.root, dataset.split, option="propagate_from")
     try:
-        made = json.loads(path.read_text())
+        made = json.loads((tree / "settings.json").read_text())
     except (OSError, UnicodeDecodeError, ValueError):
         made = None
     if not isinstance(made, dict):
         raise DatasetError(f"{param('propagate_from')} {tree} has no readable settings.json, so it is no tree that "
                            f"`freespace autolabel` wrote; label the dataset first (`freespace autolabel --out TREE`)")
-    ours = dataset_settings(dataset)
-    for key in ("dataset", "root", "split"):
-        if made.get(key) != ours[key]:
-            raise DatasetError(f"{param('propagate_from')} {tree} labels another dataset ({key} {made.get(key)}, not "
-                               f"{ours[key]}); give the tree `freespace autolabel` made for {dataset.root}")
     if "propagation" in made:
         raise DatasetError(f"{param('propagate_from')} {tree} is already propagated; give the single-frame tree it "
                            f"was made from ({made.get('source_labels')})")
