@@ -111,16 +111,18 @@ def evaluate_rendered(run: Path, tree: Path) -> dict:
 
 def _interval(values: list[float]) -> str:
     """``mean [low, high]`` in points (×100) with the 95 % t-interval; the mean alone for one value; ``—`` for
-    none (NaN values, a figure some runs lack, are left out)."""
+    none (NaN values, a figure some runs lack, are left out, and the figure then says over how many runs it is:
+    ``(n = k)``, so that the row's seed count is not read as its)."""
     from scipy import stats
 
     x = 100 * np.asarray([v for v in values if not math.isnan(v)])
     if len(x) == 0:
         return "—"
+    n = f" (n = {len(x)})" if len(x) < len(values) else ""
     if len(x) < 2:
-        return f"{x.mean():.1f}"
+        return f"{x.mean():.1f}{n}"
     half = stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))
-    return f"{x.mean():.1f} [{x.mean() - half:.1f}, {x.mean() + half:.1f}]"
+    return f"{x.mean():.1f} [{x.mean() - half:.1f}, {x.mean() + half:.1f}]{n}"
 
 
 def _figures(result: dict) -> dict[str, float]:
@@ -161,7 +163,7 @@ def table(runs: Path) -> str:
     for model in sorted({m for m, _ in cells}):
         pairs = [(v, "S") for v in ("R-auto", "HA-R-auto", "R-auto-dup", "S+R-auto")] + [
             ("HA-R-auto", "R-auto-dup"), ("HA-R-auto", "R-auto"), ("S+R-auto", "R-auto"), ("R-auto-fp", "R-auto"),
-            ("S+R-auto-fp", "S+R-auto")]
+            ("S+R-auto-fp", "S+R-auto"), ("S+R-auto-fp", "R-auto")]
         for a, b in pairs:
             if (model, a) not in cells or (model, b) not in cells:
                 continue

@@ -59,9 +59,13 @@ def test_the_table_gives_the_rendered_f_where_runs_have_it(tmp_path: Path) -> No
         (tmp_path / f"fastscnn-192x640-s-s{seed}" / "rendered.json").write_text(json.dumps({"f": f, "max_f": f}))
         _real_json(tmp_path / f"fastscnn-192x640-r-auto-s{seed}", 0.7, 0.7, 0.9)
         (tmp_path / f"fastscnn-192x640-r-auto-s{seed}" / "rendered.json").write_text(json.dumps({"f": f - 0.2}))
+    _real_json(tmp_path / "fastscnn-192x640-r-auto-s2", 0.7, 0.7, 0.9)  # a seed not scored on the rendered frames
     _real_json(tmp_path / "unet-s-s0", 0.4, 0.4, 0.5)  # scored on the real frames only
     _real_json(tmp_path / "unet-r-auto-s0", 0.7, 0.7, 0.9)
     text = evaluate.table(tmp_path)
+    r_auto = next(line for line in text.splitlines() if line.startswith("| fastscnn-192x640 | R-auto |"))
+    # three seeds on the real frames, two of them on the rendered: the rendered F says so (30 and 40 points)
+    assert "| 3 | 70.0 [70.0, 70.0] |" in r_auto and r_auto.endswith("| 35.0 [-28.5, 98.5] (n = 2) |")
     assert text.splitlines()[0].endswith("| polygon recall | F rendered |")
     rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")
             and line.split("|")[2].strip() == "S"}
