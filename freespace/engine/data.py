@@ -136,15 +136,7 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
         raise DatasetError(f"{config.dataset} at {config.root} has {len(labelled)} labelled frames; training needs ≥ 3")
     names = [f.name for f in labelled]
     split_dir = run_dir / "splits"
-    if config.splits_dir:
-        splits = read_splits(config.splits_dir, known=names)
-    elif (split_dir / "train.txt").is_file():
-        splits = read_splits(split_dir, known=names)
-    else:
-        splits = make_splits([(f.name, f.scenario) for f in labelled], seed=config.seed)
-    if not all(splits[k] for k in ("train", "val", "test")):
-        raise DatasetError(f"a split is empty ({', '.join(f'{k} {len(v)}' for k, v in splits.items())}); use more "
-                           f"frames or scenarios, or give {param('splits_dir')}")
+    splits = _splits(config, ds, labelled, split_dir)
     if config.labels is not None:  # the training frames' labels from a label tree; val and test keep their own
         human = _human_drives(labelled, splits["train"], config.human_share, config.seed)
         train = [n for n in splits["train"] if n in human or (Path(config.labels) / f"{n}.png").is_file()]
@@ -179,6 +171,49 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
         items["train"] += [Item(it.index, it.name) for it in views]
     size = config.with_size(lambda: ds.load(index[names[0]], right=False, disparity=False).left.shape[:2]).image_size
     return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
+
+
+def _splits(config: TrainConfig, ds: StereoRoadDataset, labelled: list[Any], split_dir: Path) -> dict[str, list[str]]:
+    """The train/val/test frame names: ``config.splits_dir``'s lists, else the run's own (``split_dir``, a
+    resumed run), else a split of the ``labelled`` frames by scenario.
+
+    Raises:
+        DatasetError: a listed frame of the dataset that has no label (named with its cause: a label tree
+            that lacks it, such as one shard's part, or ``max_frames``), or a split left empty (named with its
+            cause: lists without frames there, or too few scenarios to split whole).
+    """
+    names = {f.name for f in labelled}
+    lists = config.splits_dir or (split_dir if (split_dir / "train.txt").is_file() else None)
+    if lists is None:
+        splits = make_splits([(f.name, f.scenario) for f in labelled], seed=config.seed)
+    else:
+        splits = read_splits(lists, known=[f.name for f in ds.frames])
+        missing = [n for k in ("train", "val", "test") for n in splits[k] if n not in names]
+        if missing:
+            raise DatasetError(f"{len(missing)} frames of the split lists {lists} have no label (first: {missing[0]}): "
+                               f"{_why_unlabelled(config, ds, missing[0])}")
+    if not all(splits.values()):
+        counts = ", ".join(f"{k} {len(v)}" for k, v in splits.items())
+        if lists is not None:
+            raise DatasetError(f"the split lists {lists} leave a split empty ({counts}); list labelled frames in "
+                               f"each of train.txt, val.txt and test.txt")
+        scenarios = len({f.scenario for f in labelled})
+        raise DatasetError(f"a split is empty ({counts}): the {len(labelled)} labelled frames are {scenarios} "
+                           f"scenarios (drives), and each scenario goes whole into one split; use frames of more "
+                           f"scenarios, or give {param('splits_dir')}")
+    return splits
+
+
+def _why_unlabelled(config: TrainConfig, ds: StereoRoadDataset, name: str) -> str:
+    """Why the dataset's frame ``name`` is not among the labelled frames training uses, and the fix."""
+    if config.labels is None:
+        if ds.has_label(ds.frames[ds.index(name)]):
+            return f"{param('max_frames')} {config.max_frames} leaves it out; raise it or list fewer frames"
+        return f"{config.dataset} at {config.root} has no label of it; list labelled frames only"
+    shards = sorted(p.name for p in Path(config.labels).glob("summary.shard-*.json"))
+    part = (f"it holds shards' parts ({', '.join(shards)}): run `autolabel --shard K/N` into it for every K, or "
+            if shards else "label those frames or ")
+    return f"the label tree {param('labels')} {config.labels} has no {name}.png; {part}list only the frames it labels"
 
 
 def _check_labelled(ds: StereoRoadDataset, train: list[str], labels: str | None) -> None:
