@@ -1478,13 +1478,17 @@ def _ended_by_signal(code: int, err: str, sig: int) -> None:
     assert "Traceback" not in err and "Detected KeyboardInterrupt" not in err, err[-2000:]
 
 
+@pytest.mark.parametrize("children", [1, 2])
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_generate_workers_stop_at_once(sig: int, tmp_path: Path) -> None:
+def test_generate_workers_stop_at_once(sig: int, children: int, tmp_path: Path) -> None:
+    """The signal comes while the workers start (the first child process seen: the resource tracker or a
+    worker, the others still being started and sent their start-up data) or once two run: either way the
+    command ends in its one line, and no worker prints anything (issue 59: ``EOFError: Ran out of input``)."""
     data = tmp_path / "data"
     write_dataset(data, 40, seed=1, config=SMALL, progress=False)
     code, err, seconds, workers = _signalled(
         ["generate", "--dataset", "synth", "--root", str(data), "--out", str(tmp_path / "gen"), "--workers", "2",
-         "--disparity-source", "sgbm", "--cache-dir", str(tmp_path / "cache")], sig, children=2)
+         "--disparity-source", "sgbm", "--cache-dir", str(tmp_path / "cache")], sig, children=children)
     _ended_by_signal(code, err, sig)
     assert seconds < 5, f"took {seconds:.1f} s to stop"
     assert len(list((tmp_path / "gen").glob("*.png"))) < 40, "every frame was still generated"
