@@ -752,7 +752,8 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
                                                   "(K from 1); shards share --out")
     p.add_argument("--no-overlays", action="store_true",
                    help="write the confidence PNGs only, not overlays/ (for real time: an overlay PNG costs ~3 masks)")
-    p.add_argument("--threads", type=_WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
+    p.add_argument("--threads", type=_WORKERS, help="the network's CPU threads: ONNX Runtime's, or PyTorch's with "
+                                                    "--checkpoint (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--out", required=True, help="output folder (PNGs), or OUT.mp4: the overlaid video")
     p.set_defaults(func=cmd_predict)
@@ -1027,12 +1028,15 @@ def build_parser(commands: Collection[str] | None = None,
     return parser
 
 
-def _refuse_extra_arguments(parser: argparse.ArgumentParser, extra: list[str]) -> None:
-    """Arguments no option took: the shell's expansion of an unquoted wildcard (``--input *.png`` gives one
-    file to ``--input`` and the rest here) gets a one-line hint to quote it; anything else argparse's usage
-    error."""
-    files = [a for a in extra if os.path.exists(a)]
-    if files:
+def _refuse_extra_arguments(parser: argparse.ArgumentParser, extra: list[str], command: str | None) -> None:
+    """Arguments no option took: an unknown option (with its value, a path or not) is named as such; the
+    shell's expansion of an unquoted wildcard (``--input *.png`` gives one file to ``--input`` and the rest
+    here: every one an existing path) gets a one-line hint to quote it; anything else argparse's error."""
+    unknown = [a for a in extra if a.startswith("-") and not os.path.exists(a)]
+    if unknown:
+        raise InvalidOptionError(f"unknown option{'s' if len(unknown) > 1 else ''} {' '.join(unknown)}; see "
+                                 f"`{parser.prog}{f' {command}' if command else ''} --help`")
+    if all(os.path.exists(a) for a in extra):
         shown = " ".join(extra[:3]) + (f" … ({len(extra)} in all)" if len(extra) > 3 else "")
         raise InvalidOptionError(f"unexpected argument{'s' if len(extra) > 1 else ''} {shown}: the shell expanded an "
                                  f"unquoted wildcard into many files; quote the pattern, e.g. --input 'frames/*.png'")
@@ -1079,7 +1083,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser = build_parser({command} if command else (), config)
         args, extra = parser.parse_known_args(argv)
         if extra:
-            _refuse_extra_arguments(parser, extra)
+            _refuse_extra_arguments(parser, extra, command)
         setup_logging(-1 if args.quiet else args.verbose)
         return int(args.func(args))
     except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)

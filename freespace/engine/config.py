@@ -34,7 +34,7 @@ from pydantic.fields import FieldInfo
 
 from freespace.errors import MAX_SEED, CorruptFileError, DatasetError, InputFileError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE, load_yaml
-from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable
+from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable, missing_input
 from freespace.limits import (MAX_BATCH_SIZE, MAX_DEVICES, MAX_EPOCHS, MAX_FRAME_COUNT, MAX_NODES, MAX_WEIGHT_DECAY,
                               MAX_WORKERS, Bounded, check_workers)
 
@@ -748,7 +748,7 @@ def read_config_yaml(path: PathLike) -> dict[str, Any]:
     if Path(path).is_dir():
         raise InputFileError(f"{path} is a folder; name a YAML file, e.g. {Path(path) / 'config.yaml'}")
     if not Path(path).is_file():
-        raise InputFileError(f"config file not found: {path}")
+        raise missing_input(path, "config file")
     data = load_yaml(path)
     if not isinstance(data, dict):
         raise CorruptFileError(f"{path} is not a freespace training config (a mapping of options)")

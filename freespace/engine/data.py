@@ -119,6 +119,37 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     :data:`~freespace.engine.config.FIRST_FRAME_SIZE`: :meth:`TrainConfig.with_size`) and ``"virtual"`` (a
     :class:`VirtualAugment`, or None).
     """
+    plan = plan_data(config, run_dir)
+    ds, splits, index, stereo = plan["dataset"], plan["splits"], plan["index"], plan["stereo"]
+    virtual = None
+    if "virtual" in config.augment:  # before the DS-Generator views: a virtual_shift no frame allows is refused first
+        virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]], config.virtual_shift),
+                                 shift=config.virtual_shift, rotate=config.virtual_rotate, prob=config.virtual_prob)
+    if is_rank_zero():
+        write_splits(run_dir / "splits", splits)
+    items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
+    if "homography" in config.augment:
+        items["train"] += _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
+    elif "duplicate" in config.augment:  # the control: the same frames again, their own left images
+        views = _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
+        items["train"] += [Item(it.index, it.name) for it in views]
+    first = next(iter(index.values()))
+    size = config.with_size(lambda: ds.load(first, right=False, disparity=False).left.shape[:2]).image_size
+    return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
+
+
+def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str, Any]:
+    """What :func:`prepare_data` trains on, decided and checked without writing anything: the dataset (with the
+    label tree's labels), the splits, each labelled frame's index and the training frames with a right image.
+    ``reproduce`` calls it for every cell before the first trains. ``warn``: log what it leaves out.
+
+    Returns ``{"dataset", "splits", "index", "stereo"}``.
+
+    Raises:
+        DatasetError: fewer than 3 labelled frames, a split left empty, a label tree without the training
+            frames, no labelled pixel, no right image for ``augment`` homography or duplicate.
+        InvalidOptionError: ``human_share`` on a dataset without labels of its own.
+    """
     ds = get_dataset(config.dataset, config.root, config.split, disparity_source=config.disparity_source,
                      cache_dir=config.cache_dir)
     labelled = ds.labelled().frames
@@ -128,22 +159,21 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
                                      f"{config.root} has none: leave it at 0")
         ds = ds.with_labels(config.labels, [f.name for f in ds.frames if (Path(config.labels) / f"{f.name}.png").is_file()])
         labelled = ds.labelled().frames
-        log.warning("labels: %s at %s has no labels of its own: validation and test use %s as well (measure the "
-                    "model on human labels with freespace evaluate)", config.dataset, config.root, config.labels)
+        if warn:
+            log.warning("labels: %s at %s has no labels of its own: validation and test use %s as well (measure the "
+                        "model on human labels with freespace evaluate)", config.dataset, config.root, config.labels)
     if config.max_frames is not None:
         labelled = labelled[: config.max_frames]
     if len(labelled) < 3:
         raise DatasetError(f"{config.dataset} at {config.root} has {len(labelled)} labelled frames; training needs ≥ 3")
-    names = [f.name for f in labelled]
-    split_dir = run_dir / "splits"
-    splits = _splits(config, ds, labelled, split_dir)
+    splits = _splits(config, ds, labelled, run_dir / "splits")
     if config.labels is not None:  # the training frames' labels from a label tree; val and test keep their own
         human = _human_drives(labelled, splits["train"], config.human_share, config.seed)
         train = [n for n in splits["train"] if n in human or (Path(config.labels) / f"{n}.png").is_file()]
         if not train:
             raise DatasetError(f"{param('labels')} {config.labels} has no label of any of the {len(splits['train'])} "
                                f"training frames (<frame>.png); label them with `freespace autolabel`")
-        if len(train) < len(splits["train"]):
+        if len(train) < len(splits["train"]) and warn:
             log.warning("labels: %d of %d training frames have no label in %s and are left out",
                         len(splits["train"]) - len(train), len(splits["train"]), config.labels)
         ds = ds.with_labels(config.labels, [n for n in train if n not in human])
@@ -157,20 +187,7 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
                "DS-Generator view"}[needs_right[0]]
         raise DatasetError(f"{param('augment')} {needs_right[0]} needs right images ({why}); none of the "
                            f"{len(splits['train'])} training frames has one")
-    virtual = None
-    if "virtual" in config.augment:  # before the DS-Generator views: a virtual_shift no frame allows is refused first
-        virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]], config.virtual_shift),
-                                 shift=config.virtual_shift, rotate=config.virtual_rotate, prob=config.virtual_prob)
-    if is_rank_zero():
-        write_splits(split_dir, splits)
-    items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
-    if "homography" in config.augment:
-        items["train"] += _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
-    elif "duplicate" in config.augment:  # the control: the same frames again, their own left images
-        views = _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
-        items["train"] += [Item(it.index, it.name) for it in views]
-    size = config.with_size(lambda: ds.load(index[names[0]], right=False, disparity=False).left.shape[:2]).image_size
-    return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
+    return {"dataset": ds, "splits": splits, "index": index, "stereo": stereo}
 
 
 def _splits(config: TrainConfig, ds: StereoRoadDataset, labelled: list[Any], split_dir: Path) -> dict[str, list[str]]:
