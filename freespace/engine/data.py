@@ -141,7 +141,8 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
 def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str, Any]:
     """What :func:`prepare_data` trains on, decided and checked without writing anything: the dataset (with the
     label tree's labels), the splits, each labelled frame's index and the training frames with a right image.
-    ``reproduce`` calls it for every cell before the first trains. ``warn``: log what it leaves out.
+    ``reproduce`` calls it for every cell before the first trains. ``warn``: log what it leaves out or reads
+    in place of the dataset's labels (after every check, so that a refusal stays one line).
 
     Returns ``{"dataset", "splits", "index", "stereo"}``.
 
@@ -153,15 +154,15 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
     ds = get_dataset(config.dataset, config.root, config.split, disparity_source=config.disparity_source,
                      cache_dir=config.cache_dir)
     labelled = ds.labelled().frames
+    notes: list[str] = []
     if not labelled and config.labels is not None:  # a layout without labels (KITTI raw): the tree labels every split
         if config.human_share:
             raise InvalidOptionError(f"{param('human_share')} needs frames labelled by people; {config.dataset} at "
                                      f"{config.root} has none: leave it at 0")
         ds = ds.with_labels(config.labels, [f.name for f in ds.frames if (Path(config.labels) / f"{f.name}.png").is_file()])
         labelled = ds.labelled().frames
-        if warn:
-            log.warning("labels: %s at %s has no labels of its own: validation and test use %s as well (measure the "
-                        "model on human labels with freespace evaluate)", config.dataset, config.root, config.labels)
+        notes.append(f"labels: {config.dataset} at {config.root} has no labels of its own: validation and test use "
+                     f"{config.labels} as well (measure the model on human labels with freespace evaluate)")
     if config.max_frames is not None:
         labelled = labelled[: config.max_frames]
     if len(labelled) < 3:
@@ -173,9 +174,9 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
         if not train:
             raise DatasetError(f"{param('labels')} {config.labels} has no label of any of the {len(splits['train'])} "
                                f"training frames (<frame>.png); label them with `freespace autolabel`")
-        if len(train) < len(splits["train"]) and warn:
-            log.warning("labels: %d of %d training frames have no label in %s and are left out",
-                        len(splits["train"]) - len(train), len(splits["train"]), config.labels)
+        if len(train) < len(splits["train"]):
+            notes.append(f"labels: {len(splits['train']) - len(train)} of {len(splits['train'])} training frames have "
+                         f"no label in {config.labels} and are left out")
         ds = ds.with_labels(config.labels, [n for n in train if n not in human])
         splits = {**splits, "train": train}
     _check_labelled(ds, splits["train"], config.labels)
@@ -187,6 +188,8 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
                "DS-Generator view"}[needs_right[0]]
         raise DatasetError(f"{param('augment')} {needs_right[0]} needs right images ({why}); none of the "
                            f"{len(splits['train'])} training frames has one")
+    for note in notes if warn else ():
+        log.warning("%s", note)
     return {"dataset": ds, "splits": splits, "index": index, "stereo": stereo}
 
 

@@ -382,16 +382,9 @@ def missing_input(path: PathLike, what: str, kind: Literal["file", "folder"] = "
     if kind == "folder" and path.is_file():
         return InputFileError(f"{what} {path} is a file; {want}")
     if path.exists() and not path.is_dir():
-        return InputFileError(f"{what} {path} is {_special_kind(path)}, not a regular file or folder; {want}")
+        return InputFileError(f"{what} {path} is {special_kind(path.stat().st_mode)}, not a regular file or folder; "
+                              f"{want}")
     return InputFileError(f"{what} not found: {path}" + (f" ({hint})" if hint else ""))
-
-
-def _special_kind(path: Path) -> str:
-    """What the existing ``path`` that is no file and no folder is, in words."""
-    mode = path.stat().st_mode
-    kinds = ((stat.S_ISFIFO, "a named pipe"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
-             (stat.S_ISBLK, "a block device"))
-    return next((name for test, name in kinds if test(mode)), "a special file")
 
 
 def read_bytes(path: PathLike, what: str) -> bytes:
