@@ -142,7 +142,7 @@ def test_a_shard_s_part_of_a_label_tree_is_blamed_not_the_split_lists(raw: dict[
                            str(raw["part"]),
                            "--splits", str(raw["lists"]), "--epochs", "1", "--out", str(tmp_path / "run")],
                   match=f"--labels {raw['part']} has no {DATE}_drive_0001_sync/")
-    assert "summary.shard-1-of-2.json" in err and "autolabel --shard" in err and "another dataset" not in err
+    assert "summary.shard-1-of-2.json" in err and "each shard K/N" in err and "another dataset" not in err
     assert not (tmp_path / "run").exists()
 
 

@@ -231,8 +231,8 @@ def _why_unlabelled(config: TrainConfig, ds: StereoRoadDataset, name: str) -> st
             return f"{param('max_frames')} {config.max_frames} leaves it out; raise it or list fewer frames"
         return f"{config.dataset} at {config.root} has no label of it; list labelled frames only"
     shards = sorted(p.name for p in Path(config.labels).glob("summary.shard-*.json"))
-    part = (f"it holds shards' parts ({', '.join(shards)}): run `autolabel --shard K/N` into it for every K, or "
-            if shards else "label those frames or ")
+    part = (f"it holds shards' parts ({', '.join(shards)}): label the other shards into it (`freespace autolabel` "
+            f"with each shard K/N), or " if shards else "label those frames or ")
     return f"the label tree {param('labels')} {config.labels} has no {name}.png; {part}list only the frames it labels"
 
 

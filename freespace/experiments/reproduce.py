@@ -155,7 +155,7 @@ def _check_data(configs: list[TrainConfig], protocol: Protocol) -> None:
     """Each cell's training data decided and checked (:func:`~freespace.engine.data.plan_data`: labelled frames,
     splits, label tree, right images) before the first cell trains, once per distinct data, so that a cell that
     cannot train is refused now, naming its run and variant, and not after the cells before it have trained.
-    Without the protocol's data, a cell's label tree is ``--autolabels``, and its message says so.
+    Without the protocol's data, a cell's label tree is ``autolabels``, and its message says so.
 
     Raises:
         FreespaceError: the first cell that cannot train, its run and variant before the reason.
