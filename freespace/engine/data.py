@@ -225,10 +225,11 @@ def _splits(config: TrainConfig, ds: StereoRoadDataset, labelled: list[Any], spl
 
 
 def _why_unlabelled(config: TrainConfig, ds: StereoRoadDataset, name: str) -> str:
-    """Why the dataset's frame ``name`` is not among the labelled frames training uses, and the fix."""
-    if config.labels is None:
-        if ds.has_label(ds.frames[ds.index(name)]):
-            return f"{param('max_frames')} {config.max_frames} leaves it out; raise it or list fewer frames"
+    """Why the dataset's frame ``name`` is not among the labelled frames training uses, and the fix: ``max_frames``
+    cut it, the dataset has no label of it, or (a dataset without labels of its own) the label tree has none."""
+    if ds.has_label(ds.frames[ds.index(name)]):
+        return f"{param('max_frames')} {config.max_frames} leaves it out; raise it or list fewer frames"
+    if config.labels is None or any(f.label is not None for f in ds.frames):
         return f"{config.dataset} at {config.root} has no label of it; list labelled frames only"
     shards = sorted(p.name for p in Path(config.labels).glob("summary.shard-*.json"))
     part = (f"it holds shards' parts ({', '.join(shards)}): label the other shards into it (`freespace autolabel` "
