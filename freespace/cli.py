@@ -386,7 +386,8 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
                                                       "--target")
     one.add_argument("--confidence", metavar="C.png", help="also write the label's confidence (8-bit grey PNG)")
     one.add_argument("--model-json", metavar="M.json", help="also write the road model and statistics as JSON")
-    one.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration: the baseline from P2/P3")
+    one.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration (a frame's, or KITTI raw's "
+                                                          "calib_cam_to_cam.txt): the baseline from P2/P3")
     one.add_argument("--baseline", type=bounded_float(0, MAX_BASELINE_M, low_open=True), metavar="B", help="the baseline in metres (instead of --calib)")
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
