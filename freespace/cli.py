@@ -386,7 +386,8 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
                                                       "--target")
     one.add_argument("--confidence", metavar="C.png", help="also write the label's confidence (8-bit grey PNG)")
     one.add_argument("--model-json", metavar="M.json", help="also write the road model and statistics as JSON")
-    one.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration: the baseline from P2/P3")
+    one.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration (a frame's, or KITTI raw's "
+                                                          "calib_cam_to_cam.txt): the baseline from P2/P3")
     one.add_argument("--baseline", type=bounded_float(MIN_BASELINE_M, MAX_BASELINE_M), metavar="B", help="the baseline in metres (instead of --calib)")
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
@@ -825,7 +826,8 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
                                                   "(K from 1); shards share --out")
     p.add_argument("--no-overlays", action="store_true",
                    help="write the confidence PNGs only, not overlays/ (for real time: an overlay PNG costs ~3 masks)")
-    p.add_argument("--threads", type=_WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
+    p.add_argument("--threads", type=_WORKERS, help="the network's CPU threads: ONNX Runtime's, or PyTorch's with "
+                                                    "--checkpoint (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--out", required=True, help="output folder (PNGs), or OUT.mp4: the overlaid video")
     p.set_defaults(func=cmd_predict)
@@ -1104,12 +1106,15 @@ def build_parser(commands: Collection[str] | None = None,
     return parser
 
 
-def _refuse_extra_arguments(parser: argparse.ArgumentParser, extra: list[str]) -> None:
-    """Arguments no option took: the shell's expansion of an unquoted wildcard (``--input *.png`` gives one
-    file to ``--input`` and the rest here) gets a one-line hint to quote it; anything else argparse's usage
-    error."""
-    files = [a for a in extra if os.path.exists(a)]
-    if files:
+def _refuse_extra_arguments(parser: argparse.ArgumentParser, extra: list[str], command: str | None) -> None:
+    """Arguments no option took: an unknown option (with its value, a path or not) is named as such; the
+    shell's expansion of an unquoted wildcard (``--input *.png`` gives one file to ``--input`` and the rest
+    here: every one an existing path) gets a one-line hint to quote it; anything else argparse's error."""
+    unknown = [a for a in extra if a.startswith("-") and not os.path.exists(a)]
+    if unknown:
+        raise InvalidOptionError(f"unknown option{'s' if len(unknown) > 1 else ''} {' '.join(unknown)}; see "
+                                 f"`{parser.prog}{f' {command}' if command else ''} --help`")
+    if all(os.path.exists(a) for a in extra):
         shown = " ".join(extra[:3]) + (f" … ({len(extra)} in all)" if len(extra) > 3 else "")
         raise InvalidOptionError(f"unexpected argument{'s' if len(extra) > 1 else ''} {shown}: the shell expanded an "
                                  f"unquoted wildcard into many files; quote the pattern, e.g. --input 'frames/*.png'")
@@ -1162,7 +1167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser = build_parser({command} if command else (), config)
         args, extra = parser.parse_known_args(argv)
         if extra:
-            _refuse_extra_arguments(parser, extra)
+            _refuse_extra_arguments(parser, extra, command)
         setup_logging(-1 if args.quiet else args.verbose)
         with writing_as(command or "freespace"):  # the mark of the files it writes (freespace.io.files)
             return int(args.func(args))

@@ -266,8 +266,8 @@ class GenericStereo(FolderDataset):
     def __init__(self, root: PathLike, split: str | None = None, **options) -> None:
         config = Path(root) / CONFIG_NAME
         if Path(root).is_dir() and not config.is_file():
-            raise InputFileError(f"{config} not found; the generic layout is described by a YAML file there "
-                                 f"(see `freespace datasets --help`)")
+            raise InputFileError(f"{config} not found; the generic layout is described by a YAML file there naming "
+                                 f"its folders, at least `left: <folder of left images>` (every key: docs/datasets.md)")
         super().__init__(root, split, **options)
 
     def _folders(self) -> dict[str, Path | None]:

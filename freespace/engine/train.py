@@ -283,6 +283,9 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
 
 
 def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
+    saved = Path(config.out) / "config.yaml"
+    if resume and saved.is_file():  # before the checks: an option changed is named, not what it breaks (weights...)
+        _refuse_changed(config, TrainConfig.load(saved))
     config.check()  # before anything is written
     run_dir = Path(config.out)
     if not is_rank_zero():  # DDP children re-run the command inside the folder their launcher holds
@@ -360,15 +363,20 @@ def _check_resume(config: TrainConfig, run_dir: Path, last: Path) -> TrainConfig
     saved = TrainConfig.load(run_dir / "config.yaml")
     resumed = RunCheckpointIO(run_dir).load_checkpoint(last)  # refuse a damaged or crafted file before any work
     config = config.with_size(saved.image_size)
+    _refuse_changed(config, saved)
+    from freespace.models import create_model  # the run's network, named as in RoadModule: before any work
+
+    _check_fits(resumed, torch.nn.ModuleDict({"net": create_model(config.model, **config.model_options())}), last)
+    return config
+
+
+def _refuse_changed(config: TrainConfig, saved: TrainConfig) -> None:
+    """Refuse to resume the run started with ``saved`` (its config.yaml) with other options, naming each."""
     changed = config.diff(saved)[0]
     if changed:
         raise InvalidOptionError(f"{param('resume')} with other options than the run's ({'; '.join(changed)}); "
                                  f"resume with the same options (only {param('epochs')} and {param('patience')} "
                                  f"may grow)")
-    from freespace.models import create_model  # the run's network, named as in RoadModule: before any work
-
-    _check_fits(resumed, torch.nn.ModuleDict({"net": create_model(config.model, **config.model_options())}), last)
-    return config
 
 
 def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:

@@ -52,7 +52,7 @@ from typing import Any
 from freespace.errors import InvalidOptionError, param
 from freespace.experiments.variants import (DEFAULT_VARIANTS, GAIN_METRICS, GAINS, TEST_SET_NAME, VARIANTS, Variant,
                                             parse_test_roots, parse_variants, variant_tag)
-from freespace.io.files import PathLike
+from freespace.io.files import PathLike, missing_input
 
 __all__ = ["DataSource", "DATA_KEYS", "Primary", "Protocol"]
 
@@ -198,12 +198,11 @@ class Protocol:
             of an unknown one, a name of the built-in variants, two names of one tag (one line naming the file
             and the key). The data's paths are checked when cells are made (:meth:`DataSource.training`).
         """
-        from freespace.errors import InputFileError
         from freespace.io.codecs import load_yaml
 
         where = f"{param('protocol')} {path}"
         if not Path(path).is_file():
-            raise InputFileError(f"{where} not found; give a study's protocol.yaml")
+            raise missing_input(path, param("protocol"), hint="give a study's protocol.yaml")
         data = load_yaml(path)
         if not isinstance(data, dict):
             raise InvalidOptionError(f"{where} is not a mapping of variants, gains, primary, test_sets, reference "

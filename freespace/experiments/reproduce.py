@@ -49,7 +49,7 @@ from freespace.experiments.cells import (cell_config, check_autolabels_used, che
                                          check_test_roots, run_cell)
 from freespace.experiments.protocol import Protocol
 from freespace.experiments.variants import (MAX_SEEDS, TestRoots, parse_cell, parse_models, parse_test_roots,
-                                            parse_variants)
+                                            parse_variants, run_of)
 from freespace.experiments.tables import OUT_ENTRIES, write_tables
 from freespace.io.files import PathLike, check_writable
 from freespace.io.outdir import claim_folder
@@ -126,6 +126,7 @@ def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, mode
         config = cell_config(dataset, root, out, model, variant, seed, options, autolabels, protocol)
         check_inputs(out, [config], vocabulary)
         _check_test_roots([config], roots)
+        _check_data([config], protocol)
         with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
             status = run_cell(config, test_root=roots, progress=progress, variants=vocabulary)
         entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": variant,
@@ -137,12 +138,45 @@ def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, mode
         check_cell(config)
     check_inputs(out, configs, vocabulary)
     _check_test_roots(configs, roots)
+    _check_data(configs, protocol)
     statuses: dict[str, str] = {}
     with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
         for config in configs:
             statuses[Path(config.out).name] = run_cell(config, test_root=roots, progress=progress, variants=vocabulary)
             write_tables(out, figures=0, statuses=statuses, protocol=protocol)  # the tables so far, after every run
         return write_tables(out, figures=figures, statuses=statuses, protocol=protocol)
+
+
+#: the options that decide what a cell trains on (:func:`~freespace.engine.data.plan_data`)
+_DATA_OPTIONS = ("dataset", "root", "split", "labels", "human_share", "max_frames", "splits_dir", "seed", "augment")
+
+
+def _check_data(configs: list[TrainConfig], protocol: Protocol) -> None:
+    """Each cell's training data decided and checked (:func:`~freespace.engine.data.plan_data`: labelled frames,
+    splits, label tree, right images) before the first cell trains, once per distinct data, so that a cell that
+    cannot train is refused now, naming its run and variant, and not after the cells before it have trained.
+    Without the protocol's data, a cell's label tree is ``autolabels``, and its message says so.
+
+    Raises:
+        FreespaceError: the first cell that cannot train, its run and variant before the reason.
+    """
+    from freespace.engine.data import plan_data
+    from freespace.errors import FreespaceError
+
+    seen: set[tuple[Any, ...]] = set()
+    for config in configs:
+        key = tuple(str(getattr(config, k)) for k in _DATA_OPTIONS)
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            plan_data(config, Path(config.out), warn=False)
+        except FreespaceError as exc:
+            name = Path(config.out).name
+            cell = run_of(name, protocol.vocabulary)
+            what = f"run {name} (variant {cell[1].name})" if cell else f"run {name}"
+            text = exc.args[0] if protocol.data else exc.args[0].replace(param("labels"), param("autolabels"))
+            raise type(exc)(f"{what}: {text}") from None
 
 
 def _check_test_roots(configs: list[TrainConfig], roots: dict[str, Path]) -> None:

@@ -211,8 +211,9 @@ class Predictor:
     upsampled bilinearly to the frame's size before any threshold (a mask at the input's size). The three
     steps of :meth:`predict` are also callable apart, so that a pipeline runs them in different threads:
     :meth:`prepare` (resize, scale to [0, 1], CHW), :meth:`infer` (the network) and :meth:`restore` (back to
-    the frame's size). ``threads``: ONNX Runtime's intra-op threads (None: the cores this process may use;
-    :func:`session_options`).
+    the frame's size). ``threads``: the network's CPU threads (≥ 1; None: the cores this process may use):
+    ONNX Runtime's intra-op threads (:func:`session_options`), or with a checkpoint PyTorch's
+    (``torch.set_num_threads``, which holds for the whole process).
     """
 
     def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
@@ -224,6 +225,10 @@ class Predictor:
         if checkpoint is not None:
             import torch
 
+            if threads is not None:
+                if threads < 1:
+                    raise InvalidOptionError(f"{param('threads')} must be ≥ 1, got {threads}")
+                torch.set_num_threads(threads)
             self.model, hp = load_checkpoint(checkpoint)
             self.device = "cuda" if torch.cuda.is_available() else "cpu"
             self.model.to(self.device)

@@ -38,7 +38,7 @@ __all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFF
 
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
 DEPTH_SUFFIXES = (".png", ".npy", ".pfm")
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff")  # what OpenCV reads and writes here
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff", ".webp")  # what OpenCV reads and writes here
 
 #: the largest image side (pixels) a network is trained or run at: bounds sizes read from options and files
 MAX_IMAGE_SIDE = 8192

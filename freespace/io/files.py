@@ -471,21 +471,27 @@ def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str,
 
 
 
-def missing_input(path: PathLike, what: str, kind: Literal["file", "folder"] = "file") -> InputFileError:
-    """The one-line error for an input ``path`` that is not the ``kind`` asked for: that it is a folder
-    where a file is wanted (or the other way round), else that it is not found. ``what`` names it
-    ("checkpoint", "ground-truth folder", ...)."""
+def missing_input(path: PathLike, what: str, kind: Literal["file", "folder"] = "file",
+                  hint: str = "") -> InputFileError:
+    """The one-line error for an input ``path`` that is not the ``kind`` asked for, naming what it is: a
+    folder where a file is wanted (or the other way round), something that is neither (a named pipe, a socket,
+    a device: never opened, a pipe would block), else that it is not found (``hint``, when given, in brackets
+    after it). ``what`` names it ("checkpoint", "ground-truth folder", ...)."""
     path = Path(path)
+    want = "name a file" if kind == "file" else "give a folder"
     if kind == "file" and path.is_dir():
-        return InputFileError(f"{what} {path} is a folder; name a file")
-    if kind == "folder" and path.exists():
-        return InputFileError(f"{what} {path} is a file; give a folder")
-    return InputFileError(f"{what} not found: {path}")
+        return InputFileError(f"{what} {path} is a folder; {want}")
+    if kind == "folder" and path.is_file():
+        return InputFileError(f"{what} {path} is a file; {want}")
+    if path.exists() and not path.is_dir():
+        return InputFileError(f"{what} {path} is {special_kind(path.stat().st_mode)}, not a regular file or folder; "
+                              f"{want}")
+    return InputFileError(f"{what} not found: {path}" + (f" ({hint})" if hint else ""))
 
 
 def read_bytes(path: PathLike, what: str, max_bytes: int | None = None, limit: str = "") -> bytes:
     """The bytes of the input file ``path``; ``what`` names it in the one-line error (InputFileError) for a
-    missing, folder or unreadable path.
+    missing, folder, special (:func:`missing_input`) or unreadable path.
 
     Args:
         max_bytes: the most bytes the file may have, checked before it is read (None: no limit); a larger file
@@ -494,8 +500,7 @@ def read_bytes(path: PathLike, what: str, max_bytes: int | None = None, limit: s
     """
     path = Path(path)
     if not path.is_file():
-        hint = "it is a folder, name a file" if path.is_dir() else "check the path"
-        raise InputFileError(f"{what} not found: {path} ({hint})")
+        raise missing_input(path, what, hint="check the path")
     try:
         with path.open("rb") as f:
             size = os.fstat(f.fileno()).st_size

@@ -62,7 +62,9 @@ def _shaped(path: PathLike, key: str, arr: np.ndarray, shape: tuple[int, int]) -
 
 
 def read_kitti_calib(path: PathLike) -> dict[str, np.ndarray]:
-    """Parse a KITTI calibration text file (``KEY: v1 v2 ...`` lines).
+    """Parse a KITTI calibration text file (``KEY: v1 v2 ...`` lines): a frame's file of KITTI road, stereo or
+    object, or KITTI raw's ``calib_cam_to_cam.txt`` of a recording day (read as :func:`read_kitti_raw_calib`
+    reads it, without the Velodyne's file).
 
     Returns:
         A dict of float64 arrays: ``P0``–``P3`` are 3×4, ``R0_rect`` (or ``R_rect``) 3×3, ``Tr_*`` 3×4;
@@ -74,14 +76,17 @@ def read_kitti_calib(path: PathLike) -> dict[str, np.ndarray]:
         camera has: ``P2`` singular, a focal length ≤ 0 or beyond ``MAX_FOCAL_PX``, ``P3`` with other intrinsics,
         or a baseline outside ``MIN_BASELINE_M``…``MAX_BASELINE_M`` (``freespace.limits``).
     """
-    calib = _parse_calib(path)
+    calib = _parse_calib(path, text_keys=("calib_time",))
+    if "P2" not in calib and "P_rect_02" in calib:
+        return _cam_to_cam(path, calib)
     for key, arr in calib.items():
         if re.fullmatch(r"P\d|Tr_\w+", key):
             calib[key] = _shaped(path, key, arr, (3, 4))
         elif re.fullmatch(r"R0?_rect", key):
             calib[key] = _shaped(path, key, arr, (3, 3))
     if "P2" not in calib:
-        raise CorruptFileError(f"calibration file {path} has no P2 line; expected a KITTI calibration file")
+        raise CorruptFileError(f"calibration file {path} has no P2 line; expected a KITTI calibration file (a "
+                               f"frame's, with P2, or KITTI raw's calib_cam_to_cam.txt, with P_rect_02)")
     for key in [k for k in calib if k.startswith("Tr_")] + [k for k in ("R0_rect", "R_rect") if k in calib]:
         _check_rotation(path, key, calib[key][:, :3])
     _check_rig(path, calib, ("P2", "P3"))
@@ -155,7 +160,22 @@ def read_kitti_raw_calib(cam_to_cam: PathLike, velo_to_cam: PathLike | None = No
         ``KEY: numbers``, a key given twice, a missing or malformed key, a singular rotation or projection, or a
         rig no camera has (:func:`read_kitti_calib`'s checks, and a principal point outside ``S_rect_02``).
     """
-    cam = _parse_calib(cam_to_cam, text_keys=("calib_time",))
+    calib = _cam_to_cam(cam_to_cam, _parse_calib(cam_to_cam, text_keys=("calib_time",)))
+    if velo_to_cam is not None:
+        velo = _parse_calib(velo_to_cam, text_keys=("calib_time",))
+        missing = [k for k in ("R", "T") if k not in velo]
+        if missing:
+            raise CorruptFileError(f"calibration file {velo_to_cam} has no {' and no '.join(missing)} line; expected "
+                                   f"KITTI raw's calib_velo_to_cam.txt (R: 9 numbers, T: 3)")
+        rotation = _shaped(velo_to_cam, "R", velo["R"], (3, 3))
+        translation = _shaped(velo_to_cam, "T", velo["T"], (3, 1))
+        _check_rotation(velo_to_cam, "R", rotation)
+        calib["Tr_velo_to_cam"] = np.hstack([rotation, translation])
+    return calib
+
+
+def _cam_to_cam(cam_to_cam: PathLike, cam: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The keys of :func:`read_kitti_calib` from the parsed lines ``cam`` of KITTI raw's calib_cam_to_cam.txt."""
     calib: dict[str, np.ndarray] = {}
     for key, out, shape in (("P_rect_02", "P2", (3, 4)), ("R_rect_00", "R0_rect", (3, 3)), ("S_rect_02", "S_rect_02", (1, 2)),
                             ("P_rect_03", "P3", (3, 4))):
@@ -175,16 +195,6 @@ def read_kitti_raw_calib(cam_to_cam: PathLike, velo_to_cam: PathLike | None = No
                                f"than the image limit of {MAX_IMAGE_PIXELS:,} (MAX_IMAGE_PIXELS); check the file")
     _check_rotation(cam_to_cam, "R_rect_00", calib["R0_rect"])
     _check_rig(cam_to_cam, calib, ("P2", "P3"), ("P_rect_02", "P_rect_03"), (int(w), int(h)))
-    if velo_to_cam is not None:
-        velo = _parse_calib(velo_to_cam, text_keys=("calib_time",))
-        missing = [k for k in ("R", "T") if k not in velo]
-        if missing:
-            raise CorruptFileError(f"calibration file {velo_to_cam} has no {' and no '.join(missing)} line; expected "
-                                   f"KITTI raw's calib_velo_to_cam.txt (R: 9 numbers, T: 3)")
-        rotation = _shaped(velo_to_cam, "R", velo["R"], (3, 3))
-        translation = _shaped(velo_to_cam, "T", velo["T"], (3, 1))
-        _check_rotation(velo_to_cam, "R", rotation)
-        calib["Tr_velo_to_cam"] = np.hstack([rotation, translation])
     return calib
 
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
 from freespace.io.codecs import IMAGE_SUFFIXES, check_image_pixels, read_image
-from freespace.io.files import PathLike, keep_mode, mark_written, replaceable
+from freespace.io.files import PathLike, keep_mode, mark_written, missing_input, replaceable
 
 __all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path",
            "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "DEFAULT_FPS"]
@@ -233,7 +233,16 @@ def open_frames(source: PathLike, *, fps: float | None = None, default_fps: floa
         if path.suffix.lower() in IMAGE_SUFFIXES:
             src = _image_source("image", spec, [path], default_fps)
         else:
-            src = _probe_video(path, default_fps)
+            try:
+                src = _probe_video(path, default_fps)
+            except CorruptFileError:
+                if is_video_path(path):
+                    raise
+                raise CorruptFileError(f"input {path} is no image freespace reads ({', '.join(IMAGE_SUFFIXES)}) "
+                                       f"and no video FFmpeg decodes; convert it to such images or to an MP4 "
+                                       f"video") from None
+    elif path.exists():  # a named pipe, socket or device: never opened (a pipe would block)
+        raise missing_input(path, "input")
     elif _GLOB_CHARS.search(spec):
         paths = sorted((Path(p) for p in _glob.glob(spec)
                         if Path(p).is_file() and Path(p).suffix.lower() in IMAGE_SUFFIXES), key=_natural_key)

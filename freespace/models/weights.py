@@ -29,6 +29,7 @@ import torch
 from torch import nn
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, PretrainedWeightsError, param
+from freespace.io.files import missing_input
 from freespace.models.lite import (LITE_VARIANTS, convert_reference_state, is_lite, is_reference_layout,
                                    register_lite_encoders, shipped_weights)
 
@@ -124,8 +125,8 @@ def read_state_dict(path: str | Path) -> dict[str, torch.Tensor]:
         raise InputFileError(f"{param('encoder_weights')} {path} is a folder; give a state-dict file "
                              f"(torch.save(encoder.state_dict(), PATH)) or imagenet")
     if not path.is_file():
-        raise InputFileError(f"encoder weights file not found: {path} ({param('encoder_weights')} takes imagenet or a "
-                             f"state-dict file; without it the encoder starts from random weights)")
+        raise missing_input(path, "encoder weights file", hint=f"{param('encoder_weights')} takes imagenet or a "
+                            f"state-dict file; without it the encoder starts from random weights")
     state: Any = None
     for mmap in (True, False):  # mmap needs the zip format of torch.save; older files load whole
         try:

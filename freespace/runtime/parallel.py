@@ -6,9 +6,10 @@ initializer, ends a worker when its parent goes: on Linux through ``PR_SET_PDEAT
 a daemon thread that watches the parent process id.
 
 When the parent stops on Ctrl-C or ``SIGTERM``, leaving a ``with ProcessPoolExecutor`` block would wait for
-every job already submitted. :func:`worker_pool` instead cancels the jobs not started and ends the workers
-at once; its workers (:func:`init_worker`) ignore Ctrl-C, which the terminal sends to the whole process
-group, so that only the parent reacts (one message, no worker tracebacks). The standard library only.
+every job already submitted. :func:`worker_pool` instead cancels the jobs not started and kills the workers
+at once, whatever they are doing (starting up included); its workers (:func:`init_worker`) ignore Ctrl-C,
+which the terminal sends to the whole process group, so that only the parent reacts (one message, no worker
+tracebacks). The standard library only.
 """
 
 from __future__ import annotations
@@ -73,21 +74,41 @@ _STARTUP_BLOCKED = {signal.SIGINT, signal.SIGTERM}
 
 
 class _Pool(ProcessPoolExecutor):
-    """A pool whose workers start with Ctrl-C and ``SIGTERM`` blocked: ``submit`` starts them (``spawn``), and
-    the blocked signal mask passes on to them through ``exec``, until :func:`init_worker`. Without it a Ctrl-C
-    while a worker imports its modules prints that worker's traceback, and a ``SIGTERM`` that ends the parent
-    between starting a worker and sending it its start-up data leaves that worker to print an ``EOFError``;
-    blocked, the signal reaches the parent after ``submit``, when every worker it started is known and can be
-    terminated."""
+    """A pool whose ``submit`` (which starts the workers, ``spawn``) holds Ctrl-C and ``SIGTERM`` back until it
+    returns (:func:`_signals_held`), so that the parent never stops between starting a worker and sending it its
+    start-up data (the worker would print an ``EOFError``) and every worker it started is known and can be
+    killed; and whose workers start with both signals blocked, a mask that passes on to them through ``exec``,
+    until :func:`init_worker` (a Ctrl-C to the process group while a worker imports its modules would print
+    that worker's traceback)."""
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Any:
-        if not hasattr(signal, "pthread_sigmask"):
+        with _signals_held():
             return super().submit(fn, *args, **kwargs)
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, _STARTUP_BLOCKED)
-        try:
-            return super().submit(fn, *args, **kwargs)
-        finally:  # a Ctrl-C or SIGTERM that came meanwhile is raised here, in the parent
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Ctrl-C and ``SIGTERM`` held back while the block runs and delivered after it, to the handlers of before.
+
+    Blocking them in this thread is not enough: the kernel then hands a signal to another thread that does
+    not block it (OpenCV's, a reader's) and Python runs the handler in the main thread all the same, in the
+    middle of the block. So the main thread also swaps its handlers for ones that only note the signal, and
+    raises each noted signal again once the block is over and the handlers are back."""
+    main = threading.current_thread() is threading.main_thread()  # handlers can be set there only
+    noted: list[int] = []
+    handlers = {s: signal.signal(s, lambda signum, frame: noted.append(signum)) for s in _STARTUP_BLOCKED} \
+        if main else {}
+    masked = hasattr(signal, "pthread_sigmask")
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STARTUP_BLOCKED) if masked else None
+    try:
+        yield
+    finally:
+        if masked:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)  # type: ignore[arg-type]
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+        for sig in dict.fromkeys(noted):  # each once: a second Ctrl-C meanwhile is the same request
+            signal.raise_signal(sig)
 
 
 @contextmanager
@@ -101,7 +122,10 @@ def worker_pool(workers: int, initializer: Callable[..., None], initargs: tuple[
 
     When the block ends normally the pool is shut down after its jobs, as ``with ProcessPoolExecutor``
     does. When it raises (an error, Ctrl-C, ``SIGTERM``), the jobs not started are cancelled and the
-    workers terminated without waiting for the running ones, then the exception goes on.
+    workers killed (``SIGKILL``) without waiting for the running ones, then the exception goes on. A kill
+    stops a worker at once and silently whatever it does, even while it starts up with ``SIGTERM`` blocked
+    (a worker with no handler of its own would end without clean-up on ``SIGTERM`` too; what it was writing
+    is a temporary file, which the next run ignores).
     """
     # spawn, not fork: a forked child can deadlock on OpenCV's thread pool held by the parent
     pool = _Pool(max_workers=workers, initializer=initializer, initargs=initargs,
@@ -113,7 +137,7 @@ def worker_pool(workers: int, initializer: Callable[..., None], initargs: tuple[
         manager = getattr(pool, "_executor_manager_thread", None)  # as it forgets its manager thread
         pool.shutdown(wait=False, cancel_futures=True)
         for p in processes:
-            p.terminate()
+            p.kill()
         for p in processes:
             p.join(timeout=5)
         # the pool's manager thread closes its wake-up pipe when it sees the workers gone; the interpreter's exit
