@@ -39,7 +39,7 @@ from freespace.io.files import PathLike, keep_mode, mark_written, missing_input,
 __all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path",
            "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "DEFAULT_FPS"]
 
-VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".ts")
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".ts", ".y4m")
 DEFAULT_FPS = 10.0
 """Frame rate given to folders and globs of images (KITTI's cameras run at 10 Hz)."""
 
