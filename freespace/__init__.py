@@ -11,4 +11,14 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__"]
+__all__ = ["__version__", "adapt"]
+
+
+def __getattr__(name: str):
+    """``freespace.adapt`` (:func:`freespace.engine.adapt.adapt`), imported on first use: ``import freespace``
+    stays free of torch."""
+    if name == "adapt":  # by name: the one upward reach of layer 0 (docs/architecture.md), made on first use only
+        import importlib
+
+        return importlib.import_module("freespace.engine.adapt").adapt
+    raise AttributeError(f"module 'freespace' has no attribute {name!r}")

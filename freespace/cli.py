@@ -911,6 +911,51 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _adapt_parser(p: argparse.ArgumentParser) -> None:
+    from freespace.engine.adapt import BOUNDS as B
+    from freespace.engine.adapt import AdaptSettings as D
+
+    p.add_argument("--model", required=True, help="a published model folder with its checkpoint "
+                                                   "(models/real-road-fast)")
+    p.add_argument("--input", required=True, help="your unlabelled frames: a folder, a quoted glob or a video")
+    p.add_argument("--out", required=True, help="the new model folder (outside --model)")
+    p.add_argument("--source", help="frames of the model's own training drives (its card names them), rehearsed "
+                                    "so that it forgets nothing")
+    p.add_argument("--epochs", type=B["epochs"], default=D.epochs,
+                   help=f"rounds over the frames; the teacher relabels them after each (default {D.epochs})")
+    p.add_argument("--minutes", type=B["minutes"],
+                   help="a time limit for the training (default none)")
+    p.add_argument("--threshold", type=B["threshold"], default=D.threshold,
+                   help=f"a pixel is a label where the teacher is this sure of it (default {D.threshold})")
+    p.add_argument("--lr", type=B["lr"], default=D.lr,
+                   help=f"AdamW learning rate (default {D.lr:g})")
+    p.add_argument("--batch-size", type=B["batch_size"], default=D.batch_size,
+                   help=f"frames per step (default {D.batch_size})")
+    p.add_argument("--ema", type=B["ema"], default=D.ema,
+                   help=f"the teacher's moving-average decay per step (default {D.ema})")
+    p.add_argument("--max-drift", type=B["max_drift"], default=D.max_drift,
+                   help=f"the collapse guard: the most the held-out frames' road share may move (default "
+                        f"{D.max_drift})")
+    p.add_argument("--seed", type=_SEED, default=0, help="random seed (default 0)")
+    p.add_argument("--threads", type=_WORKERS, help="CPU threads (default: the cores this process may use)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=cmd_adapt)
+
+
+def cmd_adapt(args: argparse.Namespace) -> int:
+    """``freespace adapt``: self-train a published model on unlabelled frames; write a new model folder."""
+    from freespace.engine.adapt import adapt
+
+    s = adapt(args.model, args.input, args.out, source=args.source, epochs=args.epochs, minutes=args.minutes,
+              threshold=args.threshold, lr=args.lr, batch_size=args.batch_size, ema=args.ema,
+              max_drift=args.max_drift, seed=args.seed, progress=not args.no_progress, threads=args.threads)
+    b, a = s["before"], s["after"]
+    print(f"adapted {s['model']} on {s['frames']} frames ({s['skipped']} unreadable skipped) in {s['seconds'] / 60:.1f}"
+          f" min, {s['rounds']} rounds; held-out road share {100 * b['road_share']:.1f} % → {100 * a['road_share']:.1f}"
+          f" %, mean confidence {100 * b['confidence']:.1f} % → {100 * a['confidence']:.1f} % → {args.out}")
+    return 0
+
+
 def _kitti_submit_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--checkpoint", required=True)
     p.add_argument("--root", required=True, metavar="KITTI_DIR", help="folder holding data_road/testing")
@@ -1073,6 +1118,11 @@ COMMANDS: dict[str, tuple[str, str, Callable[..., None]]] = {
     "export": ("export a checkpoint to ONNX or TorchScript (validated)",
                "Export a checkpoint to ONNX (dynamic batch, height and width) or TorchScript; the export is "
                "checked against PyTorch and the max abs difference printed.", _export_parser),
+    "adapt": ("adapt a published road model to your camera's unlabelled frames",
+              "Self-train a published model folder (its checkpoint) on unlabelled frames: a slowly moving teacher "
+              "labels the pixels it is sure of, the student learns them on strongly augmented views; a collapse "
+              "guard refuses a model that drifts to all road or no road. Writes a new model folder: model.onnx "
+              "(float16), model.ckpt, README.md (the card), before_after.jpg and the run's record.", _adapt_parser),
     "kitti-submit": ("KITTI road testing predictions in the benchmark's BEV format",
                      "Predict data_road/testing and write bird's-eye-view confidence maps <cat>_road_<id>.png "
                      "(800×400, x −10…10 m, z 6…46 m) made with each frame's calibration as the devkit does, and "
