@@ -739,7 +739,7 @@ def _evaluate_parser(p: argparse.ArgumentParser) -> None:
                                                     "colours R,G,B[;R,G,B] (Cityscapes: 128,64,128)")
     f.add_argument("--ignore", metavar="VALUES", help="don't-care ids, grey values or colours, as --road "
                                                       "(CamVid: 11)")
-    f.add_argument("--tolerance", type=int, metavar="LEVELS",
+    f.add_argument("--tolerance", type=bounded_int(0, 64), metavar="LEVELS",
                    help="palette: a pixel within LEVELS of a colour on every channel has it (default 8)")
     p.add_argument("--threads", type=_WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
     p.add_argument("--no-overlays", action="store_true", help="labelled folder: skip the TP/FN/FP overlays")

@@ -16,7 +16,7 @@ import numpy as np
 from freespace.errors import DatasetError, InputFileError, param
 from freespace.io.files import PathLike
 
-__all__ = ["resolved_path", "file_signature", "label_files", "label_tree_sha256", "label_tree_pixels", "check_label_tree"]
+__all__ = ["resolved_path", "file_signature", "file_sha256", "label_files", "label_tree_sha256", "label_tree_pixels", "check_label_tree"]
 
 
 def resolved_path(value: str) -> str:
@@ -30,6 +30,24 @@ def file_signature(path: Path) -> tuple[int, int, int]:
     st = path.stat()
     return st.st_mtime_ns, st.st_size, st.st_ino
 
+
+
+def file_sha256(path: PathLike) -> str:
+    """The SHA-256 (hex) of the file ``path``'s bytes; computed once per process for a file unchanged since
+    (its modification time, size and inode key the cache)."""
+    real = Path(resolved_path(os.fspath(path)))
+    return _file_sha256(real, file_signature(real))
+
+
+@functools.lru_cache(maxsize=64)
+def _file_sha256(path: Path, signature: tuple[int, int, int]) -> str:
+    import hashlib
+
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
 
 def label_files(folder: PathLike) -> dict[str, Path]:
     """The label files of the label tree ``folder`` that training reads, by frame name: ``<frame>.png``, where

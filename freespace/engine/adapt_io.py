@@ -2,8 +2,8 @@
 folder carries (:func:`save_checkpoint`; :func:`checkpoint_from_onnx` rebuilt the published ones') and the adapted
 model folder (:func:`write_model_folder`: checkpoint, float16 ONNX, card, picture, run record).
 
-The folder is a model folder like the published ones (``models/<name>/``): ``model.onnx`` (``freespace export
---fp16``: float16, the same input size and graph, so the same speed), ``model.ckpt`` (the weights-only
+The folder is a model folder like the published ones (``models/<name>/``): ``model.onnx`` (exported as ``freespace
+export`` does in float16: the same input size and graph, so the same speed), ``model.ckpt`` (the weights-only
 checkpoint adapt continues from), ``README.md`` (the card: from which model, on which frames — count, sizes, a
 hash —, with which settings, in how long, how the prediction changed), ``before_after.jpg`` (held-out frames,
 the road before and after, side by side), and the run's record: ``config.json`` (the settings), ``rounds.csv``
@@ -275,7 +275,7 @@ def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | N
     facts = "\n".join(f"| {k} | {v} |" for k, v in (
         ("", ""), ("---", "---"),
         ("input", f"any RGB frame, resized to **{size[0]}×{size[1]}** (H×W) as the published model's"),
-        ("file", f"`model.onnx`, float16 (`freespace export --fp16`: largest road probability difference from the "
+        ("file", f"`model.onnx`, float16 (as `freespace export` writes it in float16: largest road probability difference from the "
                  f"checkpoint {summary['export']['fp16']['max_prob_diff']:.4f}); `{CHECKPOINT}`, the weights adapt "
                  f"continues from"),
         ("adapted on", f"{_frames_line(frames, 'unlabelled')}; {summary['held_out']} of them held out of training "
@@ -292,9 +292,8 @@ Made by `freespace adapt` from **{_title(folder)}** (`{folder}`): self-training 
 frames, a mean teacher relabelling them every round (module `freespace.engine.adapt`). No frame here was
 labelled by a person; nothing was measured against a label.
 
-```bash
-freespace predict --input FRAMES --out MASKS --onnx {summary['out']}/model.onnx
-```
+Use it as the published models are used: `freespace predict` with this folder's `model.onnx` (the README's
+quickstart).
 
 {facts}
 

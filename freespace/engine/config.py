@@ -31,8 +31,8 @@ from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin, 
 from pydantic import BeforeValidator, ConfigDict, Field, PlainSerializer, TypeAdapter, ValidationError
 from pydantic.fields import FieldInfo
 
-from freespace.data.label_tree import (check_label_tree, file_signature, label_files, label_tree_pixels,  # noqa: F401
-                                       label_tree_sha256, resolved_path)
+from freespace.data.label_tree import (check_label_tree, file_sha256, file_signature, label_files,  # noqa: F401
+                                       label_tree_pixels, label_tree_sha256, resolved_path)
 from freespace.errors import MAX_SEED, CorruptFileError, InputFileError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE, load_yaml
 from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable, missing_input
@@ -475,24 +475,6 @@ def _build_once(model: str, preset: str, encoder_name: str | None, encoder_weigh
 
 
 # --- what a run read: content hashes, the label tree -------------------------------------------------------
-
-
-def file_sha256(path: PathLike) -> str:
-    """The SHA-256 (hex) of the file ``path``'s bytes; computed once per process for a file unchanged since
-    (its modification time, size and inode key the cache)."""
-    real = Path(resolved_path(os.fspath(path)))
-    return _file_sha256(real, file_signature(real))
-
-
-@functools.lru_cache(maxsize=64)
-def _file_sha256(path: Path, signature: tuple[int, int, int]) -> str:
-    import hashlib
-
-    digest = hashlib.sha256()
-    with path.open("rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
 
 
 def content_hashes(config: TrainConfig) -> dict[str, Any]:

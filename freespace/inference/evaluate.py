@@ -1,7 +1,7 @@
 """`freespace evaluate`: a model (checkpoint or ONNX) on labelled frames — metrics, per-frame scores, overlays, PR curve.
 
-Two sources of labelled frames: a dataset's split (``--dataset``/``--root``, the run's lists or all labelled frames)
-or a *labelled folder* (``--images``/``--labels`` in one of the formats of :mod:`freespace.evaluation.labelled`:
+Two sources of labelled frames: a dataset's split (``dataset`` and ``root``: the run's lists or all labelled frames)
+or a *labelled folder* (``images`` and ``labels`` in one of the formats of :mod:`freespace.evaluation.labelled`:
 KITTI road ground truth, binary masks, class ids, palette colours). Predictions are made at the model's input size
 and resized back (bilinear probabilities) to each frame's own size, where the metrics are counted (the benchmark's
 way). Outputs in ``OUT``: ``metrics.json`` (pooled accuracy, precision, recall, f_score, iou at p ≥ 0.5, with

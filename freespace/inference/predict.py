@@ -297,7 +297,7 @@ def _run_record(predictor: Predictor, source: FrameSource, shard: tuple[int, int
     """What makes a ``predict`` output folder (:data:`RUN_RECORD`): the model (its name, size and the SHA-256
     of its file), the input (its path, absolute, links resolved; a glob as written, absolute) and its frame
     names (count and SHA-256, before sharding), the number of shards (None: one whole run) and overlays."""
-    from freespace.engine.config import file_sha256
+    from freespace.data.label_tree import file_sha256
 
     path = getattr(predictor, "path", None)
     spec = os.path.abspath(source.spec) if source.kind == "glob" else os.path.realpath(source.spec)
