@@ -35,8 +35,8 @@ from freespace.io.codecs import IMAGE_SUFFIXES, read_image, road_label_from_imag
 from freespace.io.files import PathLike
 from freespace.labels import RoadLabel
 
-__all__ = ["LABEL_FORMATS", "LabelFormat", "LabelledFrame", "parse_label_format", "pair_labelled_frames",
-           "frame_scores", "bootstrap_intervals", "POOLED_METRICS"]
+__all__ = ["LABEL_FORMATS", "LabelFormat", "LabelledFrame", "parse_label_format", "pair_labelled_frames", "read_label",
+           "frame_scores", "bootstrap_intervals", "PooledScores", "POOLED_METRICS"]
 
 LABEL_FORMATS = ("kitti", "binary", "class-id", "palette")
 #: the pooled metrics that get a bootstrap interval

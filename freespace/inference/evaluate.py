@@ -23,7 +23,8 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError, param
-from freespace.evaluation.labelled import LabelFormat, PooledScores, pair_labelled_frames, read_label
+from freespace.evaluation.labelled import (LabelFormat, LabelledFrame, PooledScores, pair_labelled_frames,
+                                           read_label)
 from freespace.evaluation.metrics import RoadEvaluator, confusion_counts
 from freespace.evaluation.viz import overlay_errors, write_pr_curve
 from freespace.inference.predictor import Predictor
@@ -42,7 +43,7 @@ PER_FRAME_FIELDS = ("frame", "tp", "fp", "fn", "tn", "precision", "recall", "f_s
 Frame = tuple[str, Callable[[], tuple[np.ndarray, RoadLabel]]]
 
 
-def _frames(ds, subset: str, checkpoint: Path | None, splits_dir: PathLike | None) -> list[str]:
+def _frames(ds: StereoRoadDataset, subset: str, checkpoint: Path | None, splits_dir: PathLike | None) -> list[str]:
     if subset == "all":
         return [f.name for f in ds.labelled()]
     if splits_dir is None and checkpoint is None:
@@ -161,7 +162,7 @@ def evaluate_labelled(images: PathLike, labels: PathLike, label_format: LabelFor
     predictor, record = _model(checkpoint, onnx, threads)
     frames = pair_labelled_frames(images, labels, label_format)
 
-    def loader(frame):  # -> a Frame's reader
+    def loader(frame: LabelledFrame) -> Callable[[], tuple[np.ndarray, RoadLabel]]:
         return lambda: (read_image(frame.image), read_label(frame, label_format))
 
     with claim_folder(out, "evaluate") as folder, folder.staged() as staging:  # all or nothing
