@@ -11,14 +11,23 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "adapt"]
+__all__ = ["__version__", "adapt", "train", "Predictor"]
+
+#: the short entries, each imported on first use (``import freespace`` stays free of torch): name → (module, name)
+_ENTRIES = {
+    "train": ("freespace.engine.train", "train"),          # train a network: TrainConfig's options, run folder
+    "Predictor": ("freespace.inference.predictor", "Predictor"),   # road probabilities from a checkpoint or ONNX
+    "adapt": ("freespace.engine.adapt", "adapt"),          # fit a published model to unlabelled frames
+}
 
 
 def __getattr__(name: str):
-    """``freespace.adapt`` (:func:`freespace.engine.adapt.adapt`), imported on first use: ``import freespace``
-    stays free of torch."""
-    if name == "adapt":  # by name: the one upward reach of layer 0 (docs/architecture.md), made on first use only
+    """``freespace.train`` (:func:`freespace.engine.train.train`), ``freespace.Predictor``
+    (:class:`freespace.inference.predictor.Predictor`) and ``freespace.adapt`` (:func:`freespace.engine.adapt.adapt`),
+    imported on first use: ``import freespace`` stays free of torch."""
+    if name in _ENTRIES:  # by name: the upward reach of layer 0 (docs/architecture.md), made on first use only
         import importlib
 
-        return importlib.import_module("freespace.engine.adapt").adapt
+        module, attr = _ENTRIES[name]
+        return getattr(importlib.import_module(module), attr)
     raise AttributeError(f"module 'freespace' has no attribute {name!r}")

@@ -13,6 +13,7 @@ same as an uninterrupted run's: data order, augmentation and dropout are drawn f
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io as _io
 import logging
 import os
@@ -261,6 +262,26 @@ def _confine_paths(state: dict[str, Any], folder: Path) -> None:
             state[key] = inside(state[key])
     if isinstance(state.get("best_k_models"), dict):
         state["best_k_models"] = {inside(k): v for k, v in state["best_k_models"].items() if inside(k)}
+
+
+def train(dataset: str, root: str | os.PathLike, out: str | os.PathLike, *, resume: bool = False,
+          progress: bool = True, **options: Any) -> dict[str, Any]:
+    """Train a network in one call (``freespace.train``): ``TrainConfig(dataset=…, root=…, out=…, **options)`` —
+    every option of ``freespace train`` by its parameter name, as typed values — then :func:`run_training`.
+
+    Returns the test metrics (fractions; also in ``out/metrics.json``). Raises
+    :class:`~freespace.errors.InvalidOptionError` for an unknown or bad option, before anything is written.
+
+    Example (not run here: it trains)::
+
+        metrics = freespace.train("synth", "data/syn", "runs/unet-ha", model="unet", augment=("homography",),
+                                  epochs=1, image_size=(96, 128))
+    """
+    unknown = sorted(set(options) - {f.name for f in dataclasses.fields(TrainConfig)})
+    if unknown:
+        raise InvalidOptionError(f"freespace.train takes TrainConfig's options; unknown: {', '.join(unknown)}")
+    config = TrainConfig(dataset=dataset, root=os.fspath(root), out=os.fspath(out), **options)
+    return run_training(config, resume=resume, progress=progress)
 
 
 def run_training(config: TrainConfig, resume: bool = False, progress: bool = True) -> dict[str, Any]:
