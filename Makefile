@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   := .venv
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test docs bench clean
+.PHONY: demo test docs bench clean base-check
 
 $(STAMP): pyproject.toml
 	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
@@ -18,6 +18,20 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q
 
+# the base install (no extras: NumPy, OpenCV, tqdm, PyYAML) in a fresh environment, and what it serves: synth,
+# generate, autolabel and datasets info on a small rendered dataset (issue 60: no torch, no pydantic on that path)
+base-check:
+	rm -rf .venv-base
+	$(PYTHON) -m venv .venv-base
+	.venv-base/bin/python -m pip install --quiet .
+	tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && \
+	.venv-base/bin/freespace synth --out $$tmp/syn --num 20 --width 160 --height 120 --frames-per-scenario 5 && \
+	.venv-base/bin/freespace generate --dataset synth --root $$tmp/syn --out $$tmp/gen && \
+	.venv-base/bin/freespace autolabel --dataset synth --root $$tmp/syn --out $$tmp/labels && \
+	.venv-base/bin/freespace datasets info --dataset synth --root $$tmp/syn > /dev/null && \
+	.venv-base/bin/python -c "import sys, freespace.cli; assert 'torch' not in sys.modules and 'pydantic' not in sys.modules"
+	rm -rf .venv-base
+
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/python -m mkdocs build --strict --site-dir site
 
@@ -29,4 +43,4 @@ bench: $(STAMP)
 	$(VENV)/bin/python bench/infer.py
 
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache site
+	rm -rf $(VENV) .venv-base demo_out .pytest_cache site
