@@ -22,7 +22,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import write_section  # noqa: E402
-
 from freespace.experiments.stats import paired_gain  # noqa: E402
 
 VARIANTS = ("X", "X-auto", "X-mix")

@@ -36,10 +36,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine, write_section  # noqa: E402
-
-from freespace.data import get_dataset  # noqa: E402
 import freespace.geometry.stereo as stereo  # noqa: E402
+from _common import machine, write_section  # noqa: E402
+from freespace.data import get_dataset  # noqa: E402
 from freespace.datagen.autolabel import autolabel  # noqa: E402
 from freespace.errors import RoadFitError  # noqa: E402
 from freespace.inference.predictor import Predictor  # noqa: E402

@@ -21,7 +21,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, timeit, write_section  # noqa: E402
-
 from freespace.geometry import fit_road_model, generate_view  # noqa: E402
 from freespace.io.codecs import read_disparity, read_image, write_image  # noqa: E402
 

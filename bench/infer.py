@@ -20,7 +20,6 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, section_text, timeit, write_section  # noqa: E402
-
 from freespace.models import create_model, list_models  # noqa: E402
 
 H, W = 375, 1242

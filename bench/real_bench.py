@@ -49,9 +49,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, write_section  # noqa: E402
-
-from freespace.evaluation.labelled import (LabelFormat, PooledScores, pair_labelled_frames,  # noqa: E402
-                                           parse_label_format, read_label)
+from freespace.evaluation.labelled import (  # noqa: E402
+    LabelFormat,
+    PooledScores,
+    pair_labelled_frames,
+    parse_label_format,
+    read_label,
+)
 from freespace.io.codecs import read_image  # noqa: E402
 
 

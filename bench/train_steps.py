@@ -21,7 +21,6 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, timeit, write_section  # noqa: E402
-
 from freespace.data.registry import get_dataset  # noqa: E402
 from freespace.data.synthetic import SynthConfig, write_dataset  # noqa: E402
 from freespace.data.torch_dataset import RoadSegmentationDataset  # noqa: E402

@@ -24,9 +24,24 @@ from typing import Any
 
 from freespace import __version__
 from freespace.errors import MAX_SEED, FreespaceError, InvalidOptionError, Terminated, param
-from freespace.limits import (MAX_BASELINE_M, MAX_BATCH_SIZE, MAX_CURB_HEIGHT_M, MAX_DISPARITY_PX, MAX_EPOCHS, MAX_FRAME_COUNT,
-                              MAX_INLIER_THRESHOLD_PX, MAX_LIDAR_FILL_PX, MAX_NOISE_PX, MAX_POSE, MIN_BASELINE_M,
-                              WORKERS_PER_CORE, bounded_float, bounded_int, bounded_triple, max_workers)
+from freespace.limits import (
+    MAX_BASELINE_M,
+    MAX_BATCH_SIZE,
+    MAX_CURB_HEIGHT_M,
+    MAX_DISPARITY_PX,
+    MAX_EPOCHS,
+    MAX_FRAME_COUNT,
+    MAX_INLIER_THRESHOLD_PX,
+    MAX_LIDAR_FILL_PX,
+    MAX_NOISE_PX,
+    MAX_POSE,
+    MIN_BASELINE_M,
+    WORKERS_PER_CORE,
+    bounded_float,
+    bounded_int,
+    bounded_triple,
+    max_workers,
+)
 
 # --- options shared by several commands ----------------------------------------------------------------
 
@@ -576,7 +591,6 @@ def _split_options(q: argparse.ArgumentParser, what: str) -> None:
 def cmd_datasets_info(args: argparse.Namespace) -> int:
     """``freespace datasets info``: counts, what is there, and every problem by frame."""
     from freespace.data.info import dataset_info, format_info
-
     from freespace.data.splits import parse_fractions
 
     flags = _flags(build_parser({"datasets"}), ["datasets", "info"])

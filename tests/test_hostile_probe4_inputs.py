@@ -27,6 +27,7 @@ from freespace.io.codecs import read_depth, read_disparity, read_image, read_raw
 from freespace.io.kitti import read_kitti_calib, read_kitti_raw_calib, read_velodyne
 from freespace.io.video import open_frames
 from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS, MAX_SCAN_POINTS
+
 from helpers import refused
 from test_kitti_raw import CAM_TO_CAM, DATE, make_drive
 

@@ -352,8 +352,8 @@ def test_labels_with_nothing_labelled_are_refused(tiny: Path, labels: Path, tmp_
     some = _copy_tree(labels, tmp_path / "some")
     (some / "settings.json").unlink()
     train = set()
-    from freespace.data.splits import make_splits
     from freespace.data.registry import get_dataset
+    from freespace.data.splits import make_splits
     frames = get_dataset("synth", tiny).labelled().frames
     train = set(make_splits([(f.name, f.scenario) for f in frames], seed=0)["train"])
     for path in some.glob("*.png"):

@@ -15,15 +15,15 @@ import cv2
 import numpy as np
 import pytest
 
-from helpers import shared_path
-
 from freespace.cli import main
 from freespace.data import get_dataset
 from freespace.data.kitti_raw import KittiRaw
 from freespace.data.splits import make_block_splits, read_splits
-from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
 from freespace.engine.config import check_label_tree, label_files
+from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
 from freespace.io.kitti import read_kitti_raw_calib
+
+from helpers import shared_path
 
 DATE = "2011_09_26"
 SIZE = (1242, 375)  # S_rect_02 of 2011_09_26: W, H

@@ -24,6 +24,7 @@ from freespace.geometry.lidar import (
     velodyne_to_disparity,
 )
 from freespace.io.kitti import read_kitti_calib, read_velodyne
+
 from helpers import disparity_from_depth_file, write_velodyne
 
 # a real KITTI R0_rect (rotation of about 0.7°) and camera-2 offset (P2 = K [I | t2])

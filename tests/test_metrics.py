@@ -12,8 +12,15 @@ import pytest
 
 from freespace.cli import main
 from freespace.errors import ShapeMismatchError
-from freespace.evaluation.metrics import (Counts, KittiCounts, RoadEvaluator, confusion_counts, kitti_counts, kitti_scores,
-                               to_confidence)
+from freespace.evaluation.metrics import (
+    Counts,
+    KittiCounts,
+    RoadEvaluator,
+    confusion_counts,
+    kitti_counts,
+    kitti_scores,
+    to_confidence,
+)
 from freespace.io.codecs import road_label_to_kitti, write_image
 from freespace.labels import RoadLabel
 

@@ -337,8 +337,8 @@ def test_preset_reaches_the_cells(data: Path, tmp_path: Path, monkeypatch: pytes
 
 def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
     from freespace.experiments.protocol import Primary
-    from freespace.experiments.variants import ALL_NETWORKS, GAINS
     from freespace.experiments.tables import _gains, _primary_lines
+    from freespace.experiments.variants import ALL_NETWORKS, GAINS
 
     rng = np.random.default_rng(0)
     entries = []

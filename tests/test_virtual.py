@@ -451,9 +451,9 @@ def test_resized_intrinsics_keep_the_geometry() -> None:
 # --- reproduce: the variants table ------------------------------------------------------------------------
 
 def test_reproduce_variants_table() -> None:
+    from freespace.experiments.tables import _table
     from freespace.experiments.variants import parse_variants
     from freespace.experiments.variants import run_name as _name
-    from freespace.experiments.tables import _table
 
     assert parse_variants("X,HA-X") == ("X", "HA-X")
     assert parse_variants("HV-X,HAV-X") == ("X", "HV-X", "HAV-X")  # X always, first

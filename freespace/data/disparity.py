@@ -30,8 +30,8 @@ import numpy as np
 
 from freespace.errors import DatasetError, InvalidOptionError, param
 from freespace.geometry import StereoCalibration, compute_disparity
-from freespace.geometry.stereo import SGBM_VERSION
 from freespace.geometry.depth import depth_to_disparity
+from freespace.geometry.stereo import SGBM_VERSION
 from freespace.io.codecs import read_disparity
 from freespace.io.files import PathLike, atomic_write_bytes, check_writable
 

@@ -46,8 +46,15 @@ import numpy as np
 
 from freespace.data.base import FrameRef, Problem, Sample, StereoRoadDataset
 from freespace.data.registry import register_dataset
-from freespace.errors import CorruptFileError, DatasetError, FreespaceError, InputFileError, InvalidOptionError, \
-    ShapeMismatchError, param
+from freespace.errors import (
+    CorruptFileError,
+    DatasetError,
+    FreespaceError,
+    InputFileError,
+    InvalidOptionError,
+    ShapeMismatchError,
+    param,
+)
 from freespace.geometry import StereoCalibration
 from freespace.geometry.depth import rig_from_kitti
 from freespace.geometry.lidar import velodyne_to_disparity

@@ -21,8 +21,15 @@ from freespace.data.base import StereoRoadDataset
 from freespace.datagen.inputs import check_sgbm_range, dataset_settings, may_use_sgbm
 from freespace.datagen.labeller import AutolabelOptions, AutolabelResult, autolabel
 from freespace.datagen.runner import FrameCommand, check_run, run_dataset
-from freespace.errors import (CorruptFileError, DatasetError, FreespaceError, InvalidOptionError, RoadFitError,
-                              ShapeMismatchError, param)
+from freespace.errors import (
+    CorruptFileError,
+    DatasetError,
+    FreespaceError,
+    InvalidOptionError,
+    RoadFitError,
+    ShapeMismatchError,
+    param,
+)
 from freespace.geometry import compute_disparity
 from freespace.io.codecs import describe_image, encode_image, read_disparity, read_image
 from freespace.io.files import PathLike, check_outputs, check_writable_files, encode_json, write_files_together

@@ -21,12 +21,31 @@ from freespace.data.base import StereoRoadDataset
 from freespace.datagen.inputs import check_sgbm_range, dataset_settings
 from freespace.datagen.runner import FrameCommand, check_run, run_dataset
 from freespace.errors import DatasetError, FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError, param
-from freespace.geometry import (SGBM_MAX_DISPARITY, RoadModel, RoadPlane, StereoCalibration, compute_disparity,
-                                fit_road_model, generate_view)
-from freespace.io.codecs import IMAGE_SUFFIXES, describe_image, encode_image, read_disparity, read_image, \
-    read_road_label
-from freespace.io.files import (PathLike, atomic_write_bytes, check_outputs, check_writable_files, encode_json,
-                                write_files_together)
+from freespace.geometry import (
+    SGBM_MAX_DISPARITY,
+    RoadModel,
+    RoadPlane,
+    StereoCalibration,
+    compute_disparity,
+    fit_road_model,
+    generate_view,
+)
+from freespace.io.codecs import (
+    IMAGE_SUFFIXES,
+    describe_image,
+    encode_image,
+    read_disparity,
+    read_image,
+    read_road_label,
+)
+from freespace.io.files import (
+    PathLike,
+    atomic_write_bytes,
+    check_outputs,
+    check_writable_files,
+    encode_json,
+    write_files_together,
+)
 from freespace.labels import RoadLabel
 
 log = logging.getLogger(__name__)

@@ -48,8 +48,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from freespace.errors import FreespaceError, InputFileError, InvalidOptionError, check_seed, param
 from freespace.engine.adapt_io import CHECKPOINT, Frames, frame_paths, read_frames, write_model_folder
+from freespace.errors import FreespaceError, InputFileError, InvalidOptionError, check_seed, param
 from freespace.io.files import PathLike, check_outputs, check_writable, missing_input
 from freespace.limits import MAX_BATCH_SIZE, MAX_EPOCHS, bounded_float, bounded_int
 

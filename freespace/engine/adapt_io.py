@@ -319,11 +319,11 @@ def write_model_folder(stage: Path, run: dict[str, Any], hp: dict[str, Any], fol
             hyper-parameters. folder: the published model folder. config: the run's settings
             (:class:`freespace.engine.adapt.AdaptSettings` as a dict). seconds: the run's wall time so far.
     """
+    import torch
+
     from freespace.engine.record import package_commit
     from freespace.inference.predict import export_model
     from freespace.io.files import atomic_write_text, write_csv, write_json
-
-    import torch
 
     size = list(frames.images.shape[1:3])
     save_checkpoint(run["net"], {"model": hp["model"], "model_options": hp.get("model_options", {}),

@@ -31,13 +31,29 @@ from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin, 
 from pydantic import BeforeValidator, ConfigDict, Field, PlainSerializer, TypeAdapter, ValidationError
 from pydantic.fields import FieldInfo
 
-from freespace.data.label_tree import (check_label_tree, file_sha256, file_signature, label_files,  # noqa: F401
-                                       label_tree_pixels, label_tree_sha256, resolved_path)
+from freespace.data.label_tree import (  # noqa: F401
+    check_label_tree,
+    file_sha256,
+    file_signature,
+    label_files,
+    label_tree_pixels,
+    label_tree_sha256,
+    resolved_path,
+)
 from freespace.errors import MAX_SEED, CorruptFileError, InputFileError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE, load_yaml
 from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable, missing_input
-from freespace.limits import (MAX_BATCH_SIZE, MAX_DEVICES, MAX_EPOCHS, MAX_FRAME_COUNT, MAX_NODES, MAX_WEIGHT_DECAY,
-                              MAX_WORKERS, Bounded, check_workers)
+from freespace.limits import (
+    MAX_BATCH_SIZE,
+    MAX_DEVICES,
+    MAX_EPOCHS,
+    MAX_FRAME_COUNT,
+    MAX_NODES,
+    MAX_WEIGHT_DECAY,
+    MAX_WORKERS,
+    Bounded,
+    check_workers,
+)
 
 __all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "weights_path", "resolved_path", "parse_augment", "augment_text", "ranges_text", "parse_size",
            "AUGMENTS", "AUGMENT_NAMES", "FIRST_FRAME_SIZE", "PRESETS", "STRATEGIES"]

@@ -9,10 +9,21 @@ variants and gains, :mod:`~freespace.experiments.protocol` reads a study's :clas
 
 from freespace.experiments.cells import evaluate_test_set, run_cell
 from freespace.experiments.protocol import DataSource, Primary, Protocol
-from freespace.experiments.variants import (DEFAULT_VARIANTS, GAINS, MAX_SEEDS, METRICS, PAPER_NETWORKS, VARIANTS,
-                                            TestRoots, Variant, parse_cell, parse_models, parse_test_roots,
-                                            parse_variants)
 from freespace.experiments.tables import OUT_ENTRIES, write_tables
+from freespace.experiments.variants import (
+    DEFAULT_VARIANTS,
+    GAINS,
+    MAX_SEEDS,
+    METRICS,
+    PAPER_NETWORKS,
+    VARIANTS,
+    TestRoots,
+    Variant,
+    parse_cell,
+    parse_models,
+    parse_test_roots,
+    parse_variants,
+)
 
 __all__ = ["run_cell", "write_tables", "evaluate_test_set", "parse_models", "parse_variants",
            "parse_cell", "parse_test_roots", "Variant", "VARIANTS", "DEFAULT_VARIANTS", "GAINS", "METRICS",

@@ -22,8 +22,17 @@ from typing import Any
 from freespace.engine.config import TrainConfig
 from freespace.errors import CorruptFileError, DatasetError, InvalidOptionError, param
 from freespace.experiments.protocol import Protocol
-from freespace.experiments.variants import (DEFAULT_TEST_SET, METRICS, MIX_HUMAN_SHARE, VARIANTS, TestRoots, Variant,
-                                            parse_test_roots, run_name, run_of)
+from freespace.experiments.variants import (
+    DEFAULT_TEST_SET,
+    METRICS,
+    MIX_HUMAN_SHARE,
+    VARIANTS,
+    TestRoots,
+    Variant,
+    parse_test_roots,
+    run_name,
+    run_of,
+)
 from freespace.io.files import PathLike, write_json
 from freespace.io.outdir import claim_folder
 

@@ -50,8 +50,17 @@ from pathlib import Path
 from typing import Any
 
 from freespace.errors import InvalidOptionError, param
-from freespace.experiments.variants import (DEFAULT_VARIANTS, GAIN_METRICS, GAINS, TEST_SET_NAME, VARIANTS, Variant,
-                                            parse_test_roots, parse_variants, variant_tag)
+from freespace.experiments.variants import (
+    DEFAULT_VARIANTS,
+    GAIN_METRICS,
+    GAINS,
+    TEST_SET_NAME,
+    VARIANTS,
+    Variant,
+    parse_test_roots,
+    parse_variants,
+    variant_tag,
+)
 from freespace.io.files import PathLike, missing_input
 
 __all__ = ["DataSource", "DATA_KEYS", "Primary", "Protocol"]

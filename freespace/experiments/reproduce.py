@@ -45,12 +45,25 @@ from typing import Any
 
 from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, augment_text
 from freespace.errors import InvalidOptionError, param
-from freespace.experiments.cells import (cell_config, check_autolabels_used, check_cell, check_inputs,
-                                         check_test_roots, run_cell)
+from freespace.experiments.cells import (
+    cell_config,
+    check_autolabels_used,
+    check_cell,
+    check_inputs,
+    check_test_roots,
+    run_cell,
+)
 from freespace.experiments.protocol import Protocol
-from freespace.experiments.variants import (MAX_SEEDS, TestRoots, parse_cell, parse_models, parse_test_roots,
-                                            parse_variants, run_of)
 from freespace.experiments.tables import OUT_ENTRIES, write_tables
+from freespace.experiments.variants import (
+    MAX_SEEDS,
+    TestRoots,
+    parse_cell,
+    parse_models,
+    parse_test_roots,
+    parse_variants,
+    run_of,
+)
 from freespace.io.files import PathLike, check_writable
 from freespace.io.outdir import claim_folder
 

@@ -22,9 +22,18 @@ from freespace.errors import FreespaceError, InvalidOptionError
 from freespace.experiments.cells import read_metrics
 from freespace.experiments.figures import frames_figure, gain_figure
 from freespace.experiments.protocol import Primary, Protocol
-from freespace.experiments.variants import (ALL_NETWORKS, DEFAULT_TEST_SET, GAIN_METRICS, METRIC_NAMES, METRICS,
-                                            RESERVED_TEST_SETS, VARIANTS, Variant, run_of)
 from freespace.experiments.stats import paired_gain
+from freespace.experiments.variants import (
+    ALL_NETWORKS,
+    DEFAULT_TEST_SET,
+    GAIN_METRICS,
+    METRIC_NAMES,
+    METRICS,
+    RESERVED_TEST_SETS,
+    VARIANTS,
+    Variant,
+    run_of,
+)
 from freespace.io.files import PathLike, atomic_write_text, write_csv, write_json
 from freespace.io.outdir import claim_folder
 

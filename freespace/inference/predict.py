@@ -27,8 +27,7 @@ from freespace.errors import CorruptFileError, InputFileError, InvalidOptionErro
 from freespace.evaluation.metrics import to_confidence
 from freespace.inference.predictor import Predictor, load_checkpoint
 from freespace.io.codecs import write_image
-from freespace.io.files import (PathLike, atomic_write_bytes, check_outputs, check_suffix, check_writable,
-                                write_json)
+from freespace.io.files import PathLike, atomic_write_bytes, check_outputs, check_suffix, check_writable, write_json
 from freespace.io.kitti import read_kitti_calib
 from freespace.io.outdir import OwnedFolder, claim_folder
 from freespace.io.video import FrameSource, VideoFrame, VideoWriter, open_frames
@@ -599,9 +598,8 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
 
 def _submit_into(predictor: Predictor, ds: Any, calibs: list[dict[str, np.ndarray]], out: Path,
                  progress: bool) -> list[str]:
-    from freespace.runtime.log import progress_bar
-
     from freespace.evaluation.bev import to_bev
+    from freespace.runtime.log import progress_bar
 
     names = []
     for i, frame in enumerate(progress_bar(ds.frames, desc="kitti-submit", unit="frame", enabled=progress)):

@@ -27,8 +27,8 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, InvalidOptionError, ShapeMismatchError
 from freespace.io.files import PathLike, atomic_write_bytes, read_bytes
-from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS
 from freespace.labels import RoadLabel
+from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS
 
 __all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image",
            "image_header_size", "check_image_pixels", "describe_image", "read_raw",

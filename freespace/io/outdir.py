@@ -59,8 +59,16 @@ from pathlib import Path
 from typing import Any
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError, param
-from freespace.io.files import (META, check_output_kind, inside_meta, keep_mode, on_pseudo_fs, replaceable,
-                                special_kind, write_files_together)
+from freespace.io.files import (
+    META,
+    check_output_kind,
+    inside_meta,
+    keep_mode,
+    on_pseudo_fs,
+    replaceable,
+    special_kind,
+    write_files_together,
+)
 
 PathLike = str | os.PathLike[str]
 

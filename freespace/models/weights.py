@@ -30,8 +30,14 @@ from torch import nn
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, PretrainedWeightsError, param
 from freespace.io.files import missing_input
-from freespace.models.lite import (LITE_VARIANTS, convert_reference_state, is_lite, is_reference_layout,
-                                   register_lite_encoders, shipped_weights)
+from freespace.models.lite import (
+    LITE_VARIANTS,
+    convert_reference_state,
+    is_lite,
+    is_reference_layout,
+    register_lite_encoders,
+    shipped_weights,
+)
 
 __all__ = ["smp_weights", "read_state_dict", "load_encoder_weights", "apply_state", "check_values", "hub_offline",
            "MAX_WEIGHT_MAGNITUDE"]

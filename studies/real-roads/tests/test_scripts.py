@@ -83,6 +83,7 @@ def test_rendered_scores_every_frame_of_a_tree_and_refuses_an_empty_one(tmp_path
     import numpy as np
 
     from freespace.io.codecs import write_image
+
     from helpers import road_frame, tiny_road_checkpoint
 
     evaluate = _load("evaluate")
