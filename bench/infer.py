@@ -56,22 +56,26 @@ def gpu_rows(x: torch.Tensor, preset: str, repeat: int) -> list[str]:
     x = x.cuda()
     rows = []
     for name in list_models():
-        model = create_model(name, preset=preset).eval().cuda()
-
-        def call(half: bool) -> torch.Tensor:
-            with torch.inference_mode(), torch.autocast("cuda", dtype=torch.float16, enabled=half):
-                y = model(x)
-            torch.cuda.synchronize()
-            return y
-
-        t32 = timeit(lambda: call(False), repeat, warmup=5)
-        t16 = timeit(lambda: call(True), repeat, warmup=5)
-        diff = float((call(True).float() - call(False)).abs().max())
-        rows.append(f"| {name} | {t32 * 1000:.1f} | {t16 * 1000:.1f} | {diff:.1e} |")
+        rows.append(_gpu_row(name, x, preset, repeat))
         print(rows[-1], flush=True)
-        del model
-        torch.cuda.empty_cache()
+        torch.cuda.empty_cache()  # the network is gone with _gpu_row's frame
     return rows
+
+
+def _gpu_row(name: str, x: torch.Tensor, preset: str, repeat: int) -> str:
+    """One network's row of :func:`gpu_rows` (x already on the GPU)."""
+    model = create_model(name, preset=preset).eval().cuda()
+
+    def call(half: bool) -> torch.Tensor:
+        with torch.inference_mode(), torch.autocast("cuda", dtype=torch.float16, enabled=half):
+            y = model(x)
+        torch.cuda.synchronize()
+        return y
+
+    t32 = timeit(lambda: call(False), repeat, warmup=5)
+    t16 = timeit(lambda: call(True), repeat, warmup=5)
+    diff = float((call(True).float() - call(False)).abs().max())
+    return f"| {name} | {t32 * 1000:.1f} | {t16 * 1000:.1f} | {diff:.1e} |"
 
 
 def main() -> None:
