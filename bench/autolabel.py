@@ -148,8 +148,8 @@ def table(rows: list[dict]) -> str:
     lines = ["| set | disparity | frames | no label | precision % | recall % | F % | coverage % | s/frame |",
              "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
-        lines.append(f"| {r['set']} | {r['disparity']} | {r['frames']} | {r['failed']} | {pct(r['precision'])} | {pct(r['recall'])} | "
-                     f"{pct(r['F'])} | {pct(r['coverage'])} | {r['seconds_per_frame']:.2f} |")
+        lines.append(f"| {r['set']} | {r['disparity']} | {r['frames']} | {r['failed']} | {pct(r['precision'])} | "
+                     f"{pct(r['recall'])} | {pct(r['F'])} | {pct(r['coverage'])} | {r['seconds_per_frame']:.2f} |")
     return "\n".join(lines)
 
 

@@ -92,7 +92,8 @@ def main() -> None:
     command = " ".join(["python bench/infer.py", *sys.argv[1:]])
     if args.device == "cuda":
         rows = gpu_rows(x, args.preset, args.repeat)
-        body = f"""Machine: {torch.cuda.get_device_name()} (CUDA {torch.version.cuda}), host {machine()}, PyTorch {torch.__version__}.
+        body = f"""Machine: {torch.cuda.get_device_name()} (CUDA {torch.version.cuda}), host {machine()}, \
+PyTorch {torch.__version__}.
 Command: `{command}` (batch 1, 3×{h}×{w} in, logits out, median of {args.repeat} after five warm-ups, each call
 synchronised). {PAPER_SECONDS}
 
@@ -104,7 +105,8 @@ synchronised). {PAPER_SECONDS}
         import onnxruntime as ort
 
         rows = cpu_rows(x, args.preset, args.repeat)
-        body = f"""Machine: {machine()}, PyTorch {torch.__version__} ({torch.get_num_threads()} threads), ONNX Runtime {ort.__version__}.
+        body = f"""Machine: {machine()}, PyTorch {torch.__version__} ({torch.get_num_threads()} threads), \
+ONNX Runtime {ort.__version__}.
 Command: `{command}` (batch 1, 3×{h}×{w} in, logits out, median of {args.repeat} after one warm-up).
 GPU: none (`--device cuda` on a machine with one). {PAPER_SECONDS}
 

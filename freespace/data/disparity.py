@@ -69,8 +69,8 @@ def check_disparity_source(mode: str) -> str:
 
 class DisparityCache:
     """SGBM disparities on disk, keyed by the frame's image files (path, size, mtime), the matcher
-    settings and its version (:data:`~freespace.geometry.stereo.SGBM_VERSION`), so a second run costs one ``.npy`` read. Default folder: ``$XDG_CACHE_HOME/freespace/sgbm``
-    (``~/.cache/freespace/sgbm``)."""
+    settings and its version (:data:`~freespace.geometry.stereo.SGBM_VERSION`), so a second run costs one ``.npy``
+    read. Default folder: ``$XDG_CACHE_HOME/freespace/sgbm`` (``~/.cache/freespace/sgbm``)."""
 
     def __init__(self, folder: PathLike | None = None, **settings: Any) -> None:
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "freespace" / "sgbm"

@@ -140,8 +140,8 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
                                      f"and the right image of one rectified stereo pair")
         right = read_image(target, what="target image")
         if right.shape != left.shape:
-            raise ShapeMismatchError(f"reference is {describe_image(left.shape)} but target is {describe_image(right.shape)}; give the "
-                                     f"two images of one rectified stereo pair")
+            raise ShapeMismatchError(f"reference is {describe_image(left.shape)} but target is "
+                                     f"{describe_image(right.shape)}; give the two images of one rectified stereo pair")
         disp = compute_disparity(left, right, max_disparity=options.max_disparity)
         source = "sgbm"
     else:

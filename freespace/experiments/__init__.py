@@ -2,8 +2,9 @@
 
 :func:`freespace.experiments.reproduce.reproduce` runs a campaign (its module keeps the name: the function is
 not re-exported here, where it would hide the module); :mod:`~freespace.experiments.variants` names the
-variants and gains, :mod:`~freespace.experiments.protocol` reads a study's :class:`Protocol`; :mod:`~freespace.experiments.cells` runs one cell;
-:mod:`~freespace.experiments.tables` collects the run folders into the tables
+variants and gains, :mod:`~freespace.experiments.protocol` reads a study's :class:`Protocol`;
+:mod:`~freespace.experiments.cells` runs one cell; :mod:`~freespace.experiments.tables` collects the run folders into
+the tables
 (:func:`write_tables`); :mod:`~freespace.experiments.figures` draws them.
 """
 

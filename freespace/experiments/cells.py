@@ -206,8 +206,8 @@ def _base_variant(spec: Variant) -> Variant | None:
     of 1 (X for X-long), or None (``spec`` has a budget of 1, or no such variant)."""
     if spec.budget == 1:
         return None
-    return next((v for v in VARIANTS.values() if v.budget == 1 and (v.augment, v.labels) == (spec.augment, spec.labels)),
-                None)
+    return next((v for v in VARIANTS.values()
+                 if v.budget == 1 and (v.augment, v.labels) == (spec.augment, spec.labels)), None)
 
 
 def _continue_base_run(config: TrainConfig, variants: dict[str, Variant] | None = None) -> None:

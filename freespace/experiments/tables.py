@@ -312,8 +312,9 @@ def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[s
     for g in gains:
         ci, half = ("—", "—") if math.isnan(g["ci_low"]) else \
             (f"[{g['ci_low']:+.2f}, {g['ci_high']:+.2f}]", f"{(g['ci_high'] - g['ci_low']) / 2:.2f}")
-        md.append(f"| {g['network']} | {g['versus'].replace(' - ', ' − ')} | {METRIC_NAMES[g['metric']]} | {g['test_set']} "
-                  f"| {g['n']} | {g['mean']:+.2f} | {ci} | {half} | {'yes' if g['excludes_zero'] else 'no'} |")
+        md.append(f"| {g['network']} | {g['versus'].replace(' - ', ' − ')} | {METRIC_NAMES[g['metric']]} "
+                  f"| {g['test_set']} | {g['n']} | {g['mean']:+.2f} | {ci} | {half} "
+                  f"| {'yes' if g['excludes_zero'] else 'no'} |")
     md += _convergence_lines(entries, protocol.vocabulary) + _primary_lines(gains, protocol.primary)
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
 
@@ -323,7 +324,8 @@ def _convergence_lines(entries: list[dict[str, Any]], variants: dict[str, Varian
     runs early stopping ended against how many ran to the epoch cap."""
     lines = ["", "Convergence: best epoch (the checkpoint tested) and epochs run, mean (min–max) over the finished "
              "runs; stopped = early stopping fired (patience), cap = ran the most epochs allowed.", "",
-             "| Network | Variant | n | best epoch | epochs run | stopped | cap |", "|---|---|---:|---:|---:|---:|---:|"]
+             "| Network | Variant | n | best epoch | epochs run | stopped | cap |",
+             "|---|---|---:|---:|---:|---:|---:|"]
     for model in _models(entries):
         for name in variants or VARIANTS:
             done = [e for e in entries if e["model"] == model and e["variant"] == name and "metrics" in e]

@@ -1,4 +1,5 @@
-"""`freespace evaluate`: a model (checkpoint or ONNX) on labelled frames — metrics, per-frame scores, overlays, PR curve.
+"""`freespace evaluate`: a model (checkpoint or ONNX) on labelled frames — metrics, per-frame scores, overlays,
+PR curve.
 
 Two sources of labelled frames: a dataset's split (``dataset`` and ``root``: the run's lists or all labelled frames)
 or a *labelled folder* (``images`` and ``labels`` in one of the formats of :mod:`freespace.evaluation.labelled`:

@@ -569,8 +569,8 @@ def _check_float16(model: bytes, inputs: list[np.ndarray], references: list[np.n
         diff = d if not np.isfinite(d) else max(diff, d)
         same, total = same + int(((a >= 0.5) == (b >= 0.5)).sum()), total + a.size
     if not diff <= FP16_MAX_PROB_DIFF:  # NaN too: a float16 overflow
-        raise InvalidOptionError(f"{checkpoint}: in float16 the road probabilities differ from the checkpoint's by up to "
-                          f"{diff:.3g} (allowed {FP16_MAX_PROB_DIFF}); export it without {param('fp16')}")
+        raise InvalidOptionError(f"{checkpoint}: in float16 the road probabilities differ from the checkpoint's by up "
+                                 f"to {diff:.3g} (allowed {FP16_MAX_PROB_DIFF}); export it without {param('fp16')}")
     return {"max_prob_diff": diff, "mask_agreement": same / total, "tolerance": FP16_MAX_PROB_DIFF}
 
 

@@ -232,6 +232,6 @@ def check_values(state: dict[str, torch.Tensor], own: dict[str, torch.Tensor], s
                                          f"come from a run that diverged")
         largest = float(values.abs().max())
         if largest > MAX_WEIGHT_MAGNITUDE:
-            raise PretrainedWeightsError(f"{source}: tensor {name} holds a value of magnitude {largest:.3g}, beyond the "
-                                         f"{MAX_WEIGHT_MAGNITUDE:g} of any trained network's weights; the file is "
+            raise PretrainedWeightsError(f"{source}: tensor {name} holds a value of magnitude {largest:.3g}, beyond "
+                                         f"the {MAX_WEIGHT_MAGNITUDE:g} of any trained network's weights; the file is "
                                          f"damaged or scaled")

@@ -265,7 +265,8 @@ def sample_scenario(config: SynthConfig, seed: int, index: int) -> Scenario:
     heights = rng.uniform(5, 22, nseg)
     heights[rng.random(nseg) < 0.25] = rng.uniform(0.8, 2.2)  # hedges and walls between buildings
     facade_colours = np.clip(rng.uniform(0.25, 0.85, (nseg, 3)) * rng.uniform(0.85, 1.0, (nseg, 1)), 0, 1)
-    sun_elevation = math.radians({"sunset": rng.uniform(4, 12), "dusk": rng.uniform(1, 5)}.get(weather, rng.uniform(25, 65)))
+    sun_elevation = math.radians({"sunset": rng.uniform(4, 12), "dusk": rng.uniform(1, 5)}.get(weather,
+                                                                                                rng.uniform(25, 65)))
     planar = config.planar
     sc = Scenario(
         index=index, category=category, weather=weather,
