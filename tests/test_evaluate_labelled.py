@@ -1,4 +1,5 @@
-"""The real test bench's scoring: label formats, pairing, bootstrap intervals, `freespace evaluate` on a labelled folder."""
+"""The real test bench's scoring: label formats, pairing, bootstrap intervals, `freespace evaluate` on a labelled
+folder."""
 
 from __future__ import annotations
 

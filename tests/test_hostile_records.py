@@ -125,7 +125,8 @@ def test_config_yaml_keeps_every_path_resolved(tiny: Path, labels: Path, tmp_pat
         assert TrainConfig(dataset="synth", root="r", out="o", model="unet",
                            encoder_weights=name).to_dict()["encoder_weights"] == name
     assert TrainConfig(dataset="synth", root="r", out="o", model="unet",
-                       encoder_weights="sub/x.pth").to_dict()["encoder_weights"] == str(tmp_path.resolve() / "sub/x.pth")
+                       encoder_weights="sub/x.pth").to_dict()["encoder_weights"] \
+        == str(tmp_path.resolve() / "sub/x.pth")
     # a YAML file's ~/… is the home folder, as a shell's: the file is found, not looked for under "~"
     monkeypatch.setenv("HOME", str(tmp_path))
     (tmp_path / "home.yaml").write_text("labels: ~/link\nencoder_weights: ~/w.pth\n")

@@ -56,7 +56,8 @@ def scene():
         "R0_rect": R0,
     }
     # camera-2 coordinates X2 = R0 · X0 + t2 must equal the rendered left camera's: Tr' = R0ᵀ·([I|−t2]·Tr)
-    tr = _h(np.linalg.inv(_h(R0))[:3]) @ _h(np.hstack([np.eye(3), -T2[:, None]])) @ _h(sample.kitti_calib["Tr_velo_to_cam"])
+    tr = (_h(np.linalg.inv(_h(R0))[:3]) @ _h(np.hstack([np.eye(3), -T2[:, None]]))
+          @ _h(sample.kitti_calib["Tr_velo_to_cam"]))
     calib["Tr_velo_to_cam"] = tr[:3]
     return sample, calib
 
