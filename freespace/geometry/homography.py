@@ -47,9 +47,10 @@ def homography_from_pose(K_r: np.ndarray, K_t: np.ndarray, R_tr: np.ndarray, t_t
         ``H_tr`` (3×3 float64) mapping homogeneous reference pixels to target pixels of road points.
 
     Example:
+        A level camera 1.5 m up, B = 0.5 m: 150 rows below the horizon, d = 50.
+
         >>> K = np.array([[700.0, 0, 600], [0, 700, 180], [0, 0, 1]])
         >>> H = homography_from_pose(K, K, np.eye(3), [-0.5, 0, 0], RoadPlane((0, 1, 0), 1.5))
-        >>> # level camera 1.5 m up, B = 0.5 m: 150 rows below the horizon, d = 50
         >>> (H @ [600, 330, 1]).round(6).tolist()
         [550.0, 330.0, 1.0]
     """
