@@ -1,10 +1,11 @@
 # make demo: set up .venv if missing, then run the built-in demo.  make test: set up, then run the tests.
+# make lint: set up, then check the code with ruff (its settings: pyproject.toml's [tool.ruff]).
 # make docs: set up, then build the documentation site into site/ (strict: a broken link or reference fails).
 PYTHON ?= python3
 VENV   := .venv
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test docs bench clean base-check
+.PHONY: demo test lint docs bench clean base-check
 
 $(STAMP): pyproject.toml
 	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
@@ -17,6 +18,9 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check freespace tests bench studies docs
 
 # the base install (no extras: NumPy, OpenCV, tqdm, PyYAML) in a fresh environment, and what it serves: synth,
 # generate, autolabel and datasets info on a small rendered dataset (issue 60: no torch, no pydantic on that path)

@@ -33,17 +33,18 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, write_section  # noqa: E402
-from real_frames import KITTI_ROAD_POLYGONS as ROAD_POLYGONS, ROAD_POLYGONS as ROAD_POLYGONS_BY_NAME, polygon_mask  # noqa: E402
-
+from freespace.data.disparity import fuse_disparities  # noqa: E402
 from freespace.data.synthetic import SynthConfig, render_sample  # noqa: E402
 from freespace.datagen.autolabel import autolabel  # noqa: E402
-from freespace.data.disparity import fuse_disparities  # noqa: E402
 from freespace.errors import DatasetError, RoadFitError  # noqa: E402
 from freespace.geometry import compute_disparity  # noqa: E402
 from freespace.geometry.depth import depth_to_disparity, rig_from_kitti  # noqa: E402
 from freespace.io.codecs import read_depth, read_disparity, read_image, read_road_label  # noqa: E402
 from freespace.io.kitti import read_kitti_calib  # noqa: E402
 from freespace.labels import RoadLabel  # noqa: E402
+from real_frames import KITTI_ROAD_POLYGONS as ROAD_POLYGONS  # noqa: E402
+from real_frames import ROAD_POLYGONS as ROAD_POLYGONS_BY_NAME
+from real_frames import polygon_mask
 
 SETS = {"test": (SynthConfig(width=320, height=240, frames_per_scenario=5), 0),
         "shifted": (SynthConfig(width=320, height=240, frames_per_scenario=5, max_roll_deg=6.0,
@@ -147,8 +148,8 @@ def table(rows: list[dict]) -> str:
     lines = ["| set | disparity | frames | no label | precision % | recall % | F % | coverage % | s/frame |",
              "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
-        lines.append(f"| {r['set']} | {r['disparity']} | {r['frames']} | {r['failed']} | {pct(r['precision'])} | {pct(r['recall'])} | "
-                     f"{pct(r['F'])} | {pct(r['coverage'])} | {r['seconds_per_frame']:.2f} |")
+        lines.append(f"| {r['set']} | {r['disparity']} | {r['frames']} | {r['failed']} | {pct(r['precision'])} | "
+                     f"{pct(r['recall'])} | {pct(r['F'])} | {pct(r['coverage'])} | {r['seconds_per_frame']:.2f} |")
     return "\n".join(lines)
 
 

@@ -22,7 +22,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import write_section  # noqa: E402
-
 from freespace.experiments.stats import paired_gain  # noqa: E402
 
 VARIANTS = ("X", "X-auto", "X-mix")
@@ -53,7 +52,8 @@ def tables(res: Path) -> tuple[str, str, str, list[str]]:
 
     gains = [g for g in read_csv(res / "gains.csv")
              if g["network"] in nets and g["versus"] in GAINS and g["metric"] == "f_score"]
-    g_rows = ["| network | gain | test set | n | mean | 95 % t-interval | excludes 0 |", "|---|---|---|---:|---:|---:|:---:|"]
+    g_rows = ["| network | gain | test set | n | mean | 95 % t-interval | excludes 0 |",
+              "|---|---|---|---:|---:|---:|:---:|"]
     for net in nets:
         for versus in GAINS:
             for test_set in TEST_SETS:
@@ -61,7 +61,8 @@ def tables(res: Path) -> tuple[str, str, str, list[str]]:
                     if (g["network"], g["versus"], g["test_set"]) == (net, versus, test_set):
                         ci = (f"[{float(g['ci_low']):+.2f}, {float(g['ci_high']):+.2f}]" if g["ci_low"] else "—")
                         g_rows.append(f"| {net} | {versus.replace(' - ', ' − ')} | {test_set} | {g['n']} | "
-                                      f"{float(g['mean']):+.2f} | {ci} | {'yes' if g['excludes_zero'] == 'true' else 'no'} |")
+                                      f"{float(g['mean']):+.2f} | {ci} | "
+                                      f"{'yes' if g['excludes_zero'] == 'true' else 'no'} |")
 
     index = [e for e in json.loads((res / "index.json").read_text())
              if e["model"] in nets and e["variant"] in VARIANTS and e["status"] == "done"]
@@ -88,13 +89,15 @@ def f_score(run: Path, test_set: str) -> float | None:
 
 def auto2_table(res: Path, auto2: Path) -> str:
     """X-auto on the padded matcher's autolabels (``auto2``) against X and X-auto (``res``), paired by seed."""
-    rows = ["| network | gain | test set | n | mean | 95 % t-interval | excludes 0 |", "|---|---|---|---:|---:|---:|:---:|"]
+    rows = ["| network | gain | test set | n | mean | 95 % t-interval | excludes 0 |",
+            "|---|---|---|---:|---:|---:|:---:|"]
     for net in sorted({p.name.split("-auto-s")[0] for p in auto2.glob("runs/*-auto-s*")}):
         for other, tag in (("X", "orig"), ("X-auto", "auto")):
             for test_set in TEST_SETS:
                 pairs = []
                 for run in sorted(auto2.glob(f"runs/{net}-auto-s*")):
-                    a, b = f_score(run, test_set), f_score(res / "runs" / run.name.replace("-auto-", f"-{tag}-"), test_set)
+                    a = f_score(run, test_set)
+                    b = f_score(res / "runs" / run.name.replace("-auto-", f"-{tag}-"), test_set)
                     if a is not None and b is not None:
                         pairs.append((a, b))
                 if not pairs:

@@ -36,10 +36,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import machine, write_section  # noqa: E402
-
-from freespace.data import get_dataset  # noqa: E402
 import freespace.geometry.stereo as stereo  # noqa: E402
+from _common import machine, write_section  # noqa: E402
+from freespace.data import get_dataset  # noqa: E402
 from freespace.datagen.autolabel import autolabel  # noqa: E402
 from freespace.errors import RoadFitError  # noqa: E402
 from freespace.inference.predictor import Predictor  # noqa: E402
@@ -61,7 +60,8 @@ def pixel_classes(ds, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     except RoadFitError:
         return classes, road, valid
     has_disparity = np.isfinite(disparity) & (disparity > 0)
-    classes[:] = np.where(has_disparity, CLASSES.index("don't care, ambiguous"), CLASSES.index("don't care, no disparity"))
+    classes[:] = np.where(has_disparity, CLASSES.index("don't care, ambiguous"),
+                          CLASSES.index("don't care, no disparity"))
     classes[auto.label.valid & auto.label.road] = CLASSES.index("road")
     classes[auto.label.valid & ~auto.label.road] = CLASSES.index("non-road")
     return classes, road, valid
@@ -157,9 +157,11 @@ def main() -> None:
 `{args.net}` (EfficientNet-Lite0, ImageNet) of the converged run, seeds {args.seeds}, on `{args.set}`
 ({len(frames)} frames): false road (FP) and missed road (FN) in ‰ of the evaluated pixels, split by the class
 the autolabel of each test frame (SGBM version {version}{", the package of a git worktree WORKTREE at f341a7f" if env
-else ""}; the training autolabels in `WORK/autolabels` are version 1) gives the pixel. F at threshold 0.5: {f_line}. Machine: {machine()}.
+else ""}; the training autolabels in `WORK/autolabels` are version 1) gives the pixel. F at threshold 0.5: {f_line}. \
+Machine: {machine()}.
 
-    {env}.venv/bin/python bench/autolabel_training.py --work WORK --net {args.net} --seeds {args.seeds} --set {args.set} --write
+    {env}.venv/bin/python bench/autolabel_training.py --work WORK --net {args.net} --seeds {args.seeds} \
+--set {args.set} --write
 
 {table}
 

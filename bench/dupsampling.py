@@ -19,7 +19,6 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, write_section  # noqa: E402
-
 from freespace.data.synthetic import render_sample  # noqa: E402
 from freespace.data.synthetic.scene import SynthConfig  # noqa: E402
 from freespace.evaluation.metrics import confusion_counts  # noqa: E402

@@ -21,7 +21,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, timeit, write_section  # noqa: E402
-
 from freespace.geometry import fit_road_model, generate_view  # noqa: E402
 from freespace.io.codecs import read_disparity, read_image, write_image  # noqa: E402
 
@@ -69,7 +68,15 @@ def literal(left: np.ndarray, right: np.ndarray, disp: np.ndarray, road: np.ndar
         for u in range(w):
             d = disp[v, u]
             if road[v, u] and d > 0:
-                n += 1; su += u; sv += v; sd += d; suu += u * u; svv += v * v; suv += u * v; sud += u * d; svd += v * d
+                n += 1
+                su += u
+                sv += v
+                sd += d
+                suu += u * u
+                svv += v * v
+                suv += u * v
+                sud += u * d
+                svd += v * d
     M = np.array([[suu, suv, su], [suv, svv, sv], [su, sv, n]])
     a, b, c = np.linalg.solve(M, np.array([sud, svd, sd]))
     out = left.copy()

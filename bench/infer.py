@@ -20,7 +20,6 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, section_text, timeit, write_section  # noqa: E402
-
 from freespace.models import create_model, list_models  # noqa: E402
 
 H, W = 375, 1242
@@ -57,22 +56,26 @@ def gpu_rows(x: torch.Tensor, preset: str, repeat: int) -> list[str]:
     x = x.cuda()
     rows = []
     for name in list_models():
-        model = create_model(name, preset=preset).eval().cuda()
-
-        def call(half: bool) -> torch.Tensor:
-            with torch.inference_mode(), torch.autocast("cuda", dtype=torch.float16, enabled=half):
-                y = model(x)
-            torch.cuda.synchronize()
-            return y
-
-        t32 = timeit(lambda: call(False), repeat, warmup=5)
-        t16 = timeit(lambda: call(True), repeat, warmup=5)
-        diff = float((call(True).float() - call(False)).abs().max())
-        rows.append(f"| {name} | {t32 * 1000:.1f} | {t16 * 1000:.1f} | {diff:.1e} |")
+        rows.append(_gpu_row(name, x, preset, repeat))
         print(rows[-1], flush=True)
-        del model
-        torch.cuda.empty_cache()
+        torch.cuda.empty_cache()  # the network is gone with _gpu_row's frame
     return rows
+
+
+def _gpu_row(name: str, x: torch.Tensor, preset: str, repeat: int) -> str:
+    """One network's row of :func:`gpu_rows` (x already on the GPU)."""
+    model = create_model(name, preset=preset).eval().cuda()
+
+    def call(half: bool) -> torch.Tensor:
+        with torch.inference_mode(), torch.autocast("cuda", dtype=torch.float16, enabled=half):
+            y = model(x)
+        torch.cuda.synchronize()
+        return y
+
+    t32 = timeit(lambda: call(False), repeat, warmup=5)
+    t16 = timeit(lambda: call(True), repeat, warmup=5)
+    diff = float((call(True).float() - call(False)).abs().max())
+    return f"| {name} | {t32 * 1000:.1f} | {t16 * 1000:.1f} | {diff:.1e} |"
 
 
 def main() -> None:
@@ -89,7 +92,8 @@ def main() -> None:
     command = " ".join(["python bench/infer.py", *sys.argv[1:]])
     if args.device == "cuda":
         rows = gpu_rows(x, args.preset, args.repeat)
-        body = f"""Machine: {torch.cuda.get_device_name()} (CUDA {torch.version.cuda}), host {machine()}, PyTorch {torch.__version__}.
+        body = f"""Machine: {torch.cuda.get_device_name()} (CUDA {torch.version.cuda}), host {machine()}, \
+PyTorch {torch.__version__}.
 Command: `{command}` (batch 1, 3×{h}×{w} in, logits out, median of {args.repeat} after five warm-ups, each call
 synchronised). {PAPER_SECONDS}
 
@@ -101,7 +105,8 @@ synchronised). {PAPER_SECONDS}
         import onnxruntime as ort
 
         rows = cpu_rows(x, args.preset, args.repeat)
-        body = f"""Machine: {machine()}, PyTorch {torch.__version__} ({torch.get_num_threads()} threads), ONNX Runtime {ort.__version__}.
+        body = f"""Machine: {machine()}, PyTorch {torch.__version__} ({torch.get_num_threads()} threads), \
+ONNX Runtime {ort.__version__}.
 Command: `{command}` (batch 1, 3×{h}×{w} in, logits out, median of {args.repeat} after one warm-up).
 GPU: none (`--device cuda` on a machine with one). {PAPER_SECONDS}
 

@@ -17,7 +17,6 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, write_section  # noqa: E402
-
 from freespace.models import create_model, list_models  # noqa: E402
 from freespace.models.smp_models import PRESETS, smp_kwargs  # noqa: E402
 

@@ -49,9 +49,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, write_section  # noqa: E402
-
-from freespace.evaluation.labelled import (LabelFormat, PooledScores, pair_labelled_frames,  # noqa: E402
-                                           parse_label_format, read_label)
+from freespace.evaluation.labelled import (  # noqa: E402
+    LabelFormat,
+    PooledScores,
+    pair_labelled_frames,
+    parse_label_format,
+    read_label,
+)
 from freespace.io.codecs import read_image  # noqa: E402
 
 
@@ -158,7 +162,8 @@ def run(models: dict[str, Path], roots: dict[str, Path], threads: int | None) ->
     for pool, parts in POOLS.items():
         if all(p in frames for p in parts):
             for model in models:
-                results[pool][model] = _summary(PooledScores([r for p in parts for r in results[p][model]["per_frame"]]))
+                pooled = PooledScores([r for p in parts for r in results[p][model]["per_frame"]])
+                results[pool][model] = _summary(pooled)
             results[pool][MEAN_MASK] = _summary(mean_mask_scores([f for p in parts for f in frames[p]]))
     return {"sets": {k: v for k, v in results.items() if v and any(x is not None for x in v.values())},
             "skipped": skipped, "models": {k: str(v) for k, v in models.items()}, "machine": machine()}
@@ -166,7 +171,8 @@ def run(models: dict[str, Path], roots: dict[str, Path], threads: int | None) ->
 
 def markdown(res: dict[str, Any]) -> str:
     """The bench's table: one row per model and set (F points with their interval; precision, recall, IoU)."""
-    lines = ["| set | frames | model | F [95 % bootstrap] | precision | recall | IoU |", "|---|---:|---|---|---:|---:|---:|"]
+    lines = ["| set | frames | model | F [95 % bootstrap] | precision | recall | IoU |",
+             "|---|---:|---|---|---:|---:|---:|"]
     for name, by_model in res["sets"].items():
         for model, r in by_model.items():
             if r is None:
@@ -214,8 +220,8 @@ def main(argv: list[str] | None = None) -> int:
 BENCH_NOTE = ("F, precision, recall and IoU in points, pooled over each set's frames (summed pixel counts, p ≥ 0.5); "
               "the interval is a frame-level bootstrap (frames of one drive are correlated: it is narrower than the "
               "uncertainty of another street). *mean mask*: the mean of the set's own labels thresholded at 0.5 "
-              "(leave-one-out: each frame against the mean of the set's other labels, thresholded at 0.5). The labels are "
-              "for measuring only.")
+              "(leave-one-out: each frame against the mean of the set's other labels, thresholded at 0.5). The labels "
+              "are for measuring only.")
 
 if __name__ == "__main__":
     raise SystemExit(main())

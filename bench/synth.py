@@ -16,7 +16,6 @@ import cv2
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, write_section  # noqa: E402
-
 from freespace.data.synthetic import SynthConfig, render_sample, write_dataset  # noqa: E402
 
 FRAMES = 30

@@ -19,7 +19,6 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, write_section  # noqa: E402
-
 from freespace.data.synthetic import SynthConfig, write_dataset  # noqa: E402
 from freespace.engine.config import parse_size  # noqa: E402
 from freespace.models import create_model, list_models  # noqa: E402
@@ -80,7 +79,8 @@ Command: `.venv/bin/python bench/train.py --size {args.size} --batch {args.batch
 """ + "\n".join(rows) + f"""
 
 `freespace train` (U-Net light, 40 rendered frames at {args.size}: 24 train / 8 val / 8 test, batch 4), the fastest
-of epochs 2–3: 1 process {one:.2f} s, 2 DDP processes (gloo) {two:.2f} s — speed-up {one / two:.2f}× on this 2-core machine:
+of epochs 2–3: 1 process {one:.2f} s, 2 DDP processes (gloo) {two:.2f} s — speed-up {one / two:.2f}× on this \
+2-core machine:
 one process already keeps both cores busy with PyTorch's intra-op threads, so a second process has no core to add;
 DDP pays off with more cores or GPUs.
 """

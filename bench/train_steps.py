@@ -21,7 +21,6 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, timeit, write_section  # noqa: E402
-
 from freespace.data.registry import get_dataset  # noqa: E402
 from freespace.data.synthetic import SynthConfig, write_dataset  # noqa: E402
 from freespace.data.torch_dataset import RoadSegmentationDataset  # noqa: E402
@@ -110,7 +109,8 @@ def main() -> None:
     total = sum(v for k, v in parts.items() if not k.startswith(("decode", "cached sample →")))
     rows = [f"| {k} | {1000 * v:.1f} |" for k, v in parts.items()]
     body = f"""Machine: {machine()}, PyTorch {torch.__version__}, {torch.get_num_threads()} threads.
-Command: `.venv/bin/python bench/train_steps.py --model {args.model} --size {args.size} --batch {args.batch} --frames {args.frames}`
+Command: `.venv/bin/python bench/train_steps.py --model {args.model} --size {args.size} --batch {args.batch} \
+--frames {args.frames}`
 ({args.model} light, {args.frames} rendered 640×480 frames resized to {args.size}, medians of {args.repeat}).
 
 | part of one training step (batch {args.batch}) | ms per batch |
@@ -118,7 +118,8 @@ Command: `.venv/bin/python bench/train_steps.py --model {args.model} --size {arg
 """ + "\n".join(rows) + f"""
 | **sum of augmentation, collation, forward, backward** | **{1000 * total:.1f}** |
 
-`freespace train` on the same frames: the fastest epoch after the first of {args.epochs} took {epoch:.2f} s for {steps} training
+`freespace train` on the same frames: the fastest epoch after the first of {args.epochs} took {epoch:.2f} s for \
+{steps} training
 steps, the validation of {val} frames and the two checkpoint writes (best.ckpt, last.ckpt).
 """
     print(body)

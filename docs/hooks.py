@@ -62,8 +62,8 @@ def on_files(files: Files, config) -> Files:
     for page, modules in sorted(pages.items(), key=lambda kv: (kv[0] != "freespace", kv[0])):
         title = "freespace (root modules)" if page == "freespace" else f"freespace.{page}"
         # a package's page shows its own docstring; its modules follow, each with its members
-        body = [f"# {title}", ""] + [f"::: {m}\n    options:\n      members: false\n" if _is_package(m) else f"::: {m}\n"
-                                     for m in modules]
+        body = [f"# {title}", ""] + [f"::: {m}\n    options:\n      members: false\n" if _is_package(m)
+                                     else f"::: {m}\n" for m in modules]
         files.append(File.generated(config, f"api/{page}.md", content="\n".join(body)))
         index.append(f"| [{title}]({page}.md) | {', '.join(f'`{m}`' for m in modules)} |")
     files.append(File.generated(config, "api/index.md", content="\n".join(index) + "\n"))

@@ -24,9 +24,24 @@ from typing import Any
 
 from freespace import __version__
 from freespace.errors import MAX_SEED, FreespaceError, InvalidOptionError, Terminated, param
-from freespace.limits import (MAX_BASELINE_M, MAX_BATCH_SIZE, MAX_CURB_HEIGHT_M, MAX_DISPARITY_PX, MAX_EPOCHS, MAX_FRAME_COUNT,
-                              MAX_INLIER_THRESHOLD_PX, MAX_LIDAR_FILL_PX, MAX_NOISE_PX, MAX_POSE, MIN_BASELINE_M,
-                              WORKERS_PER_CORE, bounded_float, bounded_int, bounded_triple, max_workers)
+from freespace.limits import (
+    MAX_BASELINE_M,
+    MAX_BATCH_SIZE,
+    MAX_CURB_HEIGHT_M,
+    MAX_DISPARITY_PX,
+    MAX_EPOCHS,
+    MAX_FRAME_COUNT,
+    MAX_INLIER_THRESHOLD_PX,
+    MAX_LIDAR_FILL_PX,
+    MAX_NOISE_PX,
+    MAX_POSE,
+    MIN_BASELINE_M,
+    WORKERS_PER_CORE,
+    bounded_float,
+    bounded_int,
+    bounded_triple,
+    max_workers,
+)
 
 # --- options shared by several commands ----------------------------------------------------------------
 
@@ -153,8 +168,8 @@ def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], o
     from freespace.runtime.shard import parse_shard
 
     shard = parse_shard(args.shard) if args.shard is not None else None
-    summary = run(_open_dataset(args, needs_right), args.out, workers=args.workers, options=options, overwrite=args.overwrite,
-                  shard=shard)
+    summary = run(_open_dataset(args, needs_right), args.out, workers=args.workers, options=options,
+                  overwrite=args.overwrite, shard=shard)
     failed = summary["failed"]
     print(f"{summary[done]} {done}, {summary['skipped']} already done, {len(failed)} failed of {summary['frames']} "
           f"frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
@@ -187,7 +202,8 @@ def _generate_parser(p: argparse.ArgumentParser) -> None:
                       help="KITTI calibration (P2, P3; Tr_cam_to_road without --disparity)")
     virt.add_argument("--shift", metavar="DX,DY,DZ", type=bounded_triple(MAX_POSE),
                       help="camera centre move in metres (+x right, +y down; default 0,0,0)")
-    virt.add_argument("--rotate", metavar="ROLL,PITCH,YAW", type=bounded_triple(MAX_POSE), help="degrees about z, x, y, R = R_yaw·R_pitch·R_roll; "
+    virt.add_argument("--rotate", metavar="ROLL,PITCH,YAW", type=bounded_triple(MAX_POSE),
+                      help="degrees about z, x, y, R = R_yaw·R_pitch·R_roll; "
                       "positive pitch looks down, positive yaw left (default 0,0,0)")
     virt.add_argument("--label-out", metavar="VL.png", help="the view's label, KITTI colours (don't care black)")
     g = p.add_argument_group("dataset")
@@ -285,8 +301,8 @@ def _generate_labels(args: argparse.Namespace, dataset: Any) -> tuple[Any, dict[
 
     if args.labels is None:
         if not any(dataset.has_label(f) for f in dataset.frames):
-            raise DatasetError(f"{args.dataset} at {args.root} has no road labels, which the DS-Generator fits the road "
-                               f"model to; label it with `freespace autolabel --dataset {args.dataset} --root "
+            raise DatasetError(f"{args.dataset} at {args.root} has no road labels, which the DS-Generator fits the "
+                               f"road model to; label it with `freespace autolabel --dataset {args.dataset} --root "
                                f"{args.root} --out TREE` and give {param('labels')} TREE")
         return dataset, None
     check_label_tree(args.labels, args.dataset, args.root, args.split)
@@ -388,7 +404,8 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
     one.add_argument("--model-json", metavar="M.json", help="also write the road model and statistics as JSON")
     one.add_argument("--calib", metavar="CALIB.txt", help="KITTI calibration (a frame's, or KITTI raw's "
                                                           "calib_cam_to_cam.txt): the baseline from P2/P3")
-    one.add_argument("--baseline", type=bounded_float(MIN_BASELINE_M, MAX_BASELINE_M), metavar="B", help="the baseline in metres (instead of --calib)")
+    one.add_argument("--baseline", type=bounded_float(MIN_BASELINE_M, MAX_BASELINE_M), metavar="B",
+                     help="the baseline in metres (instead of --calib)")
     g = p.add_argument_group("dataset")
     _add_dataset_root(g, required=False)
     g.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of <frame>.png|.npy|.pfm disparities")
@@ -417,7 +434,8 @@ def _autolabel_parser(p: argparse.ArgumentParser) -> None:
                                                          "keeps"), default=d.camera_height, metavar="M",
                    help=f"camera height above the road when the baseline is unknown, {CAMERA_HEIGHT_RANGE_M[0]:g}–"
                         f"{CAMERA_HEIGHT_RANGE_M[1]:g} m (default %(default)s)")
-    g.add_argument("--noise", type=bounded_float(0, MAX_NOISE_PX, low_open=True), metavar="PX", help="disparity noise in pixels (default: estimated)")
+    g.add_argument("--noise", type=bounded_float(0, MAX_NOISE_PX, low_open=True), metavar="PX",
+                   help="disparity noise in pixels (default: estimated)")
     g.add_argument("--max-disparity", type=bounded_int(1, MAX_DISPARITY_PX), default=SGBM_MAX_DISPARITY, metavar="PX",
                    help="SGBM search range (default %(default)s)")
     g.add_argument("--max-camber", dest="max_camber_deg", type=bounded_float(0, 30), default=d.max_camber_deg,
@@ -500,7 +518,8 @@ def _synth_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames-per-scenario", type=bounded_int(1, MAX_FRAMES), default=10,
                    help="frames per drive (default 10)")
     p.add_argument("--non-planar", action="store_true", help="roads with slopes and camber")
-    p.add_argument("--baseline", type=bounded_float(MIN_BASELINE_M, MAX_BASELINE_M), help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
+    p.add_argument("--baseline", type=bounded_float(MIN_BASELINE_M, MAX_BASELINE_M),
+                   help="fixed baseline in metres (default: 0.3–1.6 per scenario)")
     p.add_argument("--max-roll", dest="max_roll_deg", type=bounded_float(0, MAX_ROLL_DEG), default=3.0,
                    help="rig roll range ± degrees, at most 15 (default 3)")
     p.add_argument("--baselines", type=_range, default=(0.3, 1.6), metavar="MIN,MAX",
@@ -576,7 +595,6 @@ def _split_options(q: argparse.ArgumentParser, what: str) -> None:
 def cmd_datasets_info(args: argparse.Namespace) -> int:
     """``freespace datasets info``: counts, what is there, and every problem by frame."""
     from freespace.data.info import dataset_info, format_info
-
     from freespace.data.splits import parse_fractions
 
     flags = _flags(build_parser({"datasets"}), ["datasets", "info"])
@@ -712,7 +730,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     if not is_rank_zero():
         return 0
-    print(" ".join(f"{k} {metrics[k]:.4f}" for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
+    print(" ".join(f"{k} {metrics[k]:.4f}"
+                   for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
           + f"  → {config.out}/metrics.json")
     return 0
 
@@ -807,7 +826,8 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     write_json(args.out, results)
     print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
     for cat, r in results.items():
-        print(f"{cat:<10} {r['images']:>6} " + " ".join(f"{100 * r[k]:7.2f}" for k in ("max_f", "ap", "pre", "rec", "fpr", "fnr")))
+        print(f"{cat:<10} {r['images']:>6} "
+              + " ".join(f"{100 * r[k]:7.2f}" for k in ("max_f", "ap", "pre", "rec", "fpr", "fnr")))
     return 0
 
 
@@ -985,7 +1005,8 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
 
     _add_config_options(p, REPRODUCE_OPTIONS, values={"dataset": None, "root": None})  # not with --tables
     p.add_argument("--models", help="all (the paper's six networks) or a comma-separated list (default all)")
-    p.add_argument("--seeds", type=bounded_int(1, MAX_SEEDS), default=3, help="seeds per network and variant (default 3)")
+    p.add_argument("--seeds", type=bounded_int(1, MAX_SEEDS), default=3,
+                   help="seeds per network and variant (default 3)")
     p.add_argument("--variants", help="comma-separated arms: X, HA-X (DS-Generator views), "
                    "X-dup (the control: X with HA-X's number of steps), X-long (X with twice the epochs and "
                    "patience), HV-X (road-plane virtual views), HAV-X (both), X-auto (training labels from "

@@ -36,7 +36,8 @@ WORKERS_PER_CORE = 4
 MAX_WORKERS = 1024
 #: frames per network call or training step at most: 1024 frames of 384×1248 RGB are 5.9 GB as float32
 MAX_BATCH_SIZE = 1024
-#: epochs (and epoch counts: patience, the validation window) at most: the paper's runs take 50, converged ones a few hundred
+#: epochs (and epoch counts: patience, the validation window) at most: the paper's runs take 50, converged ones a few
+#: hundred
 MAX_EPOCHS = 100_000
 #: SGD weight decay at most: an L2 coefficient of 1 already pulls every weight to 0 at each step
 MAX_WEIGHT_DECAY = 1.0

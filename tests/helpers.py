@@ -91,8 +91,8 @@ def synthetic_pair(shape: tuple[int, int] = (160, 320), roll_deg: float = 1.0, s
     return left, right, RoadLabel(road=road, valid=valid), model.disparity(shape)
 
 
-def disparity_from_depth_file(depth_path: Path, calib: dict[str, np.ndarray] | Path, *, shape: tuple[int, int] | None = None
-                              ) -> tuple[np.ndarray, StereoCalibration]:
+def disparity_from_depth_file(depth_path: Path, calib: dict[str, np.ndarray] | Path, *,
+                              shape: tuple[int, int] | None = None) -> tuple[np.ndarray, StereoCalibration]:
     """``(float32 H×W disparity, rig)`` of a depth file and a parsed KITTI calibration (a virtual right camera
     when it has no P3), as the data sources compose them; ``calib`` may be the calibration file."""
     rig = rig_from_kitti(calib if isinstance(calib, dict) else read_kitti_calib(calib))

@@ -301,7 +301,8 @@ def test_train_config_checks_each_yaml_value_once(tmp_path: Path, monkeypatch: p
     monkeypatch.setattr(config_module, "_typed", lambda name, value: (calls.append(name), typed(name, value))[1])
     seen: list[TrainConfig] = []
     monkeypatch.setattr(train_module, "run_training", lambda config, **_: (
-        seen.append(config), dict.fromkeys(("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"), 0.5))[1])
+        seen.append(config),
+        dict.fromkeys(("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"), 0.5))[1])
     made = TrainConfig(dataset="synth", root=str(tmp_path), out=str(tmp_path / "a"), epochs=7, image_size=(64, 96),
                        augment=("homography", "virtual"), virtual_shift=((-1.0, 1.0), (-3.0, 0.9), (0.0, 0.0)))
     made.save(tmp_path / "c.yaml")

@@ -199,7 +199,8 @@ def carla_tree(root: Path, n: int = 3, camera: bool = True) -> None:
             write_image(root / seq / "left" / f"{i:05d}.png", left)
             write_image(root / seq / "right" / f"{i:05d}.png", right)
             sem = np.where(lab.road, 7, 1).astype(np.uint8)
-            write_image(root / seq / "semantic" / f"{i:05d}.png", np.stack([sem, np.zeros_like(sem), np.zeros_like(sem)], -1))
+            write_image(root / seq / "semantic" / f"{i:05d}.png",
+                        np.stack([sem, np.zeros_like(sem), np.zeros_like(sem)], -1))
             with np.errstate(divide="ignore"):
                 depth = np.where(disp > 0.5, fx * baseline / disp, 1000.0)
             code = np.round(np.clip(depth, 0, 1000) / 1000.0 * (256 ** 3 - 1)).astype(np.int64)
@@ -333,8 +334,8 @@ def test_splits_by_scenario_deterministic(tmp_path: Path) -> None:
 @pytest.mark.parametrize("layout", ["kitti", "synthia", "carla", "generic"])
 def test_generate_on_every_layout(layout: str, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     root = tmp_path / "data"
-    {"kitti": lambda r: kitti_tree(r, 2), "synthia": lambda r: synthia_tree(r, n=1), "carla": lambda r: carla_tree(r, n=1),
-     "generic": lambda r: generic_tree(r, 2)}[layout](root)
+    {"kitti": lambda r: kitti_tree(r, 2), "synthia": lambda r: synthia_tree(r, n=1),
+     "carla": lambda r: carla_tree(r, n=1), "generic": lambda r: generic_tree(r, 2)}[layout](root)
     out = tmp_path / "gen"
     assert main(["generate", "--dataset", layout, "--root", str(root), "--out", str(out),
                  "--cache-dir", str(tmp_path / "cache")]) == 0
@@ -382,7 +383,8 @@ def test_torch_dataset_training_options(tmp_path: Path) -> None:
     assert torch.equal(a["image"], torch.full((3, 40, 80), 200 / 255.0))  # the override image, resized
     full = RoadSegmentationDataset(kitti, items)[1]["label"]
     assert torch.equal(a["label"], full[::4, ::4])  # nearest (OpenCV: source pixel 4·i): no new values
-    assert torch.equal(a["label"], b["label"]) and set(cached._cache) == {(1, str(tmp_path / "view.png"))} and not plain._cache
+    assert torch.equal(a["label"], b["label"]) and set(cached._cache) == {(1, str(tmp_path / "view.png"))} \
+        and not plain._cache
     aug = RoadSegmentationDataset(kitti, items, size=(40, 80), affine=True, seed=3)
     again = RoadSegmentationDataset(kitti, items, size=(40, 80), affine=True, seed=3)
     draws = [aug[(e, 0)]["label"] for e in range(4)]
@@ -438,7 +440,8 @@ def test_datasets_split_command(tmp_path: Path, capsys: pytest.CaptureFixture) -
     out = tmp_path / "lists"
     assert main(["datasets", "split", "--dataset", "synthia", "--root", str(tmp_path / "s"), "--out", str(out)]) == 0
     lists = read_splits(out)
-    assert sorted(n for v in lists.values() for n in v) == [f.name for f in get_dataset("synthia", tmp_path / "s").frames]
+    names = [f.name for f in get_dataset("synthia", tmp_path / "s").frames]
+    assert sorted(n for v in lists.values() for n in v) == names
     scenarios = [{n.rsplit("_", 1)[0] for n in lists[k]} for k in ("train", "val", "test")]
     assert not (scenarios[0] & scenarios[1] or scenarios[0] & scenarios[2] or scenarios[1] & scenarios[2])
     assert "train" in capsys.readouterr().out

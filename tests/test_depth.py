@@ -194,7 +194,7 @@ def test_new_modules_never_import_torch() -> None:
     import subprocess
     import sys
 
-    code = ("import sys, freespace.geometry.depth, freespace.geometry.lidar, freespace.io.video, freespace.runtime.shard; "
-            "print('torch' in sys.modules)")
+    code = ("import sys, freespace.geometry.depth, freespace.geometry.lidar, freespace.io.video, "
+            "freespace.runtime.shard; print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"

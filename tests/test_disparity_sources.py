@@ -132,7 +132,8 @@ def test_lidar_mode_loads_the_projected_scan(lidar_root) -> None:
     for i, frame in enumerate(ds.frames):
         sample = ds.load(i)
         assert sample.disparity_source == "lidar"
-        projected = velodyne_to_disparity(read_velodyne(frame.velodyne), read_kitti_calib(frame.calib), sample.left.shape[:2])
+        projected = velodyne_to_disparity(read_velodyne(frame.velodyne), read_kitti_calib(frame.calib),
+                                          sample.left.shape[:2])
         np.testing.assert_array_equal(sample.disparity, projected)
         have = np.isfinite(sample.disparity)
         np.testing.assert_array_equal(have, masks[frame.name])          # one point per sampled pixel, no other

@@ -201,11 +201,13 @@ def test_config_file_and_flags(tiny: Path, tmp_path: Path, monkeypatch: pytest.M
                       tensorboard=False)
     run.save(tmp_path / "config.yaml")
     # a run's config.yaml, flags override it
-    assert main(["train", "--config", str(tmp_path / "config.yaml"), "--epochs", "3", "--out", str(tmp_path / "b")]) == 0
+    assert main(["train", "--config", str(tmp_path / "config.yaml"), "--epochs", "3",
+                 "--out", str(tmp_path / "b")]) == 0
     assert seen[-1] == dataclasses.replace(run, epochs=3, out=str(tmp_path / "b"))
     # flags alone: every field has one (names of the CLI kept: --splits, --disparity-source)
     assert main(["train", "--dataset", "synth", "--root", str(tiny), "--out", str(tmp_path / "c"), "--model", "segnet",
-                 "--epochs", "7", "--image-size", "64x96", "--splits", str(tmp_path / "lists"), "--disparity-source", "sgbm"]) == 0
+                 "--epochs", "7", "--image-size", "64x96", "--splits", str(tmp_path / "lists"),
+                 "--disparity-source", "sgbm"]) == 0
     assert seen[-1] == dataclasses.replace(run, out=str(tmp_path / "c"))
     # a config.yaml written before the renames still reads
     old = {**run.to_dict(), "splits": str(tmp_path / "lists"), "disparity": "sgbm"}
@@ -246,7 +248,8 @@ def test_ddp_two_cpu_processes(tiny: Path, tmp_path: Path) -> None:
     cmd = [sys.executable, "-m", "freespace.cli", "-v", "train", "--dataset", "synth", "--root", str(tiny), "--model",
            "segnet", "--batch-size", "4", "--no-progress", "--epochs", "2", "--devices", "2", "--strategy", "ddp",
            "--out", str(run)]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONWARNINGS": "ignore"})
     assert res.returncode == 0, res.stderr[-2000:]
     assert "Initializing distributed: GLOBAL_RANK: 0, MEMBER: 1/2" in res.stderr
     assert len(list(csv.DictReader((run / "metrics.csv").open()))) == 2

@@ -1,4 +1,5 @@
-"""The real test bench's scoring: label formats, pairing, bootstrap intervals, `freespace evaluate` on a labelled folder."""
+"""The real test bench's scoring: label formats, pairing, bootstrap intervals, `freespace evaluate` on a labelled
+folder."""
 
 from __future__ import annotations
 
@@ -11,9 +12,9 @@ import pytest
 
 from freespace.cli import main
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
-from freespace.evaluation.labelled import (LabelFormat, bootstrap_intervals, pair_labelled_frames,
-                                           parse_label_format)
+from freespace.evaluation.labelled import LabelFormat, bootstrap_intervals, pair_labelled_frames, parse_label_format
 from freespace.io.codecs import write_image
+
 from helpers import refused, road_frame, tiny_road_checkpoint
 
 CAMVID = parse_label_format("class-id", "3", "11")

@@ -119,7 +119,8 @@ def test_label_tree_mistakes_are_one_line_and_write_nothing(raw: dict[str, Path]
     assert _generate(raw, tmp_path / "o5", "--labels", str(raw["tree"]), "--disparity-source", "lidar") == 2
     assert "Velodyne" in capsys.readouterr().err and not (tmp_path / "o5").exists()
     # --labels belongs to the dataset mode
-    assert main(["generate", "--reference", "a.png", "--labels", str(raw["tree"]), "--out", str(tmp_path / "g.png")]) == 2
+    assert main(["generate", "--reference", "a.png", "--labels", str(raw["tree"]),
+                 "--out", str(tmp_path / "g.png")]) == 2
     assert "--labels is for --dataset" in capsys.readouterr().err
 
 

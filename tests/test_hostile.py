@@ -89,7 +89,8 @@ def test_generate_output_is_an_input(out_opt: str, victim: str, pair: dict[str, 
     assert snapshot(tmp_path) == before
 
 
-def test_generate_output_through_a_symlink(pair: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_generate_output_through_a_symlink(pair: dict[str, Path], tmp_path: Path,
+                                           capsys: pytest.CaptureFixture) -> None:
     link = tmp_path / "link.png"
     link.symlink_to(pair["L"])
     before = snapshot(pair["L"])
@@ -266,7 +267,8 @@ def test_bad_values_are_refused_before_any_work(argv: list[str], trained: dict[s
     assert "--splits" not in err
 
 
-def test_huge_image_size_in_a_checkpoint(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_huge_image_size_in_a_checkpoint(trained: dict[str, Path], tmp_path: Path,
+                                         capsys: pytest.CaptureFixture) -> None:
     import torch
 
     ckpt = torch.load(trained["ckpt"], map_location="cpu", weights_only=True)
@@ -322,7 +324,8 @@ def test_evaluate_kitti_bev_malformed_calibration(key: str, values: str, match: 
     assert not (tmp_path / "s.json").exists()
 
 
-def test_kitti_submit_singular_calibration(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_kitti_submit_singular_calibration(trained: dict[str, Path], tmp_path: Path,
+                                           capsys: pytest.CaptureFixture) -> None:
     root = tmp_path / "kitti"
     (root / "data_road").mkdir(parents=True)
     shutil.copytree(trained["data"] / "data_road" / "training", root / "data_road" / "testing")
@@ -839,7 +842,8 @@ def test_issue20_real_flipped_pfms_are_refused(tmp_path: Path, capsys: pytest.Ca
         flipped = tmp_path / f"{name}.pfm"
         _pfm_top_down(flipped, read_disparity(stereo / "disp_occ_0" / f"{name}.png"))
         refused(capsys, ["generate", "--reference", str(stereo / "image_2" / f"{name}.png"), "--target",
-                         str(stereo / "image_3" / f"{name}.png"), "--road-mask", str(stereo / "road_mask" / f"{name}.png"),
+                         str(stereo / "image_3" / f"{name}.png"),
+                         "--road-mask", str(stereo / "road_mask" / f"{name}.png"),
                          "--disparity", str(flipped), "--out", str(tmp_path / "G.png")], match="roll")
     assert not (tmp_path / "G.png").exists()
 
@@ -1024,7 +1028,8 @@ def test_issue20_negative_values_need_no_equals_sign(trained: dict[str, Path], t
     frame = sorted((training / "image_2").iterdir())[0].stem
     cat, idx = frame.split("_")
     res = run_cli("generate", "--virtual", "--reference", str(training / "image_2" / f"{frame}.png"), "--road-mask",
-                  str(training / "gt_image_2" / f"{cat}_road_{idx}.png"), "--calib", str(training / "calib" / f"{frame}.txt"),
+                  str(training / "gt_image_2" / f"{cat}_road_{idx}.png"),
+                  "--calib", str(training / "calib" / f"{frame}.txt"),
                   "--shift", "-0.3,-0.1,0", "--rotate", "-1,-2,-.5", "--out", str(tmp_path / "V.png"),
                   "--label-out", str(tmp_path / "VL.png"))
     assert res.returncode == 0 and "shift (-0.300, -0.100, +0.000)" in res.stdout, res.stderr
@@ -1059,7 +1064,8 @@ def test_issue20_info_flags_an_empty_split(tmp_path: Path, capsys: pytest.Captur
     assert "2/0/2" in out and "leaves val empty" in out and "1 problem" in out
 
 
-def test_issue20_name_twice_in_one_list(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_issue20_name_twice_in_one_list(trained: dict[str, Path], tmp_path: Path,
+                                        capsys: pytest.CaptureFixture) -> None:
     names = sorted(p.stem for p in (trained["data"] / "data_road" / "training" / "image_2").iterdir())
     lists = tmp_path / "lists"
     lists.mkdir()
@@ -1071,7 +1077,8 @@ def test_issue20_name_twice_in_one_list(trained: dict[str, Path], tmp_path: Path
     assert "train.txt" in err and "more than one split" not in err
 
 
-def test_issue20_config_that_is_a_folder(trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_issue20_config_that_is_a_folder(trained: dict[str, Path], tmp_path: Path,
+                                         capsys: pytest.CaptureFixture) -> None:
     refused(capsys, ["train", "--config", str(tmp_path), "--dataset", "synth", "--root", str(trained["data"]),
                      "--out", str(tmp_path / "run")], match="is a folder; name a YAML file")
     assert not (tmp_path / "run").exists()

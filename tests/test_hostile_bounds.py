@@ -12,11 +12,11 @@ E. Weights files are checked at load: meta, sparse, integer, boolean, complex an
    infinity and absurd magnitudes are refused in one line naming the file (and tensor) before any epoch;
    ``tu-NAME`` of no timm model, an empty value, a folder: one line with the flag; ``imagenet`` weights missing
    from the hub's cache fail at once (no network at run time), not after 30 s of retries.
-H. The manual's (docs/networks.md) ``reproduce … --encoder-name`` command takes networks that all have an encoder; no option value
-   is empty (``--out ''`` is not the current folder, on the command line or in YAML); a folder given for a file
-   (``--calib DIR``) is called a folder, not an input holding ``--out``; autolabel's failed fit does not blame
-   a label it never read; argparse's own mistakes (a missing required option, an unknown command or choice)
-   end in one line pointing to the command's ``--help``, not in the usage block.
+H. The manual's (docs/networks.md) ``reproduce … --encoder-name`` command takes networks that all have an encoder; no
+   option value is empty (``--out ''`` is not the current folder, on the command line or in YAML); a folder given for a
+   file (``--calib DIR``) is called a folder, not an input holding ``--out``; autolabel's failed fit does not blame a
+   label it never read; argparse's own mistakes (a missing required option, an unknown command or choice) end in one
+   line pointing to the command's ``--help``, not in the usage block.
 """
 
 from __future__ import annotations
@@ -103,7 +103,8 @@ def test_worker_processes_are_bounded_by_the_cores(command: str, capsys: pytest.
     refused(capsys, [command, "--workers", "100000"], match="--workers")
 
 
-def test_train_workers_beyond_the_machine_are_refused_before_work(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_train_workers_beyond_the_machine_are_refused_before_work(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture) -> None:
     data = tmp_path / "data"
     write_dataset(data, 6, seed=1, config=SMALL, progress=False)
     err = refused(capsys, ["train", "--dataset", "synth", "--root", str(data), "--workers", str(max_workers() + 1),
@@ -153,7 +154,8 @@ def test_the_flags_bounds_are_the_fields_bounds() -> None:
 
 def test_predict_batch_size_is_bounded(capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
     refused(capsys, ["predict", "--checkpoint", str(tmp_path / "c.ckpt"), "--input", str(tmp_path), "--batch-size",
-                     "99999999999999999999", "--out", str(tmp_path / "p")], match="--batch-size must be an integer in [1, 1024]")
+                     "99999999999999999999", "--out", str(tmp_path / "p")],
+            match="--batch-size must be an integer in [1, 1024]")
 
 
 @pytest.mark.parametrize("height", ["0.01", "0.0999", "8.01", "100"])
@@ -445,7 +447,8 @@ def test_a_folder_for_calib_is_called_a_folder(pair: dict[str, Path], tmp_path: 
                            str(folder), "--out", str(out)], match="--calib")
     assert "is a folder" in err and "--out" not in err
     err = refused(capsys, ["generate", "--virtual", "--reference", str(pair["L"]), "--road-mask", str(pair["M"]),
-                           "--calib", str(folder), "--label-out", str(folder / "VL.png"), "--out", str(folder / "V.png")],
+                           "--calib", str(folder), "--label-out", str(folder / "VL.png"),
+                           "--out", str(folder / "V.png")],
                   match="--calib")
     assert "is a folder" in err and "--out" not in err
     assert not list(folder.iterdir())

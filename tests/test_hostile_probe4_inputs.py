@@ -27,6 +27,7 @@ from freespace.io.codecs import read_depth, read_disparity, read_image, read_raw
 from freespace.io.kitti import read_kitti_calib, read_kitti_raw_calib, read_velodyne
 from freespace.io.video import open_frames
 from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS, MAX_SCAN_POINTS
+
 from helpers import refused
 from test_kitti_raw import CAM_TO_CAM, DATE, make_drive
 
@@ -68,7 +69,8 @@ def _tiff(data: bytearray) -> bytes:
         at = ifd + 2 + 12 * k
         tag, kind = struct.unpack(order + "HH", data[at:at + 4])
         if tag in (256, 257):
-            data[at + 8:at + 12] = struct.pack(order + ("HH" if kind == 3 else "I"), *((HUGE, 0) if kind == 3 else (HUGE,)))
+            data[at + 8:at + 12] = struct.pack(order + ("HH" if kind == 3 else "I"),
+                                               *((HUGE, 0) if kind == 3 else (HUGE,)))
     return bytes(data)
 
 
@@ -155,7 +157,8 @@ def test_a_scan_beyond_the_point_limit_is_refused_from_its_size(tmp_path: Path) 
     assert "MAX_SCAN_POINTS" in str(info.value) and f"{MAX_SCAN_POINTS:,}" in str(info.value)
 
 
-def test_a_video_whose_stream_states_too_many_pixels_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_video_whose_stream_states_too_many_pixels_is_refused(tmp_path: Path,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
     """The size a stream states is checked before a frame is decoded (the limit lowered to 255 pixels here: FFmpeg
     opens no stream of 30000×30000)."""
     video = tmp_path / "clip.y4m"
@@ -216,7 +219,8 @@ LYING_CAM_TO_CAM = {
     "S_rect_02 twice": (_edited(CAM_TO_CAM, "S_rect_02", twice=True), ["S_rect_02", "twice"]),
     "negative focal length": (_edited(CAM_TO_CAM, "P_rect_02", _p(fx=-721.5377)), ["P_rect_02", "focal length"]),
     "principal point off the image": (_edited(CAM_TO_CAM, "P_rect_02", _p(cx=5000)), ["P_rect_02", "principal point"]),
-    "right intrinsics differ": (_edited(CAM_TO_CAM, "P_rect_03", _p(fx=500, baseline=0.54)), ["P_rect_03", "intrinsics"]),
+    "right intrinsics differ": (_edited(CAM_TO_CAM, "P_rect_03", _p(fx=500, baseline=0.54)),
+                                ["P_rect_03", "intrinsics"]),
     "rotation that is none": (_edited(CAM_TO_CAM, "R_rect_00", "2 0 0 0 2 0 0 0 2"), ["R_rect_00", "no rotation"]),
     "huge S_rect_02": (_edited(CAM_TO_CAM, "S_rect_02", f"{HUGE} {HUGE}"), ["S_rect_02", "MAX_IMAGE_PIXELS"]),
 }

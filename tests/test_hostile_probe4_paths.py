@@ -23,6 +23,7 @@ from freespace.cli import main
 from freespace.data import get_dataset
 from freespace.data.info import dataset_info, format_info
 from freespace.errors import InvalidOptionError
+
 from helpers import refused
 from test_kitti_raw import make_drive
 

@@ -125,7 +125,8 @@ def test_config_yaml_keeps_every_path_resolved(tiny: Path, labels: Path, tmp_pat
         assert TrainConfig(dataset="synth", root="r", out="o", model="unet",
                            encoder_weights=name).to_dict()["encoder_weights"] == name
     assert TrainConfig(dataset="synth", root="r", out="o", model="unet",
-                       encoder_weights="sub/x.pth").to_dict()["encoder_weights"] == str(tmp_path.resolve() / "sub/x.pth")
+                       encoder_weights="sub/x.pth").to_dict()["encoder_weights"] \
+        == str(tmp_path.resolve() / "sub/x.pth")
     # a YAML file's ~/… is the home folder, as a shell's: the file is found, not looked for under "~"
     monkeypatch.setenv("HOME", str(tmp_path))
     (tmp_path / "home.yaml").write_text("labels: ~/link\nencoder_weights: ~/w.pth\n")
@@ -352,8 +353,8 @@ def test_labels_with_nothing_labelled_are_refused(tiny: Path, labels: Path, tmp_
     some = _copy_tree(labels, tmp_path / "some")
     (some / "settings.json").unlink()
     train = set()
-    from freespace.data.splits import make_splits
     from freespace.data.registry import get_dataset
+    from freespace.data.splits import make_splits
     frames = get_dataset("synth", tiny).labelled().frames
     train = set(make_splits([(f.name, f.scenario) for f in frames], seed=0)["train"])
     for path in some.glob("*.png"):

@@ -104,7 +104,8 @@ def test_export_and_predict(trained: dict[str, Path], tmp_path: Path, capsys: py
     assert summary["model"] == "segnet" and summary["image_size"] == [64, 64]  # the training size (TRAINED_ARGS)
     # one file works too, and gives that file's map of the folder run
     one = sorted(images.glob("*.png"))[3]
-    assert main(["predict", "--onnx", str(onnx), "--input", str(one), "--out", str(tmp_path / "one"), "--no-progress"]) == 0
+    assert main(["predict", "--onnx", str(onnx), "--input", str(one), "--out", str(tmp_path / "one"),
+                 "--no-progress"]) == 0
     assert sorted(p.name for p in (tmp_path / "one").glob("*.png")) == [one.name]
     assert np.abs(read_image(tmp_path / "one" / one.name).astype(int) - read_image(b / one.name).astype(int)).max() <= 1
     assert json.loads((tmp_path / "one" / "summary.json").read_text())["frames"] == 1
@@ -136,12 +137,14 @@ def test_inference_mistakes(trained: dict[str, Path], tmp_path: Path, capsys: py
     images = trained["data"] / "data_road" / "training" / "image_2"
     assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(images), "--batch-size", "0",
                  "--out", str(tmp_path / "p")]) == 2
-    assert "--batch-size must be an integer in [1, 1024], got 0" in capsys.readouterr().err and not (tmp_path / "p").exists()
+    assert "--batch-size must be an integer in [1, 1024], got 0" in capsys.readouterr().err \
+        and not (tmp_path / "p").exists()
     assert main(["predict", "--checkpoint", str(trained["ckpt"]), "--input", str(tmp_path / "none"), "--out",
                  str(tmp_path / "p")]) == 2
     assert "input not found" in capsys.readouterr().err
     (tmp_path / "bad.onnx").write_bytes(b"junk")
-    assert main(["predict", "--onnx", str(tmp_path / "bad.onnx"), "--input", str(images), "--out", str(tmp_path / "p")]) == 2
+    assert main(["predict", "--onnx", str(tmp_path / "bad.onnx"), "--input", str(images),
+                 "--out", str(tmp_path / "p")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("freespace: error:") and "cannot load" in err and "as an ONNX model" in err
     assert not (tmp_path / "p").exists()

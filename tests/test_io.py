@@ -8,8 +8,14 @@ import numpy as np
 import pytest
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError
-from freespace.io.codecs import (read_disparity, read_image, read_road_label, road_label_to_kitti, write_disparity,
-    write_image)
+from freespace.io.codecs import (
+    read_disparity,
+    read_image,
+    read_road_label,
+    road_label_to_kitti,
+    write_disparity,
+    write_image,
+)
 from freespace.io.files import atomic_write_text
 from freespace.io.kitti import read_kitti_calib
 from freespace.labels import RoadLabel

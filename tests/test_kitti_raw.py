@@ -15,15 +15,15 @@ import cv2
 import numpy as np
 import pytest
 
-from helpers import shared_path
-
 from freespace.cli import main
 from freespace.data import get_dataset
 from freespace.data.kitti_raw import KittiRaw
 from freespace.data.splits import make_block_splits, read_splits
-from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
 from freespace.engine.config import check_label_tree, label_files
+from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
 from freespace.io.kitti import read_kitti_raw_calib
+
+from helpers import shared_path
 
 DATE = "2011_09_26"
 SIZE = (1242, 375)  # S_rect_02 of 2011_09_26: W, H
@@ -37,13 +37,13 @@ R_rect_02: 9.998817e-01 1.511453e-02 -2.841595e-03 -1.511724e-02 9.998853e-01 -9
 P_rect_02: 7.215377e+02 0.000000e+00 6.095593e+02 4.485728e+01 0.000000e+00 7.215377e+02 1.728540e+02 2.163791e-01 0.000000e+00 0.000000e+00 1.000000e+00 2.745884e-03
 S_rect_03: 1.242000e+03 3.750000e+02
 P_rect_03: 7.215377e+02 0.000000e+00 6.095593e+02 -3.395242e+02 0.000000e+00 7.215377e+02 1.728540e+02 2.199936e+00 0.000000e+00 0.000000e+00 1.000000e+00 2.729905e-03
-"""
+"""  # noqa: E501  (KITTI raw's calibration lines as the files have them)
 VELO_TO_CAM = """calib_time: 15-Mar-2012 11:37:16
 R: 7.533745e-03 -9.999714e-01 -6.166020e-04 1.480249e-02 7.280733e-04 -9.998902e-01 9.998621e-01 7.523790e-03 1.480755e-02
 T: -4.069766e-03 -7.631618e-02 -2.717806e-01
 delta_f: 0.000000e+00 0.000000e+00
 delta_c: 0.000000e+00 0.000000e+00
-"""
+"""  # noqa: E501  (KITTI raw's calibration lines as the files have them)
 CAMERA_HEIGHT = 1.65  # metres of the left colour camera above the road (KITTI's rig)
 
 
@@ -212,7 +212,8 @@ def test_splits_by_drive_never_separate_a_drive(tmp_path: Path, capsys: pytest.C
     for number in (1, 2, 5, 9, 11):
         make_drive(tmp_path / "raw", number, frames=2, right=False)
     out = tmp_path / "splits"
-    assert main(["datasets", "split", "--dataset", "kitti-raw", "--root", str(tmp_path / "raw"), "--out", str(out)]) == 0
+    assert main(["datasets", "split", "--dataset", "kitti-raw", "--root", str(tmp_path / "raw"),
+                 "--out", str(out)]) == 0
     splits = read_splits(out)
     assert sum(len(v) for v in splits.values()) == 10 and all(splits.values())
     drives = {k: {n.split("/")[0] for n in v} for k, v in splits.items()}

@@ -1,6 +1,6 @@
-"""Imports follow the layering of docs/architecture.md (its table is read here): no module imports a higher layer, and no modules import each
-other (directly or round a longer loop). Every ``import`` statement counts, also those inside functions
-(a lazy import is still a dependency)."""
+"""Imports follow the layering of docs/architecture.md (its table is read here): no module imports a higher layer,
+and no modules import each other (directly or round a longer loop). Every ``import`` statement counts, also those
+inside functions (a lazy import is still a dependency)."""
 
 from __future__ import annotations
 
@@ -127,7 +127,8 @@ def _cycles(graph: dict[str, dict[str, int]]) -> list[frozenset[str]]:
 
 
 def test_every_module_has_a_layer() -> None:
-    assert [m for m in _modules() if _layer(m) is None] == [], "give new modules a layer in docs/architecture.md's table"
+    assert [m for m in _modules() if _layer(m) is None] == [], \
+        "give new modules a layer in docs/architecture.md's table"
 
 
 def test_no_upward_imports() -> None:
@@ -161,7 +162,8 @@ def test_checker_sees_a_cycle_and_an_upward_import() -> None:
 
 def test_the_layer_table_is_read_as_written() -> None:
     """The parser takes the rows in order, every backquoted module of a row, and refuses a table with a gap."""
-    text = "## Layers\n\n| layer | modules |\n|---:|---|\n| 0 | `freespace`, `freespace.errors` |\n| 1 | `freespace.io` |\n"
+    text = ("## Layers\n\n| layer | modules |\n|---:|---|\n| 0 | `freespace`, `freespace.errors` |\n"
+            "| 1 | `freespace.io` |\n")
     assert _read_layers(text) == [("freespace", "freespace.errors"), ("freespace.io",)]
     with pytest.raises(ValueError, match="layer 2 where layer 1"):
         _read_layers(text.replace("| 1 |", "| 2 |"))

@@ -24,6 +24,7 @@ from freespace.geometry.lidar import (
     velodyne_to_disparity,
 )
 from freespace.io.kitti import read_kitti_calib, read_velodyne
+
 from helpers import disparity_from_depth_file, write_velodyne
 
 # a real KITTI R0_rect (rotation of about 0.7°) and camera-2 offset (P2 = K [I | t2])
@@ -55,7 +56,8 @@ def scene():
         "R0_rect": R0,
     }
     # camera-2 coordinates X2 = R0 · X0 + t2 must equal the rendered left camera's: Tr' = R0ᵀ·([I|−t2]·Tr)
-    tr = _h(np.linalg.inv(_h(R0))[:3]) @ _h(np.hstack([np.eye(3), -T2[:, None]])) @ _h(sample.kitti_calib["Tr_velo_to_cam"])
+    tr = (_h(np.linalg.inv(_h(R0))[:3]) @ _h(np.hstack([np.eye(3), -T2[:, None]]))
+          @ _h(sample.kitti_calib["Tr_velo_to_cam"]))
     calib["Tr_velo_to_cam"] = tr[:3]
     return sample, calib
 

@@ -12,8 +12,15 @@ import pytest
 
 from freespace.cli import main
 from freespace.errors import ShapeMismatchError
-from freespace.evaluation.metrics import (Counts, KittiCounts, RoadEvaluator, confusion_counts, kitti_counts, kitti_scores,
-                               to_confidence)
+from freespace.evaluation.metrics import (
+    Counts,
+    KittiCounts,
+    RoadEvaluator,
+    confusion_counts,
+    kitti_counts,
+    kitti_scores,
+    to_confidence,
+)
 from freespace.io.codecs import road_label_to_kitti, write_image
 from freespace.labels import RoadLabel
 
@@ -65,7 +72,8 @@ def test_counts_by_hand() -> None:
     assert (c.tp, c.fp, c.fn, c.tn) == (2, 1, 1, 3)
     m = c.metrics()
     assert m["precision"] == pytest.approx(2 / 3) and m["recall"] == pytest.approx(2 / 3)
-    assert m["f_score"] == pytest.approx(2 / 3) and m["iou"] == pytest.approx(0.5) and m["accuracy"] == pytest.approx(5 / 7)
+    assert m["f_score"] == pytest.approx(2 / 3) and m["iou"] == pytest.approx(0.5)
+    assert m["accuracy"] == pytest.approx(5 / 7)
     # summed, not averaged
     assert (c + Counts(0, 0, 4, 0)).metrics()["recall"] == pytest.approx(2 / 7)
 
@@ -175,7 +183,8 @@ def test_evaluator_sums_counts_over_images_batches_and_processes() -> None:
     conf = RoadEvaluator()
     for prob, road, valid in images:
         conf.process(to_confidence(prob), road, valid)
-    assert {k: conf.evaluate()[k] for k in ("max_f", "ap", "pre", "rec")} == {k: m[k] for k in ("max_f", "ap", "pre", "rec")}
+    keys = ("max_f", "ap", "pre", "rec")
+    assert {k: conf.evaluate()[k] for k in keys} == {k: m[k] for k in keys}
     ev.reset()
     assert ev.images == 0 and ev.counts == Counts() and not ev.to_vector().any()
     with pytest.raises(ShapeMismatchError, match="519 values"):
@@ -218,10 +227,13 @@ def test_evaluate_kitti_command(tmp_path: Path, capsys: pytest.CaptureFixture) -
     assert "MaxF" in capsys.readouterr().out
     # user mistakes: a missing prediction, a size mismatch, a missing folder
     (pred_dir / "uu_road_000000.png").unlink()
-    assert main(["evaluate-kitti", "--gt", str(gt_dir), "--pred", str(pred_dir), "--out", str(tmp_path / "x.json")]) == 2
+    assert main(["evaluate-kitti", "--gt", str(gt_dir), "--pred", str(pred_dir),
+                 "--out", str(tmp_path / "x.json")]) == 2
     assert "no prediction" in capsys.readouterr().err and not (tmp_path / "x.json").exists()
     write_image(pred_dir / "uu_000000.png", np.zeros((10, 10), np.uint8))
-    assert main(["evaluate-kitti", "--gt", str(gt_dir), "--pred", str(pred_dir), "--out", str(tmp_path / "x.json")]) == 2
+    assert main(["evaluate-kitti", "--gt", str(gt_dir), "--pred", str(pred_dir),
+                 "--out", str(tmp_path / "x.json")]) == 2
     assert "10×10" in capsys.readouterr().err
-    assert main(["evaluate-kitti", "--gt", str(tmp_path / "no"), "--pred", str(pred_dir), "--out", str(tmp_path / "x.json")]) == 2
+    assert main(["evaluate-kitti", "--gt", str(tmp_path / "no"), "--pred", str(pred_dir),
+                 "--out", str(tmp_path / "x.json")]) == 2
     assert "ground-truth folder not found" in capsys.readouterr().err and not (tmp_path / "x.json").exists()

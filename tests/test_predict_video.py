@@ -167,7 +167,8 @@ def test_predict_mistakes_are_one_line(files: dict[str, Path], tmp_path: Path, c
         (["--input", str(files["frames"]), "--out", str(files["frames"] / "o.mp4")], "lies inside the input"),
         (["--input", str(files["frames"] / "*.png"), "--out", str(files["frames"] / "p")], "lies inside the input"),
         (["--input", str(tmp_path / "none" / "*.png"), "--out", str(tmp_path / "p")], "no image file matches"),
-        (["--input", str(video), "--out", str(tmp_path / "o.mp4"), "--batch-size", "0"], "--batch-size must be an integer in [1, 1024], got 0"),
+        (["--input", str(video), "--out", str(tmp_path / "o.mp4"), "--batch-size", "0"],
+         "--batch-size must be an integer in [1, 1024], got 0"),
     ]
     for args, message in cases:
         assert _predict(files, *args) == 2, args

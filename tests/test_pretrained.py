@@ -17,8 +17,15 @@ from freespace.cli import main
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, PretrainedWeightsError
 from freespace.models import create_model
 from freespace.models.base import load_smp_encoder
-from freespace.models.lite import (INPUT_MEAN, INPUT_STD, LITE_VARIANTS, LiteEncoder, classifier_state,
-                                   convert_reference_state, shipped_weights)
+from freespace.models.lite import (
+    INPUT_MEAN,
+    INPUT_STD,
+    LITE_VARIANTS,
+    LiteEncoder,
+    classifier_state,
+    convert_reference_state,
+    shipped_weights,
+)
 
 LITE0 = "efficientnet-lite0"
 EGYPTIAN_CAT, ESPRESSO = 285, 967  # ImageNet class indices

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from freespace.cli import main
-from freespace.datagen.propagate import (Motion, PropagateOptions, compose, ego_motion, propagate_frame,
-                                         source_frames)
+from freespace.datagen.propagate import Motion, PropagateOptions, compose, ego_motion, propagate_frame, source_frames
 from freespace.errors import InvalidOptionError
 from freespace.geometry import RoadModel
 from freespace.geometry.homography import homography_from_pose
 from freespace.geometry.plane import RoadPlane
 from freespace.io.codecs import read_road_label
 from freespace.labels import RoadLabel
+
 from helpers import refused, textured_image
 
 K = np.array([[700.0, 0, 320], [0, 700, 120], [0, 0, 1]])

@@ -19,7 +19,6 @@ from freespace.errors import InvalidOptionError
 from freespace.experiments import VARIANTS, Protocol, parse_variants
 from freespace.experiments.variants import run_name, run_of
 
-
 #: two training sources: ``first`` (a rendered set as it is) and ``second`` (another rendered set, with its own
 #: label tree and split lists, both given relative to the protocol file's folder; its root through ${FS_SECOND})
 PROTOCOL = """\

@@ -267,9 +267,8 @@ def test_demo_command_prints_one_line_per_published_model(files: dict[str, Path]
 
 
 def _repository_models() -> list[Path]:
-    from freespace.demo import published_models
-
     import freespace
+    from freespace.demo import published_models
 
     return published_models(Path(freespace.__file__).resolve().parents[1] / "models")
 

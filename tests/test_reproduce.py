@@ -175,8 +175,8 @@ def test_reproduce_cells_and_tables(experiment, data: Path, tmp_path: Path, caps
     collects whatever cells are finished."""
     out, _, _ = experiment
     cells = tmp_path / "cells"
-    base = ["reproduce", "--dataset", "synth", "--root", str(data), "--seeds", "2", "--epochs", "1", "--image-size", "64x96",
-            "--batch-size", "4", "--no-progress", "--out", str(cells)]
+    base = ["reproduce", "--dataset", "synth", "--root", str(data), "--seeds", "2", "--epochs", "1",
+            "--image-size", "64x96", "--batch-size", "4", "--no-progress", "--out", str(cells)]
     assert main(base + ["--only", "segnet,X,1"]) == 0
     assert "runs/segnet-orig-s1: done" in capsys.readouterr().out
     assert sorted(p.name for p in cells.iterdir()) == [".freespace", "runs"]  # no table: only the manifest
@@ -227,7 +227,8 @@ def test_a_larger_cap_or_patience_extends_a_finished_cell(data: Path, same_rigs:
     assert {k: ours[k] for k in (*METRICS, "epochs_run")} == {k: theirs[k] for k in (*METRICS, "epochs_run")}
     assert ours["epochs_run"] == 2
     same = [json.loads((r / "runs/segnet-orig-s0/same/metrics.json").read_text()) for r in (extended, fresh)]
-    assert same[0]["trained"]["epochs_run"] == 2 and {k: same[0][k] for k in METRICS} == {k: same[1][k] for k in METRICS}
+    assert same[0]["trained"]["epochs_run"] == 2
+    assert {k: same[0][k] for k in METRICS} == {k: same[1][k] for k in METRICS}
     capsys.readouterr()
     assert main(cell(extended, "2", patience="5")) == 2
     assert "patience 10 → 5" in capsys.readouterr().err
@@ -337,8 +338,8 @@ def test_preset_reaches_the_cells(data: Path, tmp_path: Path, monkeypatch: pytes
 
 def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
     from freespace.experiments.protocol import Primary
-    from freespace.experiments.variants import ALL_NETWORKS, GAINS
     from freespace.experiments.tables import _gains, _primary_lines
+    from freespace.experiments.variants import ALL_NETWORKS, GAINS
 
     rng = np.random.default_rng(0)
     entries = []
@@ -374,4 +375,5 @@ def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
     assert sorted(dup_long) == [ALL_NETWORKS, "segnet", "unet"] and dup_long["unet"]["n"] == 6
     assert dup_long["unet"]["mean"] == pytest.approx(
         100 * np.mean([e["metrics"]["f_score"] for e in entries if e["model"] == "unet" and e["variant"] == "X-dup"])
-        - 100 * np.mean([e["metrics"]["f_score"] for e in entries if e["model"] == "unet" and e["variant"] == "X-long"]))
+        - 100 * np.mean([e["metrics"]["f_score"] for e in entries
+                         if e["model"] == "unet" and e["variant"] == "X-long"]))

@@ -50,7 +50,8 @@ def test_plain_fit_equals_scipy_minimiser_of_E() -> None:
     assert math.degrees(phi) == pytest.approx(model.roll_deg, abs=1e-4)
     assert kh == pytest.approx(model.kappa_hat, rel=1e-5)
     assert k == pytest.approx(model.kappa, abs=1e-2)
-    assert road_energy((model.roll, model.kappa_hat, model.kappa), u, v, d) <= road_energy((phi, kh, k), u, v, d) * (1 + 1e-9)
+    assert road_energy((model.roll, model.kappa_hat, model.kappa), u, v, d) \
+        <= road_energy((phi, kh, k), u, v, d) * (1 + 1e-9)
 
 
 def test_robust_fit_is_the_minimiser_of_E_over_its_inliers() -> None:

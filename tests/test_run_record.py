@@ -15,6 +15,7 @@ import yaml
 
 from freespace.cli import main
 from freespace.engine.record import UNKNOWN, package_commit
+
 from helpers import TRAINED_ARGS
 
 

@@ -92,7 +92,8 @@ def test_frame_depends_only_on_seed_and_index(tmp_path: Path) -> None:
 
 def test_scenarios_keep_their_rig_and_vary_between_each_other() -> None:
     cfg = SynthConfig(width=64, height=48, frames_per_scenario=4)
-    rigs = [(f.scenario.index, f.scenario.baseline, f.scenario.roll) for f in (sample_frame(cfg, 0, i) for i in range(8))]
+    rigs = [(f.scenario.index, f.scenario.baseline, f.scenario.roll)
+            for f in (sample_frame(cfg, 0, i) for i in range(8))]
     assert len({r for r in rigs[:4]}) == 1 and len({r for r in rigs[4:]}) == 1 and rigs[0] != rigs[4]
     assert all(abs(np.degrees(sample_frame(cfg, 0, i * 4).scenario.roll)) <= 3 for i in range(30))
 
@@ -143,7 +144,8 @@ def test_synth_stores_disparities_beyond_the_png_range_as_invalid(tmp_path: Path
 
 def test_synth_user_mistakes(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     for args, message in ((["--num", "0"], "--num"), (["--num", "2", "--width", "8"], "--width"),
-                          (["--num", "2", "--weather", "snow"], "weather"), (["--num", "2", "--baseline", "-1"], "baseline")):
+                          (["--num", "2", "--weather", "snow"], "weather"),
+                          (["--num", "2", "--baseline", "-1"], "baseline")):
         assert main(["synth", "--out", str(tmp_path / "x"), *args]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1

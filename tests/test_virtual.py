@@ -142,8 +142,8 @@ def test_right_camera_pose_gives_the_ds_generator_homography(frames) -> None:
         # the DS-Generator's H_tr from the road fit of the exact disparity, and the plane fitted from it
         fit = fit_road_model(s.disparity, s.label.road)
         np.testing.assert_allclose(H, fit.homography, atol=1e-4)
-        H_fit = virtual_homography(calib.K, RoadPlane.from_road_model(fit, calib.fx, calib.baseline, calib.cx, calib.cy),
-                                   right)
+        H_fit = virtual_homography(calib.K,
+                                   RoadPlane.from_road_model(fit, calib.fx, calib.baseline, calib.cx, calib.cy), right)
         np.testing.assert_allclose(H_fit, fit.homography, atol=1e-9)
         # warped road geometry: every road pixel (u, v) goes to (u − d, v), d its exact disparity
         v, u = np.nonzero(s.label.road)
@@ -183,7 +183,8 @@ def test_virtual_views_match_renders_from_the_moved_camera(frames) -> None:
             psnr, psnr_raw = _psnr(image[road], truth.image[road]), _psnr(s.left[road], truth.image[road])
             inter = (label.road & truth.label.road & valid).sum()
             iou = inter / ((label.road | truth.label.road) & valid).sum()
-            iou_raw = (s.label.road & truth.label.road & valid).sum() / ((s.label.road | truth.label.road) & valid).sum()
+            iou_raw = ((s.label.road & truth.label.road & valid).sum()
+                       / ((s.label.road | truth.label.road) & valid).sum())
             assert psnr >= 24.0 and psnr >= psnr_raw + 6.0, (frame.index, pose, psnr, psnr_raw)
             assert iou >= 0.99 and iou > iou_raw, (frame.index, pose, iou, iou_raw)
             psnrs.append(psnr)
@@ -332,7 +333,8 @@ def test_generic_yaml_camera_height_and_pitch(tmp_path: Path) -> None:
     from freespace.data import get_dataset
 
     write_image(tmp_path / "left" / "a.png", textured_image((48, 64)))
-    (tmp_path / "freespace.yaml").write_text("left: left\ncamera: {fx: 60, cx: 31.5, cy: 23.5, height: 1.6, pitch: 2}\n")
+    (tmp_path / "freespace.yaml").write_text("left: left\n"
+                                             "camera: {fx: 60, cx: 31.5, cy: 23.5, height: 1.6, pitch: 2}\n")
     ds = get_dataset("generic", tmp_path)
     calib = ds.calibration(ds.frames[0])
     assert calib is not None and calib.baseline == 0.0
@@ -341,7 +343,8 @@ def test_generic_yaml_camera_height_and_pitch(tmp_path: Path) -> None:
     np.testing.assert_allclose(plane.normal, expected.normal, atol=1e-12)
     assert plane.height == pytest.approx(1.6)
     for bad in ("{fx: 60, cx: 31.5, cy: 23.5}", "{fx: 60, cx: 31.5, cy: 23.5, height: -1}",
-                "{fx: 60, cx: 31.5, cy: 23.5, height: 1.6, pitch: x}", "{fx: 60, cx: 31.5, cy: 23.5, height: 1, pitch: 95}"):
+                "{fx: 60, cx: 31.5, cy: 23.5, height: 1.6, pitch: x}",
+                "{fx: 60, cx: 31.5, cy: 23.5, height: 1, pitch: 95}"):
         (tmp_path / "freespace.yaml").write_text(f"left: left\ncamera: {bad}\n")
         with pytest.raises(InvalidOptionError, match="camera"):
             get_dataset("generic", tmp_path)
@@ -451,9 +454,9 @@ def test_resized_intrinsics_keep_the_geometry() -> None:
 # --- reproduce: the variants table ------------------------------------------------------------------------
 
 def test_reproduce_variants_table() -> None:
+    from freespace.experiments.tables import _table
     from freespace.experiments.variants import parse_variants
     from freespace.experiments.variants import run_name as _name
-    from freespace.experiments.tables import _table
 
     assert parse_variants("X,HA-X") == ("X", "HA-X")
     assert parse_variants("HV-X,HAV-X") == ("X", "HV-X", "HAV-X")  # X always, first

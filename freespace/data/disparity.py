@@ -30,8 +30,8 @@ import numpy as np
 
 from freespace.errors import DatasetError, InvalidOptionError, param
 from freespace.geometry import StereoCalibration, compute_disparity
-from freespace.geometry.stereo import SGBM_VERSION
 from freespace.geometry.depth import depth_to_disparity
+from freespace.geometry.stereo import SGBM_VERSION
 from freespace.io.codecs import read_disparity
 from freespace.io.files import PathLike, atomic_write_bytes, check_writable
 
@@ -69,8 +69,8 @@ def check_disparity_source(mode: str) -> str:
 
 class DisparityCache:
     """SGBM disparities on disk, keyed by the frame's image files (path, size, mtime), the matcher
-    settings and its version (:data:`~freespace.geometry.stereo.SGBM_VERSION`), so a second run costs one ``.npy`` read. Default folder: ``$XDG_CACHE_HOME/freespace/sgbm``
-    (``~/.cache/freespace/sgbm``)."""
+    settings and its version (:data:`~freespace.geometry.stereo.SGBM_VERSION`), so a second run costs one ``.npy``
+    read. Default folder: ``$XDG_CACHE_HOME/freespace/sgbm`` (``~/.cache/freespace/sgbm``)."""
 
     def __init__(self, folder: PathLike | None = None, **settings: Any) -> None:
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "freespace" / "sgbm"

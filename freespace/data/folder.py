@@ -275,7 +275,8 @@ class GenericStereo(FolderDataset):
         for kind, name in self.spec.folders.items():
             folders[kind] = self.root / name
         if folders["left"] is None or not folders["left"].is_dir():  # type: ignore[union-attr]
-            raise InputFileError(f"left image folder {folders['left']} not found; set `left:` in {self.root / CONFIG_NAME}")
+            raise InputFileError(f"left image folder {folders['left']} not found; "
+                                 f"set `left:` in {self.root / CONFIG_NAME}")
         return folders
 
     def _list(self) -> list[FrameRef]:

@@ -82,7 +82,8 @@ def _calibration_problem(dataset: StereoRoadDataset, frame: FrameRef, left: tupl
     return None
 
 
-def scan_dataset(dataset: StereoRoadDataset, progress: bool = False) -> tuple[list[Problem], dict[str, tuple[int, int]]]:
+def scan_dataset(dataset: StereoRoadDataset,
+                 progress: bool = False) -> tuple[list[Problem], dict[str, tuple[int, int]]]:
     """:func:`check_dataset`, plus the ``(H, W)`` of every readable left image by frame name.
 
     A problem that many frames share, a calibration (a KITTI raw day, a folder layout's camera) or right images

@@ -46,8 +46,15 @@ import numpy as np
 
 from freespace.data.base import FrameRef, Problem, Sample, StereoRoadDataset
 from freespace.data.registry import register_dataset
-from freespace.errors import CorruptFileError, DatasetError, FreespaceError, InputFileError, InvalidOptionError, \
-    ShapeMismatchError, param
+from freespace.errors import (
+    CorruptFileError,
+    DatasetError,
+    FreespaceError,
+    InputFileError,
+    InvalidOptionError,
+    ShapeMismatchError,
+    param,
+)
 from freespace.geometry import StereoCalibration
 from freespace.geometry.depth import rig_from_kitti
 from freespace.geometry.lidar import velodyne_to_disparity
@@ -282,7 +289,8 @@ class KittiRaw(StereoRoadDataset):
             unscanned = sorted(set(lefts) - set(scans)) if scans else []
             if unscanned and not self.strict:  # those frames fail alone under disparity_source lidar
                 problems.append(_TreeProblem(f"{name}/{unscanned[0]}", f"{velodyne_dir / (unscanned[0] + '.bin')} "
-                                             f"not found: {len(unscanned)} left image{'s' if len(unscanned) > 1 else ''}"
+                                             f"not found: {len(unscanned)} left "
+                                             f"image{'s' if len(unscanned) > 1 else ''}"
                                              f" of drive {name} {'have' if len(unscanned) > 1 else 'has'} no Velodyne "
                                              f"scan (first {unscanned[0]}); the lidar disparity source fails on them"))
         match = _DRIVE.match(name)
@@ -343,8 +351,8 @@ class KittiRaw(StereoRoadDataset):
         ``P_rect_02``: sparse ``float32 H×W`` disparity in pixels (``shape`` = ``(H, W)``), NaN = no point;
         densified by ``lidar_densify``."""
         if frame.velodyne is None:
-            raise DatasetError(f"{frame.name} has no Velodyne scan ({frame.left.parents[2] / VELODYNE_DIR / frame.left.stem}"
-                               f".bin not found)")
+            raise DatasetError(f"{frame.name} has no Velodyne scan "
+                               f"({frame.left.parents[2] / VELODYNE_DIR / frame.left.stem}.bin not found)")
         calib = self._frame_calib(frame)
         if "Tr_velo_to_cam" not in calib:
             raise InputFileError(f"{frame.calib.parent / VELO_TO_CAM} not found: projecting the Velodyne scan of "  # type: ignore[union-attr]

@@ -16,7 +16,8 @@ import numpy as np
 from freespace.errors import DatasetError, InputFileError, param
 from freespace.io.files import PathLike
 
-__all__ = ["resolved_path", "file_signature", "file_sha256", "label_files", "label_tree_sha256", "label_tree_pixels", "check_label_tree"]
+__all__ = ["resolved_path", "file_signature", "file_sha256", "label_files", "label_tree_sha256", "label_tree_pixels",
+           "check_label_tree"]
 
 
 def resolved_path(value: str) -> str:

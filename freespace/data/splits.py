@@ -151,8 +151,8 @@ def check_split_by(by: str, gap: int = 0) -> None:
         raise InvalidOptionError(f"{param('gap')} is for {param('by')} time (frames left out between time blocks)")
 
 
-def split_frames(dataset: StereoRoadDataset, by: str = "scenario", *, seed: int = 0, fractions: Sequence[float] | None = None,
-                 gap: int = 0) -> dict[str, list[str]]:
+def split_frames(dataset: StereoRoadDataset, by: str = "scenario", *, seed: int = 0,
+                 fractions: Sequence[float] | None = None, gap: int = 0) -> dict[str, list[str]]:
     """Train/val/test lists of a dataset's frames: the labelled ones, or every frame for a layout without
     labels of its own (KITTI raw, ``has_labels = False``: its labels come from ``freespace autolabel``).
 

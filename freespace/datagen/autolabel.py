@@ -21,8 +21,15 @@ from freespace.data.base import StereoRoadDataset
 from freespace.datagen.inputs import check_sgbm_range, dataset_settings, may_use_sgbm
 from freespace.datagen.labeller import AutolabelOptions, AutolabelResult, autolabel
 from freespace.datagen.runner import FrameCommand, check_run, run_dataset
-from freespace.errors import (CorruptFileError, DatasetError, FreespaceError, InvalidOptionError, RoadFitError,
-                              ShapeMismatchError, param)
+from freespace.errors import (
+    CorruptFileError,
+    DatasetError,
+    FreespaceError,
+    InvalidOptionError,
+    RoadFitError,
+    ShapeMismatchError,
+    param,
+)
 from freespace.geometry import compute_disparity
 from freespace.io.codecs import describe_image, encode_image, read_disparity, read_image
 from freespace.io.files import PathLike, check_outputs, check_writable_files, encode_json, write_files_together
@@ -133,8 +140,8 @@ def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparit
                                      f"and the right image of one rectified stereo pair")
         right = read_image(target, what="target image")
         if right.shape != left.shape:
-            raise ShapeMismatchError(f"reference is {describe_image(left.shape)} but target is {describe_image(right.shape)}; give the "
-                                     f"two images of one rectified stereo pair")
+            raise ShapeMismatchError(f"reference is {describe_image(left.shape)} but target is "
+                                     f"{describe_image(right.shape)}; give the two images of one rectified stereo pair")
         disp = compute_disparity(left, right, max_disparity=options.max_disparity)
         source = "sgbm"
     else:

@@ -21,12 +21,31 @@ from freespace.data.base import StereoRoadDataset
 from freespace.datagen.inputs import check_sgbm_range, dataset_settings
 from freespace.datagen.runner import FrameCommand, check_run, run_dataset
 from freespace.errors import DatasetError, FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError, param
-from freespace.geometry import (SGBM_MAX_DISPARITY, RoadModel, RoadPlane, StereoCalibration, compute_disparity,
-                                fit_road_model, generate_view)
-from freespace.io.codecs import IMAGE_SUFFIXES, describe_image, encode_image, read_disparity, read_image, \
-    read_road_label
-from freespace.io.files import (PathLike, atomic_write_bytes, check_outputs, check_writable_files, encode_json,
-                                write_files_together)
+from freespace.geometry import (
+    SGBM_MAX_DISPARITY,
+    RoadModel,
+    RoadPlane,
+    StereoCalibration,
+    compute_disparity,
+    fit_road_model,
+    generate_view,
+)
+from freespace.io.codecs import (
+    IMAGE_SUFFIXES,
+    describe_image,
+    encode_image,
+    read_disparity,
+    read_image,
+    read_road_label,
+)
+from freespace.io.files import (
+    PathLike,
+    atomic_write_bytes,
+    check_outputs,
+    check_writable_files,
+    encode_json,
+    write_files_together,
+)
 from freespace.labels import RoadLabel
 
 log = logging.getLogger(__name__)
@@ -126,8 +145,8 @@ def generate_arrays(reference: np.ndarray, target: np.ndarray, road: np.ndarray,
     """
     timings: dict[str, float] = {}
     if reference.shape != target.shape:
-        raise ShapeMismatchError(f"reference is {describe_image(reference.shape)} but target is {describe_image(target.shape)}; "
-                                 f"give the two images of one rectified stereo pair")
+        raise ShapeMismatchError(f"reference is {describe_image(reference.shape)} but target is "
+                                 f"{describe_image(target.shape)}; give the two images of one rectified stereo pair")
     if road.shape != reference.shape[:2]:
         raise ShapeMismatchError(f"road mask is {_size(road.shape)} but the images are {_size(reference.shape)}; "
                                  f"give the label of the reference image")
@@ -285,7 +304,8 @@ def generate_dataset(dataset: StereoRoadDataset, out_dir: PathLike, *, workers: 
     check_sgbm_range(dataset, options.max_disparity, labelled=True)
     summary, _ = run_dataset(dataset, out_dir, GENERATE, options=options, settings=_settings(dataset, options),
                              workers=workers, progress=progress, overwrite=overwrite, shard=shard,
-                             summary={"options": {"robust": options.robust, "inlier_threshold": options.inlier_threshold,
+                             summary={"options": {"robust": options.robust,
+                                                  "inlier_threshold": options.inlier_threshold,
                                                   "max_disparity": options.max_disparity,
                                                   "disparity_source": dataset.disparity_source}})
     return summary

@@ -198,9 +198,9 @@ def _fit_seed(disparity: np.ndarray, valid: np.ndarray, max_roll_deg: float) -> 
         try:
             model = fit_road_model(disparity, region, inlier_threshold=1.0)
         except RoadFitError as exc:  # its words are for a labelled road; autolabel reads no label
-            failure = RoadFitError(f"the disparity of the lower image fits no road plane ({re.split('[:;]', str(exc))[0]}); "
-                                   f"check that the disparity is the left image's and that the road fills the lower "
-                                   f"image centre")
+            failure = RoadFitError(f"the disparity of the lower image fits no road plane "
+                                   f"({re.split('[:;]', str(exc))[0]}); check that the disparity is the left image's "
+                                   f"and that the road fills the lower image centre")
             continue
         try:
             _check_road_plane(model, max_roll_deg)
@@ -438,7 +438,8 @@ def autolabel(disparity: np.ndarray, *, baseline: float | None = None,
     conf[nonroad & p["sky"]] = 1.0
     centre = p["m"][:, w // 2]
     below = np.nonzero(centre > 0)[0]
-    stats = {"noise_px": round(float(p["noise"]), 4), "roughness_m": round(float(p["roughness"]), 4), "camera_height_m": round(float(p["camera_height"]), 4),
+    stats = {"noise_px": round(float(p["noise"]), 4), "roughness_m": round(float(p["roughness"]), 4),
+             "camera_height_m": round(float(p["camera_height"]), 4),
              "horizon_row": int(below[0]) if below.size else None,
              "coverage": round(float(label.valid.mean()), 4), "road_fraction": round(float(road.mean()), 4),
              "valid_disparity": round(float(valid.mean()), 4)}

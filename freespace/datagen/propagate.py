@@ -45,8 +45,15 @@ from freespace.geometry import RoadModel
 from freespace.geometry.homography import homography_from_pose
 from freespace.geometry.plane import RoadPlane
 from freespace.io.codecs import encode_image, read_image, read_road_label, road_label_to_kitti
-from freespace.io.files import (PathLike, check_outputs, check_writable, encode_json, write_csv, write_files_together,
-                                write_json)
+from freespace.io.files import (
+    PathLike,
+    check_outputs,
+    check_writable,
+    encode_json,
+    write_csv,
+    write_files_together,
+    write_json,
+)
 from freespace.io.outdir import claim_folder
 from freespace.labels import RoadLabel
 

@@ -17,10 +17,23 @@ import numpy as np
 
 from freespace.datagen.generate import FitOptions, check_output_image_path, road_to_fit
 from freespace.errors import CorruptFileError, InvalidOptionError, ShapeMismatchError, param
-from freespace.geometry import (RoadModel, RoadPlane, StereoCalibration, VirtualPose, fit_road_model,
-                                virtual_homography, virtual_view)
-from freespace.io.codecs import IMAGE_SUFFIXES, encode_image, read_disparity, read_image, read_road_label, \
-    road_label_to_kitti
+from freespace.geometry import (
+    RoadModel,
+    RoadPlane,
+    StereoCalibration,
+    VirtualPose,
+    fit_road_model,
+    virtual_homography,
+    virtual_view,
+)
+from freespace.io.codecs import (
+    IMAGE_SUFFIXES,
+    encode_image,
+    read_disparity,
+    read_image,
+    read_road_label,
+    road_label_to_kitti,
+)
 from freespace.io.files import PathLike, check_outputs, check_writable_files, encode_json, write_files_together
 from freespace.io.kitti import read_kitti_calib
 from freespace.labels import RoadLabel

@@ -28,9 +28,9 @@ on the source frames below :data:`MIN_SOURCE_AGREEMENT`, end the run with one li
 and nothing written.
 
 The written folder is a model folder like the published ones (:func:`freespace.engine.adapt_io.write_model_folder`):
-the float16 ``model.onnx`` (exported as ``freespace export`` does in float16: the same input size and speed), ``model.ckpt`` (what adapt
-continues from), ``README.md`` (the card), ``before_after.jpg``, and the run's ``config.json``,
-``rounds.csv`` and ``summary.json``. It is written all or nothing (:mod:`freespace.io.outdir`).
+the float16 ``model.onnx`` (exported as ``freespace export`` does in float16: the same input size and speed),
+``model.ckpt`` (what adapt continues from), ``README.md`` (the card), ``before_after.jpg``, and the run's
+``config.json``, ``rounds.csv`` and ``summary.json``. It is written all or nothing (:mod:`freespace.io.outdir`).
 """
 
 from __future__ import annotations
@@ -48,8 +48,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from freespace.errors import FreespaceError, InputFileError, InvalidOptionError, check_seed, param
 from freespace.engine.adapt_io import CHECKPOINT, Frames, frame_paths, read_frames, write_model_folder
+from freespace.errors import FreespaceError, InputFileError, InvalidOptionError, check_seed, param
 from freespace.io.files import PathLike, check_outputs, check_writable, missing_input
 from freespace.limits import MAX_BATCH_SIZE, MAX_EPOCHS, bounded_float, bounded_int
 

@@ -275,9 +275,9 @@ def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | N
     facts = "\n".join(f"| {k} | {v} |" for k, v in (
         ("", ""), ("---", "---"),
         ("input", f"any RGB frame, resized to **{size[0]}×{size[1]}** (H×W) as the published model's"),
-        ("file", f"`model.onnx`, float16 (as `freespace export` writes it in float16: largest road probability difference from the "
-                 f"checkpoint {summary['export']['fp16']['max_prob_diff']:.4f}); `{CHECKPOINT}`, the weights adapt "
-                 f"continues from"),
+        ("file", f"`model.onnx`, float16 (as `freespace export` writes it in float16: largest road probability "
+                 f"difference from the checkpoint {summary['export']['fp16']['max_prob_diff']:.4f}); "
+                 f"`{CHECKPOINT}`, the weights adapt continues from"),
         ("adapted on", f"{_frames_line(frames, 'unlabelled')}; {summary['held_out']} of them held out of training "
                        f"for the collapse guard"),
         ("source frames", _frames_line(src, "source") if src is not None else "none (no source frames rehearsed)"),
@@ -319,11 +319,11 @@ def write_model_folder(stage: Path, run: dict[str, Any], hp: dict[str, Any], fol
             hyper-parameters. folder: the published model folder. config: the run's settings
             (:class:`freespace.engine.adapt.AdaptSettings` as a dict). seconds: the run's wall time so far.
     """
+    import torch
+
     from freespace.engine.record import package_commit
     from freespace.inference.predict import export_model
     from freespace.io.files import atomic_write_text, write_csv, write_json
-
-    import torch
 
     size = list(frames.images.shape[1:3])
     save_checkpoint(run["net"], {"model": hp["model"], "model_options": hp.get("model_options", {}),

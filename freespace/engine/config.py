@@ -31,16 +31,33 @@ from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin, 
 from pydantic import BeforeValidator, ConfigDict, Field, PlainSerializer, TypeAdapter, ValidationError
 from pydantic.fields import FieldInfo
 
-from freespace.data.label_tree import (check_label_tree, file_sha256, file_signature, label_files,  # noqa: F401
-                                       label_tree_pixels, label_tree_sha256, resolved_path)
+from freespace.data.label_tree import (  # noqa: F401
+    check_label_tree,
+    file_sha256,
+    file_signature,
+    label_files,
+    label_tree_pixels,
+    label_tree_sha256,
+    resolved_path,
+)
 from freespace.errors import MAX_SEED, CorruptFileError, InputFileError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE, load_yaml
 from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable, missing_input
-from freespace.limits import (MAX_BATCH_SIZE, MAX_DEVICES, MAX_EPOCHS, MAX_FRAME_COUNT, MAX_NODES, MAX_WEIGHT_DECAY,
-                              MAX_WORKERS, Bounded, check_workers)
+from freespace.limits import (
+    MAX_BATCH_SIZE,
+    MAX_DEVICES,
+    MAX_EPOCHS,
+    MAX_FRAME_COUNT,
+    MAX_NODES,
+    MAX_WEIGHT_DECAY,
+    MAX_WORKERS,
+    Bounded,
+    check_workers,
+)
 
-__all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "weights_path", "resolved_path", "parse_augment", "augment_text", "ranges_text", "parse_size",
-           "AUGMENTS", "AUGMENT_NAMES", "FIRST_FRAME_SIZE", "PRESETS", "STRATEGIES"]
+__all__ = ["TrainConfig", "Option", "options", "read_config_yaml", "weights_path", "resolved_path", "parse_augment",
+           "augment_text", "ranges_text", "parse_size", "AUGMENTS", "AUGMENT_NAMES", "FIRST_FRAME_SIZE", "PRESETS",
+           "STRATEGIES"]
 
 #: the augmentations ``augment`` combines, in their one order (duplicate: the step-count control of homography)
 AUGMENT_NAMES = ("homography", "virtual", "duplicate")
@@ -268,9 +285,9 @@ class TrainConfig:
     momentum: Annotated[float, Field(ge=0, lt=1)] = _option("SGD momentum", 0.9)
     weight_decay: Annotated[float, Field(ge=0, le=MAX_WEIGHT_DECAY)] = _option("SGD weight decay", 0.0)
     patience: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = _option("early-stopping patience in epochs", 10)
-    val_window: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = _option("early stopping and the best checkpoint follow the validation "
-                                                      "F-score averaged over the last N epochs (1: each epoch's own)",
-                                                      1, metavar="N")
+    val_window: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = _option("early stopping and the best checkpoint follow "
+                                                                     "the validation F-score averaged over the last N "
+                                                                     "epochs (1: each epoch's own)", 1, metavar="N")
     min_delta: Annotated[float, Field(ge=0, lt=1)] = _option("early stopping counts an epoch as better only when the "
                                                              "validation F-score rises by more than this (a fraction: "
                                                              "0.001 = 0.1 point)", 0.0, metavar="F")
@@ -279,14 +296,17 @@ class TrainConfig:
     seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = _option("seed of the split, the data order, the augmentation "
                                                              "and the weights", 0)
     devices: Annotated[int, Field(ge=1, le=MAX_DEVICES)] = _option("processes or GPUs", 1)
-    num_nodes: Annotated[int, Field(ge=1, le=MAX_NODES)] = _option("machines, for multi-node DDP (see docs/commands.md)", 1)
+    num_nodes: Annotated[int, Field(ge=1, le=MAX_NODES)] = _option("machines, for multi-node DDP "
+                                                                   "(see docs/commands.md)", 1)
     strategy: str = _option("ddp: one process per device", "auto", choices=STRATEGIES)
     workers: Annotated[int, Field(ge=0, le=MAX_WORKERS)] = _option("data-loading processes (at most 4 per CPU core "
                                                                    "of the machine that trains)", 0)
     splits_dir: PathText | None = _option("train.txt/val.txt/test.txt to use (default: the paper's split)", None,
                                           metavar="DIR")
-    max_frames: Annotated[int, Field(ge=3, le=MAX_FRAME_COUNT)] | None = _option("use only the first N labelled frames (quick runs; "
-                                                             "train, val and test need one each)", None, metavar="N")
+    max_frames: Annotated[int, Field(ge=3, le=MAX_FRAME_COUNT)] | None = _option("use only the first N labelled "
+                                                                                 "frames (quick runs; train, val and "
+                                                                                 "test need one each)", None,
+                                                                                 metavar="N")
     labels: PathText | None = _option("road labels of the training frames from this label tree (written by "
                                       "`freespace autolabel` for the dataset: DIR/<frame>.png, KITTI colours) instead "
                                       "of the dataset's own; validation and test keep the dataset's labels; training "
@@ -298,7 +318,8 @@ class TrainConfig:
                                     "SGBM", "auto", choices=_disparity_sources)
     cache_dir: PathText | None = _option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
     tensorboard: bool = _option("also write TensorBoard logs (needs tensorboard)", False)
-    # augment virtual (reproduce's HV-X, HAV-X): ranges of the random pose (dx, dy, dz metres; roll, pitch, yaw degrees), probability
+    # augment virtual (reproduce's HV-X, HAV-X): ranges of the random pose (dx, dy, dz metres; roll, pitch, yaw
+    # degrees), probability
     virtual_shift: Ranges = _option(f"{_VIRTUAL}camera moves drawn in ± these metres (x right, "
                                     f"y down, z forward), or in LO:HI (e.g. 0.5,-3:0.9,0: raised by up to 3 m, "
                                     f"lowered by up to 0.9 m)", (0.5, 0.2, 0.0), metavar="DX,DY,DZ")

@@ -89,7 +89,8 @@ class EpochSampler(torch.utils.data.Sampler):
         self.epoch = epoch
 
     def _order(self) -> list[int]:
-        order = np.random.default_rng([self.seed, self.epoch]).permutation(self.n) if self.shuffle else np.arange(self.n)
+        order = (np.random.default_rng([self.seed, self.epoch]).permutation(self.n) if self.shuffle
+                 else np.arange(self.n))
         if torch.distributed.is_available() and torch.distributed.is_initialized():
             rank, world = torch.distributed.get_rank(), torch.distributed.get_world_size()
             if self.shuffle:
@@ -159,7 +160,8 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
         if config.human_share:
             raise InvalidOptionError(f"{param('human_share')} needs frames labelled by people; {config.dataset} at "
                                      f"{config.root} has none: leave it at 0")
-        ds = ds.with_labels(config.labels, [f.name for f in ds.frames if (Path(config.labels) / f"{f.name}.png").is_file()])
+        ds = ds.with_labels(config.labels, [f.name for f in ds.frames
+                                            if (Path(config.labels) / f"{f.name}.png").is_file()])
         labelled = ds.labelled().frames
         notes.append(f"labels: {config.dataset} at {config.root} has no labels of its own: validation and test use "
                      f"{config.labels} as well (measure the model on human labels with freespace evaluate)")

@@ -35,8 +35,8 @@ from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionErro
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
 from freespace.io.outdir import claim_folder
-from freespace.runtime.log import on_terminal, quiet_lightning
 from freespace.models.registry import warn_if_below_intact_size
+from freespace.runtime.log import on_terminal, quiet_lightning
 
 log = logging.getLogger(__name__)
 

@@ -3,8 +3,8 @@
 Ground truth: ``GT_DIR/<cat>_road_<id>.png`` (KITTI colours, read as the devkit reads them: road = blue
 > 0, evaluated = red > 0). Predictions: ``PRED_DIR/<cat>_road_<id>.png`` (the benchmark's naming) or
 ``PRED_DIR/<cat>_<id>.png``, 8-bit grey (255 = sure road; a colour file must have three equal channels).
-Counts are summed per category (``um_road``, ``umm_road``, ``uu_road``) and over all images (``all``). With a calibration folder the
-evaluation is in the benchmark's bird's-eye view (``bev=True``).
+Counts are summed per category (``um_road``, ``umm_road``, ``uu_road``) and over all images (``all``). With a
+calibration folder the evaluation is in the benchmark's bird's-eye view (``bev=True``).
 """
 
 from __future__ import annotations

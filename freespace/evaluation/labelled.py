@@ -74,13 +74,14 @@ class LabelFormat:
         """
         if self.kind == "kitti":
             if img.ndim != 3:
-                raise CorruptFileError(f"label {path} is a grey image, but {param('label_format')} kitti needs KITTI's colour "
-                                       f"ground truth (road magenta, non-road red); a grey mask is {param('label_format')} binary")
+                raise CorruptFileError(f"label {path} is a grey image, but {param('label_format')} kitti needs "
+                                       f"KITTI's colour ground truth (road magenta, non-road red); a grey mask is "
+                                       f"{param('label_format')} binary")
             return road_label_from_image(img)
         if self.kind == "palette":
             if img.ndim != 3:
-                raise CorruptFileError(f"label {path} is a grey image, but {param('label_format')} palette needs colours; "
-                                       f"class ids are {param('label_format')} class-id")
+                raise CorruptFileError(f"label {path} is a grey image, but {param('label_format')} palette needs "
+                                       f"colours; class ids are {param('label_format')} class-id")
             return RoadLabel(road=self._near(img, self.road), valid=~self._near(img, self.ignore))
         grey = _grey(img, path, self.kind)
         road = grey > 0 if self.kind == "binary" else np.isin(grey, self.road)
@@ -99,8 +100,9 @@ def _grey(img: np.ndarray, path: PathLike, kind: str) -> np.ndarray:
         return img
     if np.array_equal(img[..., 0], img[..., 1]) and np.array_equal(img[..., 1], img[..., 2]):
         return img[..., 0]
-    raise CorruptFileError(f"label {path} is a colour image, but {param('label_format')} {kind} reads grey values; colour "
-                           f"labels are {param('label_format')} palette (class colours) or kitti (KITTI road ground truth)")
+    raise CorruptFileError(f"label {path} is a colour image, but {param('label_format')} {kind} reads grey values; "
+                           f"colour labels are {param('label_format')} palette (class colours) or kitti (KITTI road "
+                           f"ground truth)")
 
 
 def _ints(text: str | None, what: str) -> tuple[int, ...]:
@@ -109,7 +111,8 @@ def _ints(text: str | None, what: str) -> tuple[int, ...]:
     try:
         values = tuple(int(v) for v in text.split(","))
     except ValueError:
-        raise InvalidOptionError(f"{param(what)} takes comma-separated integers (e.g. 3 or 3,4), got {text!r}") from None
+        raise InvalidOptionError(f"{param(what)} takes comma-separated integers (e.g. 3 or 3,4), "
+                                 f"got {text!r}") from None
     if any(not 0 <= v <= 255 for v in values):
         raise InvalidOptionError(f"{param(what)} values are 8-bit label values in [0, 255], got {text!r}")
     return values
@@ -145,10 +148,11 @@ def parse_label_format(kind: str, road: str | None = None, ignore: str | None = 
     if kind not in LABEL_FORMATS:
         raise InvalidOptionError(f"{param('label_format')} must be one of {', '.join(LABEL_FORMATS)}, got {kind!r}")
     if kind in ("kitti", "binary") and road:
-        raise InvalidOptionError(f"{param('road')} is for {param('label_format')} class-id or palette; {kind} labels mark "
-                                 f"road themselves")
+        raise InvalidOptionError(f"{param('road')} is for {param('label_format')} class-id or palette; {kind} labels "
+                                 f"mark road themselves")
     if kind == "kitti" and ignore:
-        raise InvalidOptionError(f"{param('ignore')} is not for {param('label_format')} kitti: KITTI marks don't care black")
+        raise InvalidOptionError(f"{param('ignore')} is not for {param('label_format')} kitti: KITTI marks don't care "
+                                 f"black")
     if kind in ("class-id", "palette") and not road:
         example = "3 (CamVid)" if kind == "class-id" else "128,64,128 (Cityscapes)"
         raise InvalidOptionError(f"{param('label_format')} {kind} needs {param('road')}, the road's "

@@ -22,8 +22,17 @@ from typing import Any
 from freespace.engine.config import TrainConfig
 from freespace.errors import CorruptFileError, DatasetError, InvalidOptionError, param
 from freespace.experiments.protocol import Protocol
-from freespace.experiments.variants import (DEFAULT_TEST_SET, METRICS, MIX_HUMAN_SHARE, VARIANTS, TestRoots, Variant,
-                                            parse_test_roots, run_name, run_of)
+from freespace.experiments.variants import (
+    DEFAULT_TEST_SET,
+    METRICS,
+    MIX_HUMAN_SHARE,
+    VARIANTS,
+    TestRoots,
+    Variant,
+    parse_test_roots,
+    run_name,
+    run_of,
+)
 from freespace.io.files import PathLike, write_json
 from freespace.io.outdir import claim_folder
 
@@ -197,8 +206,8 @@ def _base_variant(spec: Variant) -> Variant | None:
     of 1 (X for X-long), or None (``spec`` has a budget of 1, or no such variant)."""
     if spec.budget == 1:
         return None
-    return next((v for v in VARIANTS.values() if v.budget == 1 and (v.augment, v.labels) == (spec.augment, spec.labels)),
-                None)
+    return next((v for v in VARIANTS.values()
+                 if v.budget == 1 and (v.augment, v.labels) == (spec.augment, spec.labels)), None)
 
 
 def _continue_base_run(config: TrainConfig, variants: dict[str, Variant] | None = None) -> None:

@@ -2,8 +2,9 @@
 :mod:`~freespace.experiments.variants` (the vocabulary: variants, gains, run-folder names, the parsing of
 names), or variants of its own with their own training data (:class:`DataSource`).
 
-Names: a *variant* is an arm of the protocol, named as in the tables (``"HA-X"``, :attr:`~freespace.experiments.variants.Variant.name`; its
-run folders carry its short :attr:`~freespace.experiments.variants.Variant.tag`, ``ha``); its ``augment`` is the training configuration's
+Names: a *variant* is an arm of the protocol, named as in the tables (``"HA-X"``,
+:attr:`~freespace.experiments.variants.Variant.name`; its run folders carry its short
+:attr:`~freespace.experiments.variants.Variant.tag`, ``ha``); its ``augment`` is the training configuration's
 (:attr:`freespace.engine.config.TrainConfig.augment`, e.g. ``("homography",)``), which several variants may
 share (X and X-long). index.json holds both: ``variant`` (the name) and ``augment`` (spelled as in
 config.yaml, ``"homography"``).
@@ -50,8 +51,17 @@ from pathlib import Path
 from typing import Any
 
 from freespace.errors import InvalidOptionError, param
-from freespace.experiments.variants import (DEFAULT_VARIANTS, GAIN_METRICS, GAINS, TEST_SET_NAME, VARIANTS, Variant,
-                                            parse_test_roots, parse_variants, variant_tag)
+from freespace.experiments.variants import (
+    DEFAULT_VARIANTS,
+    GAIN_METRICS,
+    GAINS,
+    TEST_SET_NAME,
+    VARIANTS,
+    Variant,
+    parse_test_roots,
+    parse_variants,
+    variant_tag,
+)
 from freespace.io.files import PathLike, missing_input
 
 __all__ = ["DataSource", "DATA_KEYS", "Primary", "Protocol"]

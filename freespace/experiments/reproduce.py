@@ -3,8 +3,8 @@
 Every chosen network is trained on the original training set (X), on the set augmented with the
 DS-Generator views (HA-X) and on the control X-dup (X with every frame that has a DS-Generator view once
 more, unchanged: as many optimiser steps per epoch as HA-X under the same early stopping, without the
-views' content) — or any variants of :data:`~freespace.experiments.variants.VARIANTS` (HV-X: road-plane virtual views, HAV-X: both) —
-with the same seeds and budget, and tested on the test split (``test_set = test``) and, with
+views' content) — or any variants of :data:`~freespace.experiments.variants.VARIANTS` (HV-X: road-plane virtual
+views, HAV-X: both) — with the same seeds and budget, and tested on the test split (``test_set = test``) and, with
 ``test_root``, on every labelled frame of further datasets (``test_set = shifted`` for a bare folder, e.g.
 other rigs, or the name given as ``NAME=DIR``, e.g. a large fixed set rendered with the training rigs).
 A study's protocol file may instead declare its own variants, each training on its own data
@@ -45,12 +45,25 @@ from typing import Any
 
 from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, augment_text
 from freespace.errors import InvalidOptionError, param
-from freespace.experiments.cells import (cell_config, check_autolabels_used, check_cell, check_inputs,
-                                         check_test_roots, run_cell)
+from freespace.experiments.cells import (
+    cell_config,
+    check_autolabels_used,
+    check_cell,
+    check_inputs,
+    check_test_roots,
+    run_cell,
+)
 from freespace.experiments.protocol import Protocol
-from freespace.experiments.variants import (MAX_SEEDS, TestRoots, parse_cell, parse_models, parse_test_roots,
-                                            parse_variants, run_of)
 from freespace.experiments.tables import OUT_ENTRIES, write_tables
+from freespace.experiments.variants import (
+    MAX_SEEDS,
+    TestRoots,
+    parse_cell,
+    parse_models,
+    parse_test_roots,
+    parse_variants,
+    run_of,
+)
 from freespace.io.files import PathLike, check_writable
 from freespace.io.outdir import claim_folder
 

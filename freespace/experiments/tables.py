@@ -22,9 +22,18 @@ from freespace.errors import FreespaceError, InvalidOptionError
 from freespace.experiments.cells import read_metrics
 from freespace.experiments.figures import frames_figure, gain_figure
 from freespace.experiments.protocol import Primary, Protocol
-from freespace.experiments.variants import (ALL_NETWORKS, DEFAULT_TEST_SET, GAIN_METRICS, METRIC_NAMES, METRICS,
-                                            RESERVED_TEST_SETS, VARIANTS, Variant, run_of)
 from freespace.experiments.stats import paired_gain
+from freespace.experiments.variants import (
+    ALL_NETWORKS,
+    DEFAULT_TEST_SET,
+    GAIN_METRICS,
+    METRIC_NAMES,
+    METRICS,
+    RESERVED_TEST_SETS,
+    VARIANTS,
+    Variant,
+    run_of,
+)
 from freespace.io.files import PathLike, atomic_write_text, write_csv, write_json
 from freespace.io.outdir import claim_folder
 
@@ -303,8 +312,9 @@ def _write_markdown(out: Path, entries: list[dict[str, Any]], table: list[dict[s
     for g in gains:
         ci, half = ("—", "—") if math.isnan(g["ci_low"]) else \
             (f"[{g['ci_low']:+.2f}, {g['ci_high']:+.2f}]", f"{(g['ci_high'] - g['ci_low']) / 2:.2f}")
-        md.append(f"| {g['network']} | {g['versus'].replace(' - ', ' − ')} | {METRIC_NAMES[g['metric']]} | {g['test_set']} "
-                  f"| {g['n']} | {g['mean']:+.2f} | {ci} | {half} | {'yes' if g['excludes_zero'] else 'no'} |")
+        md.append(f"| {g['network']} | {g['versus'].replace(' - ', ' − ')} | {METRIC_NAMES[g['metric']]} "
+                  f"| {g['test_set']} | {g['n']} | {g['mean']:+.2f} | {ci} | {half} "
+                  f"| {'yes' if g['excludes_zero'] else 'no'} |")
     md += _convergence_lines(entries, protocol.vocabulary) + _primary_lines(gains, protocol.primary)
     atomic_write_text(out / "results.md", "\n".join(md) + "\n")
 
@@ -314,7 +324,8 @@ def _convergence_lines(entries: list[dict[str, Any]], variants: dict[str, Varian
     runs early stopping ended against how many ran to the epoch cap."""
     lines = ["", "Convergence: best epoch (the checkpoint tested) and epochs run, mean (min–max) over the finished "
              "runs; stopped = early stopping fired (patience), cap = ran the most epochs allowed.", "",
-             "| Network | Variant | n | best epoch | epochs run | stopped | cap |", "|---|---|---:|---:|---:|---:|---:|"]
+             "| Network | Variant | n | best epoch | epochs run | stopped | cap |",
+             "|---|---|---:|---:|---:|---:|---:|"]
     for model in _models(entries):
         for name in variants or VARIANTS:
             done = [e for e in entries if e["model"] == model and e["variant"] == name and "metrics" in e]

@@ -13,7 +13,8 @@ from freespace.io.files import PathLike
 
 __all__ = ["Variant", "VARIANTS", "MIX_HUMAN_SHARE", "DEFAULT_VARIANTS", "GAINS", "ALL_NETWORKS",
            "PAPER_NETWORKS", "GAIN_METRICS", "METRICS", "METRIC_NAMES", "DEFAULT_TEST_SET",
-           "RESERVED_TEST_SETS", "TEST_SET_NAME", "MAX_SEEDS", "TestRoots", "variant_tag", "run_name", "run_of", "parse_models", "parse_variants", "parse_cell", "parse_test_roots"]
+           "RESERVED_TEST_SETS", "TEST_SET_NAME", "MAX_SEEDS", "TestRoots", "variant_tag", "run_name", "run_of",
+           "parse_models", "parse_variants", "parse_cell", "parse_test_roots"]
 
 @dataclass(frozen=True)
 class Variant:

@@ -47,9 +47,11 @@ def homography_from_pose(K_r: np.ndarray, K_t: np.ndarray, R_tr: np.ndarray, t_t
         ``H_tr`` (3×3 float64) mapping homogeneous reference pixels to target pixels of road points.
 
     Example:
+        A level camera 1.5 m up, B = 0.5 m: 150 rows below the horizon, d = 50.
+
         >>> K = np.array([[700.0, 0, 600], [0, 700, 180], [0, 0, 1]])
         >>> H = homography_from_pose(K, K, np.eye(3), [-0.5, 0, 0], RoadPlane((0, 1, 0), 1.5))
-        >>> (H @ [600, 330, 1]).round(6).tolist()  # level camera 1.5 m up, B = 0.5 m: 150 rows below the horizon, d = 50
+        >>> (H @ [600, 330, 1]).round(6).tolist()
         [550.0, 330.0, 1.0]
     """
     K_r = _as_matrix(K_r, (3, 3), "K_r")
@@ -88,9 +90,10 @@ class StereoCalibration:
         """Build from a parsed KITTI calibration (:func:`freespace.io.kitti.read_kitti_calib`).
 
         Focal length and principal point come from ``P2``; the baseline from the difference of the
-        4th columns of ``P2`` and ``P3``. When ``Tr_cam_to_road`` (camera 0 → road frame, applied before ``R0_rect`` as in the devkit,
-        road plane ``Y = 0``) is present, the road plane is moved into the ``P2`` camera's frame; its
-        normal is the one pointing from the camera to the road, whichever way the road frame's Y points.
+        4th columns of ``P2`` and ``P3``. When ``Tr_cam_to_road`` (camera 0 → road frame, applied before
+        ``R0_rect`` as in the devkit, road plane ``Y = 0``) is present, the road plane is moved into the ``P2``
+        camera's frame; its normal is the one pointing from the camera to the road, whichever way the road frame's Y
+        points.
 
         Raises:
             InvalidOptionError: ``P3`` is not to the right of ``P2``, or ``Tr_cam_to_road`` puts the

@@ -22,6 +22,7 @@ Only NumPy and OpenCV are imported here; never torch.
 from __future__ import annotations
 
 import math
+
 import cv2
 import numpy as np
 

@@ -155,8 +155,8 @@ class RoadModel:
                                f"below the disparity's noise, else {hint}")
         if abs(self.roll_deg) > MAX_ROLL_DEG:
             raise RoadFitError(f"implausible road fit: roll {self.roll_deg:+.1f}° is "
-                               f"{abs(self.roll_deg) - MAX_ROLL_DEG:.1f}° beyond the ±{MAX_ROLL_DEG:g}° a stereo rig on "
-                               f"a road can have; {hint}")
+                               f"{abs(self.roll_deg) - MAX_ROLL_DEG:.1f}° beyond the ±{MAX_ROLL_DEG:g}° a stereo rig "
+                               f"on a road can have; {hint}")
         lo, hi = CAMERA_HEIGHT_RANGE_M
         if camera_height is not None and not lo <= camera_height <= hi:
             off = f"{camera_height - hi:.2f} m above the highest" if camera_height > hi else \

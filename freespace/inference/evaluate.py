@@ -1,4 +1,5 @@
-"""`freespace evaluate`: a model (checkpoint or ONNX) on labelled frames — metrics, per-frame scores, overlays, PR curve.
+"""`freespace evaluate`: a model (checkpoint or ONNX) on labelled frames — metrics, per-frame scores, overlays,
+PR curve.
 
 Two sources of labelled frames: a dataset's split (``dataset`` and ``root``: the run's lists or all labelled frames)
 or a *labelled folder* (``images`` and ``labels`` in one of the formats of :mod:`freespace.evaluation.labelled`:
@@ -23,8 +24,7 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError, param
-from freespace.evaluation.labelled import (LabelFormat, LabelledFrame, PooledScores, pair_labelled_frames,
-                                           read_label)
+from freespace.evaluation.labelled import LabelFormat, LabelledFrame, PooledScores, pair_labelled_frames, read_label
 from freespace.evaluation.metrics import RoadEvaluator, confusion_counts
 from freespace.evaluation.viz import overlay_errors, write_pr_curve
 from freespace.inference.predictor import Predictor

@@ -27,8 +27,7 @@ from freespace.errors import CorruptFileError, InputFileError, InvalidOptionErro
 from freespace.evaluation.metrics import to_confidence
 from freespace.inference.predictor import Predictor, load_checkpoint
 from freespace.io.codecs import write_image
-from freespace.io.files import (PathLike, atomic_write_bytes, check_outputs, check_suffix, check_writable,
-                                write_json)
+from freespace.io.files import PathLike, atomic_write_bytes, check_outputs, check_suffix, check_writable, write_json
 from freespace.io.kitti import read_kitti_calib
 from freespace.io.outdir import OwnedFolder, claim_folder
 from freespace.io.video import FrameSource, VideoFrame, VideoWriter, open_frames
@@ -570,8 +569,8 @@ def _check_float16(model: bytes, inputs: list[np.ndarray], references: list[np.n
         diff = d if not np.isfinite(d) else max(diff, d)
         same, total = same + int(((a >= 0.5) == (b >= 0.5)).sum()), total + a.size
     if not diff <= FP16_MAX_PROB_DIFF:  # NaN too: a float16 overflow
-        raise InvalidOptionError(f"{checkpoint}: in float16 the road probabilities differ from the checkpoint's by up to "
-                          f"{diff:.3g} (allowed {FP16_MAX_PROB_DIFF}); export it without {param('fp16')}")
+        raise InvalidOptionError(f"{checkpoint}: in float16 the road probabilities differ from the checkpoint's by up "
+                                 f"to {diff:.3g} (allowed {FP16_MAX_PROB_DIFF}); export it without {param('fp16')}")
     return {"max_prob_diff": diff, "mask_agreement": same / total, "tolerance": FP16_MAX_PROB_DIFF}
 
 
@@ -599,9 +598,8 @@ def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: 
 
 def _submit_into(predictor: Predictor, ds: Any, calibs: list[dict[str, np.ndarray]], out: Path,
                  progress: bool) -> list[str]:
-    from freespace.runtime.log import progress_bar
-
     from freespace.evaluation.bev import to_bev
+    from freespace.runtime.log import progress_bar
 
     names = []
     for i, frame in enumerate(progress_bar(ds.frames, desc="kitti-submit", unit="frame", enabled=progress)):

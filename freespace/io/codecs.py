@@ -27,18 +27,19 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, InvalidOptionError, ShapeMismatchError
 from freespace.io.files import PathLike, atomic_write_bytes, read_bytes
-from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS
 from freespace.labels import RoadLabel
+from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS
 
-__all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image",
-           "image_header_size", "check_image_pixels", "describe_image", "read_raw",
+__all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES",
+           "MAX_IMAGE_SIDE", "read_image", "image_header_size", "check_image_pixels", "describe_image", "read_raw",
            "write_image", "encode_image", "read_disparity", "write_disparity", "png_disparity_overflow",
            "read_depth", "read_road_label",
            "road_label_from_image", "road_label_to_kitti"]
 
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
 DEPTH_SUFFIXES = (".png", ".npy", ".pfm")
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff", ".webp")  # what OpenCV reads and writes here
+# what OpenCV reads and writes here
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff", ".webp")
 
 #: the largest image side (pixels) a network is trained or run at: bounds sizes read from options and files
 MAX_IMAGE_SIDE = 8192

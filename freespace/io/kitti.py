@@ -177,8 +177,8 @@ def read_kitti_raw_calib(cam_to_cam: PathLike, velo_to_cam: PathLike | None = No
 def _cam_to_cam(cam_to_cam: PathLike, cam: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The keys of :func:`read_kitti_calib` from the parsed lines ``cam`` of KITTI raw's calib_cam_to_cam.txt."""
     calib: dict[str, np.ndarray] = {}
-    for key, out, shape in (("P_rect_02", "P2", (3, 4)), ("R_rect_00", "R0_rect", (3, 3)), ("S_rect_02", "S_rect_02", (1, 2)),
-                            ("P_rect_03", "P3", (3, 4))):
+    for key, out, shape in (("P_rect_02", "P2", (3, 4)), ("R_rect_00", "R0_rect", (3, 3)),
+                            ("S_rect_02", "S_rect_02", (1, 2)), ("P_rect_03", "P3", (3, 4))):
         if key not in cam:
             if out == "P3":
                 continue

@@ -39,8 +39,8 @@ The folder itself is never renamed or replaced, so an output folder that is a sy
 ``.`` works. Files are listed in the manifest **before** they are written (in place or by a
 stage), so a run killed half-way leaves only files that its next run knows.
 
-Also here: :func:`freespace.io.files.write_files_together` (several output files written all or nothing, earlier files kept
-when it fails). Only the standard library is imported.
+Also here: :func:`freespace.io.files.write_files_together` (several output files written all or nothing, earlier
+files kept when it fails). Only the standard library is imported.
 """
 
 from __future__ import annotations
@@ -59,8 +59,16 @@ from pathlib import Path
 from typing import Any
 
 from freespace.errors import CorruptFileError, InvalidOptionError, OutputError, param
-from freespace.io.files import (META, check_output_kind, inside_meta, keep_mode, on_pseudo_fs, replaceable,
-                                special_kind, write_files_together)
+from freespace.io.files import (
+    META,
+    check_output_kind,
+    inside_meta,
+    keep_mode,
+    on_pseudo_fs,
+    replaceable,
+    special_kind,
+    write_files_together,
+)
 
 PathLike = str | os.PathLike[str]
 

@@ -30,8 +30,14 @@ from torch import nn
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, PretrainedWeightsError, param
 from freespace.io.files import missing_input
-from freespace.models.lite import (LITE_VARIANTS, convert_reference_state, is_lite, is_reference_layout,
-                                   register_lite_encoders, shipped_weights)
+from freespace.models.lite import (
+    LITE_VARIANTS,
+    convert_reference_state,
+    is_lite,
+    is_reference_layout,
+    register_lite_encoders,
+    shipped_weights,
+)
 
 __all__ = ["smp_weights", "read_state_dict", "load_encoder_weights", "apply_state", "check_values", "hub_offline",
            "MAX_WEIGHT_MAGNITUDE"]
@@ -226,6 +232,6 @@ def check_values(state: dict[str, torch.Tensor], own: dict[str, torch.Tensor], s
                                          f"come from a run that diverged")
         largest = float(values.abs().max())
         if largest > MAX_WEIGHT_MAGNITUDE:
-            raise PretrainedWeightsError(f"{source}: tensor {name} holds a value of magnitude {largest:.3g}, beyond the "
-                                         f"{MAX_WEIGHT_MAGNITUDE:g} of any trained network's weights; the file is "
+            raise PretrainedWeightsError(f"{source}: tensor {name} holds a value of magnitude {largest:.3g}, beyond "
+                                         f"the {MAX_WEIGHT_MAGNITUDE:g} of any trained network's weights; the file is "
                                          f"damaged or scaled")

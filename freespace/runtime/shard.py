@@ -18,7 +18,8 @@ from freespace.errors import InvalidOptionError, param
 
 __all__ = ["parse_shard", "select_shard", "SHARD_FORM"]
 
-SHARD_FORM = "K/N with whole numbers 1 ≤ K ≤ N (e.g. 1/4 … 4/4; K is 1-based, like SLURM_ARRAY_TASK_ID with --array=1-N)"
+SHARD_FORM = ("K/N with whole numbers 1 ≤ K ≤ N (e.g. 1/4 … 4/4; K is 1-based, like SLURM_ARRAY_TASK_ID with "
+              "--array=1-N)")
 
 _SHARD = re.compile(r"\s*(\d+)\s*/\s*(\d+)\s*")
 

@@ -172,7 +172,8 @@ def table(runs: Path) -> str:
                 continue
             row = []
             for c in ("mean F (masks)", "pooled f_score", "polygon recall", "F rendered"):
-                g = paired_gain([100 * cells[model, a][s][c] for s in seeds], [100 * cells[model, b][s][c] for s in seeds])
+                g = paired_gain([100 * cells[model, a][s][c] for s in seeds],
+                                [100 * cells[model, b][s][c] for s in seeds])
                 row.append("—" if np.isnan(g.mean) else f"{g.mean:+.1f}" if g.n < 2 else
                            f"{g.mean:+.1f} [{g.ci_low:+.1f}, {g.ci_high:+.1f}]")
             lines.append(f"| {model} | {a} − {b} | {len(seeds)} | " + " | ".join(row) + " |")

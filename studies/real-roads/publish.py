@@ -68,7 +68,8 @@ def _inputs(run: Path, raw: Path) -> dict[str, Path]:
                 for drive, frame in EXAMPLES}
     missing = [f"{what} {path}" for what, path in {**needed, **examples}.items() if not path.is_file()]
     if missing:
-        raise SystemExit(f"publish.py: error: {missing[0]} not found{f' (and {len(missing) - 1} more)' if len(missing) > 1 else ''}"
+        raise SystemExit(f"publish.py: error: {missing[0]} not found"
+                         f"{f' (and {len(missing) - 1} more)' if len(missing) > 1 else ''}"
                          f"; nothing written (give the run folder and the KITTI raw root with drives "
                          f"{', '.join(d for d, _ in EXAMPLES)})")
     return examples

@@ -18,8 +18,25 @@ import cv2
 import numpy as np
 
 from freespace.data.synthetic.scene import (
-    CURB, FACADE, FOLIAGE, GLASS, GRASS, HEDGE, MARKING, PERSON, POLE, ROAD, SIDEWALK, TRUNK, VEHICLE,
-    Box, Frame, Scenario, Sphere, SynthConfig, sample_frame,
+    CURB,
+    FACADE,
+    FOLIAGE,
+    GLASS,
+    GRASS,
+    HEDGE,
+    MARKING,
+    PERSON,
+    POLE,
+    ROAD,
+    SIDEWALK,
+    TRUNK,
+    VEHICLE,
+    Box,
+    Frame,
+    Scenario,
+    Sphere,
+    SynthConfig,
+    sample_frame,
 )
 from freespace.geometry.homography import StereoCalibration
 from freespace.geometry.virtual import VirtualPose

@@ -265,7 +265,8 @@ def sample_scenario(config: SynthConfig, seed: int, index: int) -> Scenario:
     heights = rng.uniform(5, 22, nseg)
     heights[rng.random(nseg) < 0.25] = rng.uniform(0.8, 2.2)  # hedges and walls between buildings
     facade_colours = np.clip(rng.uniform(0.25, 0.85, (nseg, 3)) * rng.uniform(0.85, 1.0, (nseg, 1)), 0, 1)
-    sun_elevation = math.radians({"sunset": rng.uniform(4, 12), "dusk": rng.uniform(1, 5)}.get(weather, rng.uniform(25, 65)))
+    sun_elevation = math.radians({"sunset": rng.uniform(4, 12), "dusk": rng.uniform(1, 5)}.get(weather,
+                                                                                                rng.uniform(25, 65)))
     planar = config.planar
     sc = Scenario(
         index=index, category=category, weather=weather,
@@ -340,18 +341,18 @@ def sample_frame(config: SynthConfig, seed: int, index: int) -> Frame:
         if abs(s - sc.ego_offset) < 1.5 and z - z_cam < 10:
             z += 10.0  # keep the ego lane clear just ahead
         van = rng.random() < 0.2
-        w, l = (float(rng.uniform(1.9, 2.2)), float(rng.uniform(5, 7))) if van else \
+        w, length = (float(rng.uniform(1.9, 2.2)), float(rng.uniform(5, 7))) if van else \
             (float(rng.uniform(1.65, 1.9)), float(rng.uniform(3.8, 4.8)))
         body_h = float(rng.uniform(1.6, 2.4)) if van else float(rng.uniform(0.75, 0.95))
         x = sc.centre_x(z) + s
         y = -sc.elevation(s, z)
         yaw_o = sc.heading(z) + (math.pi if rng.random() < 0.3 else 0.0) + math.radians(rng.uniform(-4, 4))
         colour = CAR_COLOURS[int(rng.integers(0, len(CAR_COLOURS)))]
-        objects.append(Box(x, y, z, w, body_h, l, yaw_o, material=VEHICLE, colour=_colour(rng, colour, 0.05),
+        objects.append(Box(x, y, z, w, body_h, length, yaw_o, material=VEHICLE, colour=_colour(rng, colour, 0.05),
                            group=group))
         if not van:
-            cab_l = 0.55 * l
-            dz = -0.08 * l
+            cab_l = 0.55 * length
+            dz = -0.08 * length
             objects.append(Box(x + dz * math.sin(yaw_o), y - body_h, z + dz * math.cos(yaw_o), 0.92 * w,
                                float(rng.uniform(0.45, 0.6)), cab_l, yaw_o, material=GLASS, colour=(0.08, 0.1, 0.12),
                                group=group))

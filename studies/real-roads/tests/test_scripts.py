@@ -39,7 +39,8 @@ def test_the_table_gives_means_intervals_and_paired_gains(tmp_path: Path) -> Non
     _real_json(tmp_path / "unet-r-auto-fp-s1", 0.80, 0.80, 0.99)  # mirror and colour jitter: paired with R-auto
     _real_json(tmp_path / "notarun", 0.1, 0.1, 0.1)  # not a cell's name: ignored
     text = evaluate.table(tmp_path)
-    rows = {tuple(c.strip() for c in line.split("|")[1:3]): line for line in text.splitlines() if line.startswith("| unet")}
+    rows = {tuple(c.strip() for c in line.split("|")[1:3]): line
+            for line in text.splitlines() if line.startswith("| unet")}
     # R-auto's F over 3 seeds (70, 74, 78): 74.0 with the t-interval 74 ± 4.303·4/√3 = [64.1, 83.9]
     assert "| 3 | 74.0 [64.1, 83.9] | 74.0 [64.1, 83.9] | 74.0 [64.1, 83.9] |" in rows["unet", "R-auto"]
     assert "| 1 |" in rows["unet-64x208", "R-auto"]
@@ -83,6 +84,7 @@ def test_rendered_scores_every_frame_of_a_tree_and_refuses_an_empty_one(tmp_path
     import numpy as np
 
     from freespace.io.codecs import write_image
+
     from helpers import road_frame, tiny_road_checkpoint
 
     evaluate = _load("evaluate")
