@@ -1,4 +1,6 @@
-"""The ``freespace`` command. Thin: parses options, calls the library, reports.
+"""freespace: drivable road (collision-free space) from stereo images — road model, DS-Generator, training, deployment.
+
+The command line parses options, calls the library and reports.
 
 Each command's options are declared beside its handler (``_<command>_parser``); the options of ``train``
 and ``reproduce`` are generated from :class:`~freespace.engine.config.TrainConfig`'s fields (the flag of a
@@ -762,8 +764,8 @@ def _evaluate_parser(p: argparse.ArgumentParser) -> None:
                    help="palette: a pixel within LEVELS of a colour on every channel has it (default 8)")
     p.add_argument("--threads", type=_WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
     p.add_argument("--no-overlays", action="store_true", help="labelled folder: skip the TP/FN/FP overlays")
-    p.add_argument("--no-progress", action="store_true")
-    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (a new one, or one this command wrote)")
     p.set_defaults(func=cmd_evaluate)
 
 
@@ -848,7 +850,7 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
                    help="write the confidence PNGs only, not overlays/ (for real time: an overlay PNG costs ~3 masks)")
     p.add_argument("--threads", type=_WORKERS, help="the network's CPU threads: ONNX Runtime's, or PyTorch's with "
                                                     "--checkpoint (default: the cores this process may use)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
     p.add_argument("--out", required=True, help="output folder (PNGs), or OUT.mp4: the overlaid video")
     p.set_defaults(func=cmd_predict)
 
@@ -889,8 +891,9 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
 
 def _export_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--checkpoint", required=True)
-    p.add_argument("--format", dest="fmt", choices=("onnx", "torchscript"), required=True)
+    p.add_argument("--checkpoint", required=True, help="a training checkpoint (.ckpt) to export")
+    p.add_argument("--format", dest="fmt", choices=("onnx", "torchscript"), required=True,
+                   help="onnx (ONNX Runtime, `predict --onnx`) or torchscript")
     p.add_argument("--int8", action="store_true", help="onnx: int8 static quantisation (QDQ, per channel), "
                                                        "calibrated on --calibration's frames")
     p.add_argument("--calibration", metavar="DIR", help="with --int8: a folder (or glob, or video) of real frames "
@@ -958,7 +961,7 @@ def _adapt_parser(p: argparse.ArgumentParser) -> None:
                         f"{D.max_drift})")
     p.add_argument("--seed", type=_SEED, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=_WORKERS, help="CPU threads (default: the cores this process may use)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
     p.set_defaults(func=cmd_adapt)
 
 
@@ -977,9 +980,9 @@ def cmd_adapt(args: argparse.Namespace) -> int:
 
 
 def _kitti_submit_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--checkpoint", required=True)
+    p.add_argument("--checkpoint", required=True, help="a training checkpoint (.ckpt)")
     p.add_argument("--root", required=True, metavar="KITTI_DIR", help="folder holding data_road/testing")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_kitti_submit)
 
@@ -1025,8 +1028,8 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
                    "its primary endpoint, named test sets and a reference line; or variants of its own, each with "
                    "its training data, which replace --dataset and --root; see freespace.experiments.protocol); "
                    "default: variants X,HA-X,X-dup, every gain of the variants run, no primary endpoint")
-    p.add_argument("--no-progress", action="store_true")
-    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (a new one, or one this command wrote)")
     p.set_defaults(func=cmd_reproduce)
 
 

@@ -257,3 +257,17 @@ def test_the_generic_layout_s_missing_yaml_says_what_to_write(tmp_path: Path, ca
     err = refused(capsys, ["datasets", "info", "--dataset", "generic", "--root", str(tmp_path)],
                   match="freespace.yaml not found")
     assert "`left: " in err and "docs/datasets.md" in err and "datasets --help" not in err
+
+
+def test_every_option_has_help_and_the_help_speaks_to_users() -> None:
+    """`freespace --help` opens with what the tool does; every option of every command says what it is for."""
+    import argparse
+
+    from freespace.cli import build_parser
+
+    parser = build_parser()
+    assert parser.description.startswith("freespace: drivable road")
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    bare = [(name, a.option_strings[0]) for name, p in sub.choices.items() for a in p._actions
+            if a.option_strings and not a.help and a.dest != "help"]
+    assert bare == []
