@@ -42,6 +42,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -54,7 +55,6 @@ from freespace.evaluation.labelled import (  # noqa: E402
     PooledScores,
     pair_labelled_frames,
     parse_label_format,
-    read_label,
 )
 from freespace.io.codecs import read_image  # noqa: E402
 
@@ -105,7 +105,7 @@ def mean_mask_scores(frames: list[tuple[str, Any]], size: tuple[int, int] = (256
 def _frames(s: LabelledSet, roots: dict[str, Path]) -> list[tuple[str, Any]]:
     root = roots[s.root]
     frames = pair_labelled_frames(root / s.images, root / s.labels, s.label_format)
-    return [(f.name, (lambda f=f: (read_image(f.image), read_label(f, s.label_format)))) for f in frames]
+    return [(f.name, partial(f.read, s.label_format)) for f in frames]
 
 
 def score_set(predictor: Any, frames: list[tuple[str, Any]]) -> PooledScores:

@@ -35,7 +35,7 @@ from freespace.io.codecs import IMAGE_SUFFIXES, read_image, road_label_from_imag
 from freespace.io.files import PathLike
 from freespace.labels import RoadLabel
 
-__all__ = ["LABEL_FORMATS", "LabelFormat", "LabelledFrame", "parse_label_format", "pair_labelled_frames", "read_label",
+__all__ = ["LABEL_FORMATS", "LabelFormat", "LabelledFrame", "parse_label_format", "pair_labelled_frames",
            "frame_scores", "bootstrap_intervals", "PooledScores", "POOLED_METRICS"]
 
 LABEL_FORMATS = ("kitti", "binary", "class-id", "palette")
@@ -175,6 +175,10 @@ class LabelledFrame:
     image: Path
     label: Path
 
+    def read(self, label_format: LabelFormat) -> tuple[np.ndarray, RoadLabel]:
+        """The image (``H×W×3`` RGB ``uint8``) and its label, decoded by ``label_format``."""
+        return read_image(self.image), label_format.decode(read_image(self.label, what="label"), self.label)
+
 
 def _image_name(label: Path, kind: str) -> str | None:
     """The stem of the image a label file belongs to, or None for a file that is no label of the format."""
@@ -233,11 +237,6 @@ def pair_labelled_frames(images: PathLike, labels: PathLike, label_format: Label
         hint = " (KITTI ground truth is named <cat>_road_<id>.png)" if label_format.kind == "kitti" else ""
         raise DatasetError(f"no label images in {label_dir}{hint}")
     return frames
-
-
-def read_label(frame: LabelledFrame, label_format: LabelFormat) -> RoadLabel:
-    """Read and decode the label of ``frame`` (:meth:`LabelFormat.decode`)."""
-    return label_format.decode(read_image(frame.label, what="label"), frame.label)
 
 
 def frame_scores(name: str, counts: Counts) -> dict[str, Any]:

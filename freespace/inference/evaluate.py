@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -24,11 +25,11 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError, param
-from freespace.evaluation.labelled import LabelFormat, LabelledFrame, PooledScores, pair_labelled_frames, read_label
+from freespace.evaluation.labelled import LabelFormat, PooledScores, pair_labelled_frames
 from freespace.evaluation.metrics import RoadEvaluator, confusion_counts
 from freespace.evaluation.viz import overlay_errors, write_pr_curve
 from freespace.inference.predictor import Predictor
-from freespace.io.codecs import read_image, write_image
+from freespace.io.codecs import write_image
 from freespace.io.files import PathLike, check_outputs, check_writable, write_csv, write_json
 from freespace.io.outdir import claim_folder
 from freespace.labels import RoadLabel
@@ -162,11 +163,8 @@ def evaluate_labelled(images: PathLike, labels: PathLike, label_format: LabelFor
     predictor, record = _model(checkpoint, onnx, threads)
     frames = pair_labelled_frames(images, labels, label_format)
 
-    def loader(frame: LabelledFrame) -> Callable[[], tuple[np.ndarray, RoadLabel]]:
-        return lambda: (read_image(frame.image), read_label(frame, label_format))
-
     with claim_folder(out, "evaluate") as folder, folder.staged() as staging:  # all or nothing
-        evaluator, scores, seconds = score_frames(predictor, [(f.name, loader(f)) for f in frames],
+        evaluator, scores, seconds = score_frames(predictor, [(f.name, partial(f.read, label_format)) for f in frames],
                                                   overlays=staging / "overlays" if overlays else None,
                                                   progress=progress, total=len(frames))
         return _write_results(staging, evaluator, scores, seconds,
