@@ -1,0 +1,123 @@
+"""The student's dataset of issue 61 (item 3): the real drives' autolabels plus a teacher's confident road on
+unlabelled frames of another city and camera, as one generic ``freespace`` dataset with its split lists.
+
+- Real drives: links to the KITTI raw frames and their label tree (``freespace autolabel``), split by the
+  study's ``splits-raw`` lists (training block; validation and test blocks as they are: autolabels, no human
+  label).
+- Unlabelled frames (e.g. CamVid's 367 ``train`` frames, none of them opened with a label): the teacher is one
+  or more published-format model folders (``model.onnx``), each run on the frame and its mirror image as
+  ``freespace adapt``'s teacher sees them (light normalised: :func:`freespace.engine.adapt.normalise_light`),
+  the probabilities averaged over models and mirrors, brought to the frame's size; road where p > THRESHOLD,
+  not road where p < 1 - THRESHOLD, don't care between. They join the training list only.
+
+Labels are KITTI colours everywhere (road magenta, non-road red, don't care black). Frame names:
+``<drive>-<frame>`` and ``<prefix>-<stem>``. ``report.json`` gives each teacher, the threshold and the labels'
+confident and road shares.
+
+    python studies/real-roads/student.py --raw RAW --autolabels AL --splits SPLITS \\
+        --frames CAMVID/train --teacher MODEL [--teacher MODEL ...] --out MIX
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from freespace.engine.adapt import road_probabilities
+
+#: road where the teacher's mean probability is above this, not road below 1 - this (adapt's default)
+THRESHOLD = 0.9
+ROAD_BGR, NON_ROAD_BGR = (255, 0, 255), (0, 0, 255)
+
+
+def _link(target: Path, link: Path) -> None:
+    link.parent.mkdir(parents=True, exist_ok=True)
+    os.symlink(target.resolve(), link)
+
+
+def _sessions(teachers: list[Path]) -> list[tuple[object, tuple[int, int]]]:
+    """ONNX Runtime sessions of the teachers' ``model.onnx`` files with their input size (h, w)."""
+    import onnxruntime as ort
+
+    out = []
+    for folder in teachers:
+        session = ort.InferenceSession(str(folder / "model.onnx"), providers=["CPUExecutionProvider"])
+        h, w = json.loads(session.get_modelmeta().custom_metadata_map["image_size"])  # freespace export's record
+        out.append((session, (int(h), int(w))))
+    return out
+
+
+def teacher_labels(image: np.ndarray, sessions: list[tuple[object, tuple[int, int]]],
+                   threshold: float = THRESHOLD) -> np.ndarray:
+    """A KITTI-colour label (``H×W×3 uint8`` BGR) of an ``H×W×3 uint8`` RGB frame from the teachers' mean road
+    probability (each on the frame and its mirror, light normalised), at the frame's size."""
+    h0, w0 = image.shape[:2]
+    prob = np.zeros((h0, w0), np.float32)
+    for session, (h, w) in sessions:
+        small = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)[None]
+        p = road_probabilities(session, small, normalise=True)[0].astype(np.float32)
+        prob += cv2.resize(p, (w0, h0), interpolation=cv2.INTER_LINEAR)
+    prob /= len(sessions)
+    label = np.zeros((h0, w0, 3), np.uint8)
+    label[prob > threshold] = ROAD_BGR
+    label[prob < 1 - threshold] = NON_ROAD_BGR
+    return label
+
+
+def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
+          prefix: str = "camvid", threshold: float = THRESHOLD) -> dict[str, object]:
+    """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
+    (a new folder); return the report."""
+    if out.exists():
+        raise SystemExit(f"{out} exists; give a new folder")
+    lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}
+    drives = {p.name: p for p in raw.rglob("*_drive_*_sync") if p.is_dir()}
+    for part in lists:
+        for frame in (splits / f"{part}.txt").read_text().split():
+            drive, number = frame.split("/")
+            label = autolabels / drive / f"{number}.png"
+            if label.is_file():
+                name = f"{drive}-{number}"
+                _link(drives[drive] / "image_02" / "data" / f"{number}.png", out / "left" / f"{name}.png")
+                _link(label, out / "label" / f"{name}.png")
+                lists[part].append(name)
+    sessions = _sessions(teachers)
+    confident, road = [], []
+    for path in sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png"):
+        image = cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        label = teacher_labels(image, sessions, threshold)
+        name = f"{prefix}-{path.stem}"
+        _link(path, out / "left" / f"{name}.png")
+        cv2.imwrite(str(out / "label" / f"{name}.png"), label)
+        confident.append(float(label.any(2).mean()))
+        road.append(float((label[..., 0] == 255).mean()))
+        lists["train"].append(name)
+    (out / "freespace.yaml").write_text("left: left\nlabel: label\nlabel_encoding: kitti\n")
+    (out / "splits").mkdir()
+    for part, names in lists.items():
+        (out / "splits" / f"{part}.txt").write_text("".join(f"{n}\n" for n in names))
+    report = {"teachers": [str(t) for t in teachers], "threshold": threshold, "frames": str(frames),
+              "counts": {k: len(v) for k, v in lists.items()}, "teacher_frames": len(road),
+              "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road))}
+    (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
+    return report
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    for name in ("raw", "autolabels", "splits", "frames", "out"):
+        ap.add_argument(f"--{name}", type=Path, required=True)
+    ap.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder (model.onnx)")
+    ap.add_argument("--prefix", default="camvid")
+    ap.add_argument("--threshold", type=float, default=THRESHOLD)
+    a = ap.parse_args()
+    print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold)))
+
+
+if __name__ == "__main__":
+    main()
