@@ -431,6 +431,34 @@ def test_torch_dataset_flip_and_photometric(tmp_path: Path) -> None:
     assert _augmenter(False, False, False) is None
 
 
+def test_torch_dataset_strong_photometric(tmp_path: Path) -> None:
+    """``photometric="strong"`` darkens, blurs and adds noise besides the jitter: its draws spread the image's mean
+    brightness wider than the mild ones, never touch the label, and repeat for (seed, epoch, i); a strength that
+    is not one of PHOTOMETRIC is refused."""
+    torch = pytest.importorskip("torch")
+    import albumentations as A
+
+    from freespace.data.torch_dataset import PHOTOMETRIC, RoadSegmentationDataset, _augmenter, photometric_strength
+
+    names = kitti_tree(tmp_path, 1)
+    kitti = KittiRoad(tmp_path, disparity_source="none")
+    plain = RoadSegmentationDataset(kitti, names)[0]
+    spread = {}
+    for strength in ("mild", "strong"):
+        ds = RoadSegmentationDataset(kitti, names, photometric=strength, seed=2)
+        draws = [ds[(e, 0)] for e in range(30)]
+        assert all(torch.equal(d["label"], plain["label"]) for d in draws)
+        assert all(torch.equal(d["image"], ds[(e, 0)]["image"]) for e, d in enumerate(draws))
+        means = torch.stack([d["image"].mean() for d in draws])
+        spread[strength] = float(means.max() - means.min())
+    assert spread["strong"] > 1.5 * spread["mild"]
+    assert _augmenter(False, False, "strong") is None  # drawn apart, from its own generator
+    assert [type(t) for t in _augmenter(False, True, "strong").transforms] == [A.HorizontalFlip]
+    assert [photometric_strength(v) for v in (False, True, *PHOTOMETRIC)] == ["off", "mild", *PHOTOMETRIC]
+    with pytest.raises(ValueError, match="photometric must be one of"):
+        photometric_strength("loud")
+
+
 def test_datasets_split_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     synthia_tree(tmp_path / "two", n=5)  # two scenarios cannot fill three splits: refused, nothing written
     assert main(["datasets", "split", "--dataset", "synthia", "--root", str(tmp_path / "two"), "--out",

@@ -11,9 +11,11 @@ Samples are dicts: ``image`` float32 ``3×H×W`` in [0, 1] (normalisation belong
   image and label together; label borders become don't care). Keys may be ``(epoch, i)`` pairs (see
   :class:`freespace.engine.data.EpochSampler`): the augmentation of sample i in an epoch depends only on
   (``seed``, epoch, i), so a resumed run sees exactly the same data;
-* ``flip=True``, ``photometric=True``: a left-right mirror of image and label (probability ½) and a colour jitter
-  of the image (brightness, contrast and saturation ×0.75–1.25, hue ±0.04 turn; probability 0.8), drawn with the
-  conventional augmentation (before it, in this order); not in the paper, for training on few real drives;
+* ``flip=True``, ``photometric=True`` (or ``"mild"``, ``"strong"``): a left-right mirror of image and label
+  (probability ½) and a colour augmentation of the image (mild: brightness, contrast and saturation ×0.75–1.25,
+  hue ±0.04 turn; strong: :func:`freespace.data.photometry.strong_photometry`, wider ranges, a dusk-like gamma,
+  blur and noise), drawn with the conventional augmentation (before it, in this order); not in the paper, for
+  training on few real drives;
 * ``virtual=VirtualAugment(...)``: road-plane virtual views (a training run's ``augment="virtual"``),
   drawn from (``seed``, epoch, i) like the conventional augmentation and applied before it (when both are
   on), with the torch-free :func:`freespace.geometry.virtual_view`;
@@ -32,11 +34,13 @@ import numpy as np
 import torch
 
 from freespace.data.base import StereoRoadDataset
+from freespace.data.photometry import strong_photometry
 from freespace.errors import DatasetError
 from freespace.io.codecs import read_image
 from freespace.labels import IGNORE_INDEX
 
-__all__ = ["RoadSegmentationDataset", "Item", "VirtualAugment", "IGNORE_INDEX", "label_to_index", "resized_intrinsics"]
+__all__ = ["RoadSegmentationDataset", "Item", "VirtualAugment", "IGNORE_INDEX", "label_to_index", "resized_intrinsics",
+           "PHOTOMETRIC", "photometric_strength"]
 
 
 def label_to_index(road: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -103,14 +107,27 @@ def resized_intrinsics(K: np.ndarray, src: tuple[int, int], dst: tuple[int, int]
     return S @ K
 
 
-def _augmenter(affine: bool, flip: bool, photometric: bool) -> Any:
-    """The per-sample augmentations that are on, as one albumentations pipeline (None when none is): the colour
-    jitter, the mirror, then the paper's conventional augmentation (random translation and rotation of image and
-    label together). With ``affine`` alone it is the paper's pipeline as it always was (the same draws)."""
+#: the strengths of the colour augmentation (``photometric``): none, the mild jitter, or the strong one
+PHOTOMETRIC = ("off", "mild", "strong")
+
+
+def photometric_strength(value: bool | str) -> str:
+    """``photometric`` as one of :data:`PHOTOMETRIC` (``False`` = off, ``True`` = mild)."""
+    strength = {False: "off", True: "mild"}.get(value, value) if isinstance(value, bool) else value
+    if strength not in PHOTOMETRIC:
+        raise ValueError(f"photometric must be one of {PHOTOMETRIC} or a bool, got {value!r}")
+    return strength
+
+
+def _augmenter(affine: bool, flip: bool, photometric: bool | str) -> Any:
+    """The per-sample augmentations that are on, as one albumentations pipeline (None when none is): the mild
+    colour jitter (``photometric`` mild; the strong one is drawn apart, :func:`strong_photometry`), the mirror,
+    then the paper's conventional augmentation (random translation and rotation of image and label together).
+    With ``affine`` alone it is the paper's pipeline as it always was (the same draws)."""
     import albumentations as A
 
     steps = [A.ColorJitter(brightness=(0.75, 1.25), contrast=(0.75, 1.25), saturation=(0.75, 1.25),
-                           hue=(-0.04, 0.04), p=0.8)] if photometric else []
+                           hue=(-0.04, 0.04), p=0.8)] if photometric_strength(photometric) == "mild" else []
     steps += [A.HorizontalFlip(p=0.5)] if flip else []
     steps += [A.Affine(translate_percent=(-0.1, 0.1), rotate=(-10, 10), p=0.8, border_mode=cv2.BORDER_CONSTANT,
                        fill=0, fill_mask=IGNORE_INDEX)] if affine else []
@@ -128,7 +145,8 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         affine: the conventional augmentation (random translation and rotation), drawn from (``seed``,
             epoch, i).
         flip: mirror image and label left-right with probability ½, drawn like ``affine``.
-        photometric: jitter the image's colours, drawn like ``affine``.
+        photometric: the colour augmentation's strength (:data:`PHOTOMETRIC`; ``True`` = mild), drawn like
+            ``affine``.
         seed: the seed of the augmentations.
         cache: keep decoded frames in memory.
         virtual: road-plane virtual views, drawn from (``seed``, epoch, i); before the conventional
@@ -142,7 +160,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
                  transform: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None, *,
                  size: tuple[int, int] | None = None, affine: bool = False, seed: int = 0,
                  cache: bool = False, virtual: VirtualAugment | None = None, flip: bool = False,
-                 photometric: bool = False) -> None:
+                 photometric: bool | str = False) -> None:
         self.dataset = dataset
         wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
         self.items = [n if isinstance(n, Item) else Item(dataset.index(n), n) for n in wanted]
@@ -153,6 +171,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         self.transform, self.size, self.affine, self.seed, self.cache = transform, size, affine, seed, cache
         self._cache: dict[tuple[int, str | None], tuple[np.ndarray, np.ndarray]] = {}
         self._aug = _augmenter(affine, flip, photometric)
+        self._strong = photometric_strength(photometric) == "strong"
         self.virtual = virtual
         self._K: dict[tuple[int, str | None], np.ndarray] = {}  # intrinsics at the decoded size, by frame and image
 
@@ -191,6 +210,9 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
 
                 plane = self.virtual.planes[self.items[i].index][1]
                 image, label, _ = virtual_view(image, label, self._K[k], plane, pose, ignore=IGNORE_INDEX)
+        if self._strong:  # its own generator: independent of the pipeline's draws, which it leaves as they were
+            rng = np.random.default_rng([self.seed, epoch, i, 1])
+            image = (strong_photometry(image.astype(np.float32) / 255.0, rng) * 255.0 + 0.5).astype(np.uint8)
         if self._aug is not None:
             self._aug.set_random_seed(int(np.random.default_rng([self.seed, epoch, i]).integers(2**31)))
             out = self._aug(image=image, mask=label)

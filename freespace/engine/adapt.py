@@ -48,6 +48,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from freespace.data.photometry import strong_photometry
 from freespace.engine.adapt_io import CHECKPOINT, Frames, frame_paths, read_frames, write_model_folder
 from freespace.errors import FreespaceError, InputFileError, InvalidOptionError, check_seed, param
 from freespace.io.files import PathLike, check_outputs, check_writable, missing_input
@@ -193,9 +194,8 @@ def strong_views(images: np.ndarray, labels: np.ndarray, rng: np.random.Generato
 
     Geometry (the labels follow, nearest neighbour): a random crop of 1/1.6…1 of the height and of
     ``width_share``·w scaled to h × ``width_share``·w (at ``width_share`` 1: the whole frame's size), a mirror
-    image half of the time. Photometry (frames only): brightness ×0.5…1.3, contrast ×0.6…1.4,
-    saturation ×0.4…1.4, gamma 0.7…2 (dusk-like darkening above 1), a Gaussian blur (σ 0.3…1.5 px) a third of
-    the time, Gaussian noise (σ 0…0.03).
+    image half of the time. Photometry (frames only): :func:`freespace.data.photometry.strong_photometry`
+    (saturation, contrast, brightness, gamma, blur, noise).
 
     Returns:
         ``N×3×h×w'`` float32 frames in [0, 1] and ``N×h×w'`` int64 labels (w' = round(``width_share``·w)).
@@ -212,15 +212,7 @@ def strong_views(images: np.ndarray, labels: np.ndarray, rng: np.random.Generato
         lab = cv2.resize(labels[i, y0:y0 + ch, x0:x0 + cw], (ow, h), interpolation=cv2.INTER_NEAREST)
         if rng.random() < 0.5:
             img, lab = img[:, ::-1], lab[:, ::-1]
-        x = img.astype(np.float32) / 255.0
-        grey = x.mean(2, keepdims=True)
-        x = grey + (x - grey) * rng.uniform(0.4, 1.4)  # saturation
-        x = x.mean() + (x - x.mean()) * rng.uniform(0.6, 1.4)  # contrast
-        x = np.clip(x * rng.uniform(0.5, 1.3), 0, 1) ** rng.uniform(0.7, 2.0)  # brightness, gamma
-        if rng.random() < 1 / 3:
-            x = cv2.GaussianBlur(x, (0, 0), rng.uniform(0.3, 1.5))
-        x = x + rng.normal(0, rng.uniform(0, 0.03), x.shape).astype(np.float32)
-        xs[i] = np.clip(x, 0, 1).transpose(2, 0, 1)
+        xs[i] = strong_photometry(img.astype(np.float32) / 255.0, rng).transpose(2, 0, 1)
         ys[i] = lab
     return xs, ys
 
