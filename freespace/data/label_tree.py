@@ -11,7 +11,7 @@ A label tree is a folder of ``<frame>.png`` (KITTI colours; a frame name may hol
   :func:`tree_record`, :func:`file_record`, :func:`changed_inputs`);
 * **check** that it labels the frames it is given to (:func:`check_label_tree`, :func:`label_tree_pixels`);
 * **record** which tree the frames of ``generate`` were fitted to (:func:`hold_labels_record`, ``labels.json``);
-* **apply** it to a dataset (:func:`apply_label_tree`, :func:`labelled_from_tree`).
+* **apply** it to a dataset (:func:`tree_labels`, :func:`apply_label_tree`, :func:`labelled_from_tree`).
 
 Torch- and pydantic-free: ``freespace generate`` and ``freespace autolabel`` (the base install) use it too.
 """
@@ -41,8 +41,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["resolved_path", "file_signature", "file_sha256", "CONFIDENCE", "LABELS_RECORD", "confidence_path",
            "write_label_files", "label_files", "label_tree_sha256", "tree_record", "file_record", "changed_inputs",
-           "tree_text", "label_tree_pixels", "check_label_tree", "apply_label_tree", "labelled_from_tree",
-           "hold_labels_record"]
+           "tree_text", "label_tree_pixels", "check_label_tree", "tree_labels", "apply_label_tree",
+           "labelled_from_tree", "hold_labels_record"]
 
 #: the folder of a label tree that holds each label's confidence (``confidence/<frame>.png``)
 CONFIDENCE = "confidence"
@@ -263,6 +263,11 @@ def check_label_tree(folder: PathLike, dataset: str, root: PathLike, split: str 
 
 
 # --- applying a tree to a dataset --------------------------------------------------------------------------
+
+
+def tree_labels(folder: PathLike, names: Iterable[str]) -> list[str]:
+    """The frames of ``names`` that the label tree ``folder`` labels (a ``folder/<name>.png`` file), in order."""
+    return [name for name in names if (Path(folder) / f"{name}.png").is_file()]
 
 
 def apply_label_tree(dataset: StereoRoadDataset, folder: PathLike, names: Iterable[str]) -> StereoRoadDataset:

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from freespace.data.base import StereoRoadDataset
-from freespace.data.label_tree import apply_label_tree, label_tree_pixels
+from freespace.data.label_tree import apply_label_tree, label_tree_pixels, tree_labels
 from freespace.data.registry import get_dataset
 from freespace.data.splits import make_splits, read_splits, write_splits
 from freespace.data.torch_dataset import Item, VirtualAugment
@@ -162,8 +162,7 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
         if config.human_share:
             raise InvalidOptionError(f"{param('human_share')} needs frames labelled by people; {config.dataset} at "
                                      f"{config.root} has none: leave it at 0")
-        ds = apply_label_tree(ds, config.labels, [f.name for f in ds.frames
-                                                  if (Path(config.labels) / f"{f.name}.png").is_file()])
+        ds = apply_label_tree(ds, config.labels, tree_labels(config.labels, [f.name for f in ds.frames]))
         labelled = ds.labelled().frames
         notes.append(f"labels: {config.dataset} at {config.root} has no labels of its own: validation and test use "
                      f"{config.labels} as well (measure the model on human labels with freespace evaluate)")
@@ -174,7 +173,8 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
     splits = _splits(config, ds, labelled, run_dir / "splits")
     if config.labels is not None:  # the training frames' labels from a label tree; val and test keep their own
         human = _human_drives(labelled, splits["train"], config.human_share, config.seed)
-        train = [n for n in splits["train"] if n in human or (Path(config.labels) / f"{n}.png").is_file()]
+        tree = set(tree_labels(config.labels, splits["train"]))
+        train = [n for n in splits["train"] if n in human or n in tree]
         if not train:
             raise DatasetError(f"{param('labels')} {config.labels} has no label of any of the {len(splits['train'])} "
                                f"training frames (<frame>.png); label them with `freespace autolabel`")
