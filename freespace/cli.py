@@ -18,8 +18,7 @@ import re
 import signal
 import sys
 import threading
-from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -280,25 +279,21 @@ def cmd_generate(args: argparse.Namespace) -> int:
     from freespace.datagen.generate import generate_dataset
 
     def run(dataset: Any, out: str, **kwargs: Any) -> dict[str, Any]:
+        from freespace.data.label_tree import hold_labels_record
+
         dataset, tree = _generate_labels(args, dataset)
-        with _label_record(out, tree, dataset.root, args.labels, args.overwrite):
+        with hold_labels_record(out, tree, dataset.root, args.labels, args.overwrite):
             return generate_dataset(dataset, out, **kwargs)
 
     return _run_dataset(args, run, options, "generated", needs_right="the DS-Generator warps the right image")
 
 
-#: generate's record of the label tree its frames were fitted to (``--labels``), beside its settings.json
-LABELS_RECORD = "labels.json"
-
-
 def _generate_labels(args: argparse.Namespace, dataset: Any) -> tuple[Any, dict[str, Any] | None]:
     """``generate --dataset``'s road labels: with ``--labels TREE`` the dataset's frames that have a label
-    there, labelled from it (the others skipped, in one warning line), and the tree's record (``path``,
-    ``sha256`` of its content, ``files``); without, the dataset as it is (refused in one line naming
-    ``--labels`` when none of its frames has a label) and None."""
-    import logging
-
-    from freespace.data.label_tree import check_label_tree, label_files, label_tree_sha256, resolved_path
+    there, labelled from it, and the tree's record (:func:`~freespace.data.label_tree.labelled_from_tree`);
+    without, the dataset as it is (refused in one line naming ``--labels`` when none of its frames has a label)
+    and None."""
+    from freespace.data.label_tree import labelled_from_tree
     from freespace.errors import DatasetError
 
     if args.labels is None:
@@ -307,85 +302,7 @@ def _generate_labels(args: argparse.Namespace, dataset: Any) -> tuple[Any, dict[
                                f"road model to; label it with `freespace autolabel --dataset {args.dataset} --root "
                                f"{args.root} --out TREE` and give {param('labels')} TREE")
         return dataset, None
-    check_label_tree(args.labels, args.dataset, args.root, args.split)
-    files = label_files(args.labels)
-    names = [f.name for f in dataset.frames if f.name in files]
-    if not names:
-        raise DatasetError(f"{param('labels')} {args.labels} labels none of the {len(dataset.frames)} frames of "
-                           f"{args.dataset} at {args.root} (e.g. {dataset.frames[0].name}); give the tree that "
-                           f"`freespace autolabel` wrote for this dataset")
-    skipped = [f.name for f in dataset.frames if f.name not in files]
-    if skipped:
-        logging.getLogger("freespace.cli").warning(
-            "%d of %d frames have no label in %s and are skipped (%s%s)", len(skipped), len(dataset.frames),
-            args.labels, skipped[0], ", …" if len(skipped) > 1 else "")
-    digest, count = label_tree_sha256(args.labels)
-    tree = {"path": resolved_path(args.labels), "sha256": digest, "files": count}
-    return dataset.subset(names).with_labels(args.labels, names), tree
-
-
-def _tree_text(tree: dict[str, Any] | None) -> str:
-    """A label tree's record (:func:`_generate_labels`) in words, for messages."""
-    return "the dataset's own labels" if tree is None else \
-        f"the label tree {tree.get('path')} (sha256 {str(tree.get('sha256'))[:12]}…)"
-
-
-@contextmanager
-def _label_record(out: str, tree: dict[str, Any] | None, root: Any, labels: str | None,
-                  overwrite: bool) -> Iterator[None]:
-    """Hold ``OUT/labels.json``, generate's record of the label tree (``tree``, None: the dataset's own labels)
-    that the frames in ``out`` were fitted to, around the run. An ``out`` made with another tree, or with the
-    dataset's own labels when a tree is given now (or the reverse), is refused in one line, unless
-    ``overwrite``: then every file of the earlier run goes, and every frame is made again. The record is
-    written before any frame, so that a run killed half-way resumes with the same tree, under a claim of the
-    folder by generate (:mod:`freespace.io.outdir`: shared, as the shards of one run share it); it is
-    removed again when the run fails before generating anything."""
-    import json
-
-    from freespace.io.files import check_outputs, check_writable, write_json
-    from freespace.io.outdir import claim_folder
-
-    folder_path = Path(out)
-    record, settings = folder_path / LABELS_RECORD, folder_path / "settings.json"
-    if tree is None and not record.exists():
-        yield  # the dataset's own labels, and no tree recorded: generate's own settings say it all
-        return
-    check_writable(out, folder=True)  # what generate checks first: nothing is written where it refuses to
-    check_outputs({"out": out}, {"root": root, **({"labels": labels} if labels else {})})
-    created = not folder_path.exists()
-    with claim_folder(out, "generate", shared=True) as folder:
-        started = settings.is_file()
-        if record.is_file():
-            try:
-                old = json.loads(record.read_text())["labels"]
-            except (OSError, ValueError, KeyError, TypeError):
-                old = "unreadable"
-        else:
-            old = None if started else tree  # frames of the dataset's own labels; or nothing made yet
-        if old != tree:
-            if not overwrite:
-                was = "an unreadable record of their labels" if old == "unreadable" else _tree_text(old)
-                raise InvalidOptionError(f"{param('out')} {out} holds frames fitted to {was}, not to "
-                                         f"{_tree_text(tree)}; choose another {param('out')}, or add "
-                                         f"{param('overwrite')} to make them again")
-            folder.forget(folder.entries())  # every frame of the other labels, whichever this run makes
-        if tree is None:
-            folder.forget({LABELS_RECORD} & folder.entries())
-        else:
-            folder.record({LABELS_RECORD})
-            write_json(record, {"labels": tree})
-    try:
-        yield
-    except BaseException:
-        if tree is not None and not started and not settings.exists():  # refused before any frame: leave no record
-            with claim_folder(out, "generate", shared=True) as folder:
-                folder.forget({LABELS_RECORD} & folder.entries())
-            if created:
-                try:
-                    folder_path.rmdir()  # empty again (its manifest went with the last entry)
-                except OSError:
-                    pass
-        raise
+    return labelled_from_tree(dataset, args.labels, args.dataset, args.root, args.split)
 
 
 # --- autolabel -----------------------------------------------------------------------------------------
@@ -657,7 +574,7 @@ def _add_config_options(p: argparse.ArgumentParser, names: Collection[str] | Non
     choices and default; ``values`` (typed) replace the defaults, and a field given there is no longer required
     (``checked``: they are ``--config``'s, whose file checked them: :class:`_FromFile`). Flags are passed on as
     given (numbers converted); TrainConfig parses and checks them, as the file's values were."""
-    from freespace.engine.config import options
+    from freespace.engine.options import options
 
     for o in options(names, values):
         text = FreespaceError(o.help).render(_config_flag).replace("%", "%%")  # its parameters as flags
@@ -677,7 +594,7 @@ def _add_config_options(p: argparse.ArgumentParser, names: Collection[str] | Non
 
 def _config_values(args: argparse.Namespace, names: Collection[str] | None = None) -> dict[str, Any]:
     """The values of the options :func:`_add_config_options` added, by field name."""
-    from freespace.engine.config import options
+    from freespace.engine.options import options
 
     return {o.name: getattr(args, o.name) for o in options(names)}
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from freespace.cli import main
+from freespace.data.label_tree import apply_label_tree
 from freespace.data.registry import get_dataset
 from freespace.data.synthetic import SynthConfig, render_sample, write_dataset
 from freespace.datagen.autolabel import AutolabelOptions, autolabel
@@ -251,7 +252,7 @@ def test_train_labels_view_reads_the_tree_for_the_named_frames(rendered: Path, t
     assert main(["autolabel", "--dataset", "synth", "--root", str(rendered), "--out", str(out)]) == 0
     ds = get_dataset("synth", rendered)
     first, second = ds.frames[0].name, ds.frames[1].name
-    view = ds.with_labels(out, [first])
+    view = apply_label_tree(ds, out, [first])
     auto, own = read_road_label(out / f"{first}.png"), ds.load(0, right=False, disparity=False).label
     got = view.load(0, right=False, disparity=False).label
     assert np.array_equal(got.valid, auto.valid) and not np.array_equal(got.valid, own.valid)
@@ -259,7 +260,7 @@ def test_train_labels_view_reads_the_tree_for_the_named_frames(rendered: Path, t
                           ds.load(1, right=False, disparity=False).label.road)  # other frames keep theirs
     (out / f"{second}.png").unlink()
     with pytest.raises(DatasetError, match=second):
-        ds.with_labels(out, [second])
+        apply_label_tree(ds, out, [second])
     from freespace.engine.config import TrainConfig
 
     with pytest.raises(InputFileError, match="labels .* not found"):

@@ -15,7 +15,8 @@ import yaml
 
 from freespace.cli import CONFIG_FLAGS, REPRODUCE_OPTIONS, _flags, build_parser, main
 from freespace.data.synthetic import SynthConfig, write_dataset
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, options, read_config_yaml
+from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, read_config_yaml
+from freespace.engine.options import options
 from freespace.errors import InvalidOptionError, param
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -293,12 +294,13 @@ def test_generate_and_the_geometry_do_not_import_pydantic() -> None:
 def test_train_config_checks_each_yaml_value_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """`train --config`: each value of the file is parsed and checked once (when the file is read), not again
     for the options' defaults nor when the TrainConfig is made; a flag given as well still is checked, and wins."""
-    import freespace.engine.config as config_module
+    import freespace.engine.config_yaml as config_yaml
     import freespace.engine.train as train_module
 
     calls: list[str] = []
-    typed = config_module._typed
-    monkeypatch.setattr(config_module, "_typed", lambda name, value: (calls.append(name), typed(name, value))[1])
+    typed = config_yaml.typed_value
+    monkeypatch.setattr(config_yaml, "typed_value",
+                        lambda cls, name, value: (calls.append(name), typed(cls, name, value))[1])
     seen: list[TrainConfig] = []
     monkeypatch.setattr(train_module, "run_training", lambda config, **_: (
         seen.append(config),

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from freespace.cli import main
-from freespace.engine.config import label_tree_sha256
+from freespace.data.label_tree import label_tree_sha256
 from freespace.io.codecs import read_image, road_label_to_kitti, write_disparity, write_image
 from freespace.labels import RoadLabel
 

@@ -141,7 +141,8 @@ def test_config_file_values_have_the_flags_bounds(key: str, value: str, match: s
 
 def test_the_flags_bounds_are_the_fields_bounds() -> None:
     """The command line's type of a training option is derived from its TrainConfig field: one declaration."""
-    from freespace.engine.config import TrainConfig, options
+    from freespace.engine.config import TrainConfig
+    from freespace.engine.options import options
 
     kinds = {o.name: o.kind for o in options()}
     assert kinds["batch_size"](" 1024") == 1024

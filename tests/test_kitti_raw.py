@@ -18,8 +18,8 @@ import pytest
 from freespace.cli import main
 from freespace.data import get_dataset
 from freespace.data.kitti_raw import KittiRaw
+from freespace.data.label_tree import check_label_tree, label_files
 from freespace.data.splits import make_block_splits, read_splits
-from freespace.engine.config import check_label_tree, label_files
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError
 from freespace.io.kitti import read_kitti_raw_calib
 

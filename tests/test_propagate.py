@@ -181,7 +181,7 @@ def test_propagate_a_drive_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixt
     gained = new.road & new.valid & ~old.valid
     assert gained.any() and (np.nonzero(gained)[0] > 120).all()  # below the horizon only
     # training reads the propagated tree as a label tree of the dataset
-    from freespace.engine.config import check_label_tree
+    from freespace.data.label_tree import check_label_tree
 
     check_label_tree(tmp_path / "prop", "kitti-raw", root, None)
     # a propagated tree is not propagated again; the output may not be the input; method options are refused

@@ -68,7 +68,7 @@ def test_network_counts_match_the_registry(path: str, marker: str) -> None:
 
 
 def test_encoder_name_help_names_every_network_that_takes_one() -> None:
-    from freespace.engine.config import options
+    from freespace.engine.options import options
 
     help_text = next(o for o in options() if o.name == "encoder_name").help
     takes = {m for m in list_models() if "encoder_name" in model_options(m)}

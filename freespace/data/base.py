@@ -108,7 +108,8 @@ class StereoRoadDataset(ABC):
 
     name: ClassVar[str] = ""
     splits: ClassVar[tuple[str, ...]] = ("all",)
-    #: frame name → a KITTI-colour label file read instead of the layout's own label (:meth:`with_labels`)
+    #: frame name → a KITTI-colour label file read instead of the layout's own label (a label tree's:
+    #: :func:`freespace.data.label_tree.apply_label_tree`)
     label_files: dict[str, Path] = {}
 
     def __init__(self, root: PathLike, split: str | None = None, *, disparity_source: str = "auto",
@@ -195,27 +196,9 @@ class StereoRoadDataset(ABC):
         view.frames = frames
         return view
 
-    def with_labels(self, folder: PathLike, names: Iterable[str]) -> StereoRoadDataset:
-        """This dataset with the road labels of the frames ``names`` read from ``folder/<name>.png`` (KITTI
-        colours: an autolabel tree, ``freespace autolabel`` of a dataset) instead of its own; other frames keep
-        theirs. Every named frame must have its file there.
-
-        Raises:
-            DatasetError: a name is not a frame of this dataset, or has no ``<name>.png`` in ``folder``.
-        """
-        files = {}
-        for name in names:
-            self.index(name)
-            path = Path(folder) / f"{name}.png"
-            if not path.is_file():
-                raise DatasetError(f"{path} not found: the label tree {folder} has no label of frame {name}")
-            files[name] = path
-        view = copy.copy(self)
-        view.label_files = {**self.label_files, **files}
-        return view
-
     def has_label(self, frame: FrameRef) -> bool:
-        """Whether ``frame`` has a road label: its own, or one from a label tree (:meth:`with_labels`)."""
+        """Whether ``frame`` has a road label: its own, or one from a label tree
+        (:func:`~freespace.data.label_tree.apply_label_tree`)."""
         return frame.label is not None or frame.name in self.label_files
 
     def labelled(self) -> StereoRoadDataset:

@@ -1,7 +1,7 @@
 """Road labels without people from files: one left image (:func:`autolabel_pair`) or every frame of a dataset
-(:func:`autolabel_dataset`, through the per-frame runner :mod:`freespace.datagen.runner`); what
-``freespace autolabel`` runs. The method itself, :func:`autolabel` of a disparity map, is
-:mod:`freespace.datagen.labeller` (its names are importable from here too).
+(:func:`autolabel_dataset`, through the per-frame runner :mod:`freespace.datagen.runner`, into a label tree:
+:mod:`freespace.data.label_tree`); what ``freespace autolabel`` runs. The method itself, :func:`autolabel` of a
+disparity map, is :mod:`freespace.datagen.labeller` (its names are importable from here too).
 
 Every input is read and checked before anything is written; outputs are written atomically. This module
 imports NumPy and OpenCV only, never torch.
@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from freespace.data import label_tree
 from freespace.data.base import StereoRoadDataset
 from freespace.datagen.inputs import check_sgbm_range, dataset_settings, may_use_sgbm
 from freespace.datagen.labeller import AutolabelOptions, AutolabelResult, autolabel
@@ -31,8 +32,8 @@ from freespace.errors import (
     param,
 )
 from freespace.geometry import compute_disparity
-from freespace.io.codecs import describe_image, encode_image, read_disparity, read_image
-from freespace.io.files import PathLike, check_outputs, check_writable_files, encode_json, write_files_together
+from freespace.io.codecs import describe_image, read_disparity, read_image
+from freespace.io.files import PathLike, check_outputs, check_writable_files
 from freespace.io.kitti import read_kitti_calib
 
 log = logging.getLogger(__name__)
@@ -90,13 +91,10 @@ def write_label_files(result: AutolabelResult, out: PathLike, confidence: PathLi
                       report: PathLike | None = None, extra: dict[str, Any] | None = None) -> list[Path]:
     """Write the label (KITTI colours PNG), its confidence (8-bit grey PNG, ``round(255·c)``) and a JSON
     report (:meth:`AutolabelResult.report` plus ``extra``), all or nothing (when one cannot be written, the
-    files there before stay as they were). Returns the paths written."""
-    files: dict[PathLike, bytes] = {out: encode_image(result.kitti(), ".png")}
-    if confidence is not None:
-        files[confidence] = encode_image(result.confidence_u8(), ".png")
-    if report is not None:
-        files[report] = encode_json({**result.report(), **(extra or {})})
-    return write_files_together(files)
+    files there before stay as they were), as a label tree holds them
+    (:func:`freespace.data.label_tree.write_label_files`). Returns the paths written."""
+    return label_tree.write_label_files(result.label, out, result.confidence_u8(), confidence,
+                                        {**result.report(), **(extra or {})}, report)
 
 
 def autolabel_pair(reference: PathLike, target: PathLike | None = None, disparity: PathLike | None = None, *,
@@ -203,7 +201,7 @@ def _label_frame(dataset: StereoRoadDataset, index: int, out: Path, report: Path
         why = implausible_pair(matched, result)
         record.update(status="done", **result.report(), settings=settings, **({"implausible": why} if why else {}))
         root = out.parents[len(Path(frame.name).parts) - 1]  # OUT: out is OUT/<frame>.png, a frame may hold folders
-        write_label_files(result, out, root / "confidence" / f"{frame.name}.png", report, record)
+        write_label_files(result, out, label_tree.confidence_path(root, frame.name), report, record)
     except FreespaceError as exc:
         why = implausible_pair(matched, None) if isinstance(exc, RoadFitError) else None
         text = exc.render(param) + (f" ({why}: are the left and right images swapped?)" if why else "")

@@ -40,18 +40,17 @@ import cv2
 import numpy as np
 
 from freespace.data.base import StereoRoadDataset
+from freespace.data.label_tree import check_label_tree, confidence_path, write_label_files
 from freespace.errors import CorruptFileError, DatasetError, InvalidOptionError, param
 from freespace.geometry import RoadModel
 from freespace.geometry.homography import homography_from_pose
 from freespace.geometry.plane import RoadPlane
-from freespace.io.codecs import encode_image, read_image, read_road_label, road_label_to_kitti
+from freespace.io.codecs import read_image, read_road_label
 from freespace.io.files import (
     PathLike,
     check_outputs,
     check_writable,
-    encode_json,
     write_csv,
-    write_files_together,
     write_json,
 )
 from freespace.io.outdir import claim_folder
@@ -274,8 +273,6 @@ def propagate_frame(image: np.ndarray, label: RoadLabel, model: RoadModel, K: np
 
 def _read_tree_settings(tree: Path, dataset: StereoRoadDataset) -> dict[str, Any]:
     """The settings of the autolabel tree ``tree``, checked to label ``dataset`` and not to be propagated already."""
-    from freespace.data.label_tree import check_label_tree
-
     check_label_tree(tree, dataset.name, dataset.root, dataset.split, option="propagate_from")
     try:
         made = json.loads((tree / "settings.json").read_text())
@@ -352,12 +349,11 @@ def _propagate_drive(dataset: StereoRoadDataset, indices: list[int], tree: Path,
                "coverage": round(float(new.valid.mean()), 4), "road_before": round(float(label.road.mean()), 4),
                "road_fraction": round(float(new.road.mean()), 4), "gained": round(float((change == 1).mean()), 4),
                "conflicts": round(float((change == 2).mean()), 4)}
-        confidence = read_image(tree / "confidence" / f"{name}.png", what="confidence") \
-            if (tree / "confidence" / f"{name}.png").is_file() else np.zeros(label.shape, np.uint8)
+        confidence = read_image(confidence_path(tree, name), what="confidence") \
+            if confidence_path(tree, name).is_file() else np.zeros(label.shape, np.uint8)
         confidence = np.where(change == 1, 128, np.where(change == 2, 0, confidence)).astype(np.uint8)
-        write_files_together({staging / f"{name}.png": encode_image(road_label_to_kitti(new), ".png"),
-                              staging / "confidence" / f"{name}.png": encode_image(confidence, ".png"),
-                              staging / "reports" / f"{name}.json": encode_json({**report, "propagation": row})})
+        write_label_files(new, staging / f"{name}.png", confidence, confidence_path(staging, name),
+                          {**report, "propagation": row}, staging / "reports" / f"{name}.json")
         rows.append(row)
     return rows
 

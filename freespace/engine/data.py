@@ -17,10 +17,12 @@ import numpy as np
 import torch
 
 from freespace.data.base import StereoRoadDataset
+from freespace.data.label_tree import apply_label_tree, label_tree_pixels, tree_labels
 from freespace.data.registry import get_dataset
 from freespace.data.splits import make_splits, read_splits, write_splits
 from freespace.data.torch_dataset import Item, VirtualAugment
-from freespace.engine.config import TrainConfig, ranges_text
+from freespace.engine.config import TrainConfig
+from freespace.engine.option_values import ranges_text
 from freespace.errors import DatasetError, InvalidOptionError, param
 
 log = logging.getLogger(__name__)
@@ -160,8 +162,7 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
         if config.human_share:
             raise InvalidOptionError(f"{param('human_share')} needs frames labelled by people; {config.dataset} at "
                                      f"{config.root} has none: leave it at 0")
-        ds = ds.with_labels(config.labels, [f.name for f in ds.frames
-                                            if (Path(config.labels) / f"{f.name}.png").is_file()])
+        ds = apply_label_tree(ds, config.labels, tree_labels(config.labels, [f.name for f in ds.frames]))
         labelled = ds.labelled().frames
         notes.append(f"labels: {config.dataset} at {config.root} has no labels of its own: validation and test use "
                      f"{config.labels} as well (measure the model on human labels with freespace evaluate)")
@@ -172,14 +173,15 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
     splits = _splits(config, ds, labelled, run_dir / "splits")
     if config.labels is not None:  # the training frames' labels from a label tree; val and test keep their own
         human = _human_drives(labelled, splits["train"], config.human_share, config.seed)
-        train = [n for n in splits["train"] if n in human or (Path(config.labels) / f"{n}.png").is_file()]
+        tree = set(tree_labels(config.labels, splits["train"]))
+        train = [n for n in splits["train"] if n in human or n in tree]
         if not train:
             raise DatasetError(f"{param('labels')} {config.labels} has no label of any of the {len(splits['train'])} "
                                f"training frames (<frame>.png); label them with `freespace autolabel`")
         if len(train) < len(splits["train"]):
             notes.append(f"labels: {len(splits['train']) - len(train)} of {len(splits['train'])} training frames have "
                          f"no label in {config.labels} and are left out")
-        ds = ds.with_labels(config.labels, [n for n in train if n not in human])
+        ds = apply_label_tree(ds, config.labels, [n for n in train if n not in human])
         splits = {**splits, "train": train}
     _check_labelled(ds, splits["train"], config.labels)
     index = {f.name: ds.index(f.name) for f in labelled}
@@ -243,7 +245,6 @@ def _check_labelled(ds: StereoRoadDataset, train: list[str], labels: str | None)
     """Refuse a training set in which no pixel is labelled (every label all don't care: the loss would be 0 and
     nothing learnt), before any training. Reads the training labels until one has a labelled pixel (the
     first, unless something is wrong); a label tree's files are read once per process."""
-    from freespace.engine.config import label_tree_pixels
     from freespace.io.codecs import read_road_label
 
     tree = label_tree_pixels(labels) if labels is not None else {}

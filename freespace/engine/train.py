@@ -27,8 +27,9 @@ import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.plugins.io import TorchCheckpointIO
 
+from freespace.data.label_tree import changed_inputs
 from freespace.data.torch_dataset import RoadSegmentationDataset
-from freespace.engine.config import TrainConfig, changed_inputs, content_hashes
+from freespace.engine.config import TrainConfig, content_hashes
 from freespace.engine.data import EpochSampler, is_rank_zero, loader_context, prepare_data
 from freespace.engine.record import run_record
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, Terminated, TrainingError, param
