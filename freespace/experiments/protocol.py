@@ -29,7 +29,7 @@ A study whose arms train on *other data* declares them, each with its training d
     data:                                   # named training sources (paths: ${VAR} from the environment,
       real: {dataset: kitti-raw, root: "${RAW}", labels: "${WORK}/autolabels", splits: "${WORK}/splits",
              cache_dir: "${WORK}/sgbm-cache"}    # then relative ones from the protocol file's folder)
-      rendered: {dataset: synth, root: syn}
+      rendered: {dataset: kitti, root: syn}   # the renderer's output: a KITTI road tree
     variants:                               # a mapping: NAME: {data, augment, flip, photometric}; in this order
       S: {data: rendered}
       R-auto: {data: real}
@@ -284,7 +284,7 @@ def _data(data: Any, base: Path, file: str) -> dict[str, DataSource]:
     from freespace.data.registry import list_datasets
 
     if not isinstance(data, dict) or not data:
-        raise InvalidOptionError("data must map names to training sources (e.g. {rendered: {dataset: synth, root: "
+        raise InvalidOptionError("data must map names to training sources (e.g. {rendered: {dataset: kitti, root: "
                                  "syn}})")
     sources = {}
     for name, spec in data.items():
@@ -299,9 +299,9 @@ def _data(data: Any, base: Path, file: str) -> dict[str, DataSource]:
             if "$" in _ENV.sub("", value):
                 raise InvalidOptionError(f"data {name}: {key} {value}: write an environment variable as ${{NAME}}, "
                                          f"and no other $")
-        if spec["dataset"] not in list_datasets():
+        if spec["dataset"] not in list_datasets(aliases=True):  # an earlier name too (studies' files keep theirs)
             raise InvalidOptionError(f"data {name}: unknown dataset {spec['dataset']!r}; choose one of "
-                                     f"{', '.join(list_datasets())}")
+                                     f"{', '.join(list_datasets(aliases=False))}")
         sources[name] = DataSource(name=name, base=base, file=file, **spec)
     return sources
 
