@@ -8,8 +8,8 @@ that the autolabel does not mark don't care). Counts are summed over each set's 
 - the two real KITTI stereo 2015 frames (../shared/data/kitti_stereo_2015, road_mask/ the human label),
   from SGBM on the real pair and from the LiDAR disparity disp_occ_0 (baseline 0.54 m);
 - the three real KITTI road frames with LiDAR depth (../shared/data/kitti_road_depth), and the KITTI raw
-  frames of real_frames.py (SGBM from the pair where there is a right image, LiDAR where there is a scan:
-  $FREESPACE_KITTI_RAW), against the road polygons of real_frames.py: the polygons mark road only, so only
+  frames of freespace/evaluation/real_frames.py (SGBM from the pair where there is a right image, LiDAR where
+  there is a scan: $FREESPACE_KITTI_RAW), against its road polygons: the polygons mark road only, so only
   recall and coverage (inside the polygon) are measured there;
 - on KITTI stereo 2015 also ``fused``: LiDAR and SGBM joined (freespace.data.disparity.fuse_disparities).
 
@@ -37,14 +37,14 @@ from freespace.data.disparity import fuse_disparities  # noqa: E402
 from freespace.data.synthetic import SynthConfig, render_sample  # noqa: E402
 from freespace.datagen.autolabel import autolabel  # noqa: E402
 from freespace.errors import DatasetError, RoadFitError  # noqa: E402
+from freespace.evaluation.real_frames import KITTI_ROAD_POLYGONS as ROAD_POLYGONS  # noqa: E402
+from freespace.evaluation.real_frames import ROAD_POLYGONS as ROAD_POLYGONS_BY_NAME  # noqa: E402
+from freespace.evaluation.real_frames import polygon_mask  # noqa: E402
 from freespace.geometry import compute_disparity  # noqa: E402
 from freespace.geometry.depth import depth_to_disparity, rig_from_kitti  # noqa: E402
 from freespace.io.codecs import read_depth, read_disparity, read_image, read_road_label  # noqa: E402
 from freespace.io.kitti import read_kitti_calib  # noqa: E402
 from freespace.labels import RoadLabel  # noqa: E402
-from real_frames import KITTI_ROAD_POLYGONS as ROAD_POLYGONS  # noqa: E402
-from real_frames import ROAD_POLYGONS as ROAD_POLYGONS_BY_NAME
-from real_frames import polygon_mask
 
 SETS = {"test": (SynthConfig(width=320, height=240, frames_per_scenario=5), 0),
         "shifted": (SynthConfig(width=320, height=240, frames_per_scenario=5, max_roll_deg=6.0,
@@ -87,7 +87,7 @@ def kitti_raw_polygons() -> Iterator[Case]:
     """The KITTI raw frames of real_frames.py's polygons, each from every source its drive has (SGBM where
     there is a right image, LiDAR where there is a scan, fused where both)."""
     from freespace.data import get_dataset
-    from real_frames import KITTI_RAW, SHARED
+    from freespace.evaluation.real_frames import KITTI_RAW, SHARED
 
     wanted = {name: polygon for name, polygon in ROAD_POLYGONS_BY_NAME.items() if "_drive_" in name}
     for root in [r for r in (SHARED / "kitti_raw", KITTI_RAW) if r is not None and r.is_dir()]:

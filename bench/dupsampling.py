@@ -4,7 +4,8 @@ validation accuracy, precision, recall and F-score of the road class and writes 
 
     .venv/bin/python bench/dupsampling.py [--train 32 --val 16 --size 96x128 --epochs 25 --seeds 0]
 
-``tests/test_models.py`` runs :func:`compare` (slow) and asserts DUpsampling ≥ 90 % of DeepLabv3+'s F-score.
+``tests/test_models.py`` trains both the same way (its own copy of this loop, slow) and asserts DUpsampling ≥ 90 %
+of DeepLabv3+'s F-score.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Compares the robust fit + warp with the floor (plain least squares + one cv2.remap) and with a literal
 per-pixel implementation of the paper's formula. Uses the real KITTI frame in ../shared/data when it is
-there, otherwise a synthetic pair of the same size. Prints the figures and writes them to BENCHMARKS.md.
+there, otherwise a rendered frame of the same size. Prints the figures and writes them to BENCHMARKS.md.
 
     .venv/bin/python bench/generate.py
 """
@@ -34,17 +34,16 @@ def load_frame():
         right = read_image(SHARED / "image_3" / "000000_10.png")
         disp_path = SHARED / "disp_occ_0" / "000000_10.png"
         source = "real KITTI stereo 2015 frame 000000_10, LiDAR disparity"
-    else:
-        sys.path.insert(0, str(ROOT / "tests"))
-        from helpers import synthetic_pair
+        road = np.zeros(left.shape[:2], np.uint8)
+        cv2.fillPoly(road, [np.array(POLYGON, np.int32)], 1)
+        return left, right, read_disparity(disp_path), road.astype(bool), disp_path, source
+    from freespace.data.synthetic import SynthConfig, render_sample  # the built-in renderer at KITTI's size
 
-        left, right, _, disp = synthetic_pair((375, 1242))
-        disp_path = Path(tempfile.mkdtemp()) / "d.npy"
-        np.save(disp_path, disp)
-        source = "synthetic 1242×375 pair"
-    road = np.zeros(left.shape[:2], np.uint8)
-    cv2.fillPoly(road, [np.array(POLYGON, np.int32)], 1)
-    return left, right, read_disparity(disp_path), road.astype(bool), disp_path, source
+    sample = render_sample(0, 0, SynthConfig(width=1242, height=375))
+    disp_path = Path(tempfile.mkdtemp()) / "d.npy"
+    np.save(disp_path, np.nan_to_num(sample.disparity, nan=0.0))  # sky: no disparity
+    source = "rendered 1242×375 frame (freespace synth, frame 0 of seed 0), exact disparity, its road label"
+    return sample.left, sample.right, read_disparity(disp_path), sample.label.road, disp_path, source
 
 
 def floor(left: np.ndarray, right: np.ndarray, disp: np.ndarray, road: np.ndarray) -> np.ndarray:

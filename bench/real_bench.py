@@ -5,7 +5,8 @@
 
 ``--real-dev``: the development sets laid out by ``shared/data/real_dev/make.sh`` (``kitti_dev/``, ``camvid/``);
 ``--shared``: the shared samples (default ``../shared/data``: the two KITTI stereo 2015 frames with full road masks
-and the drawn road polygons of ``bench/real_frames.py``). A set whose files are absent is skipped and said so.
+and the drawn road polygons of :mod:`freespace.evaluation.real_frames`). A set whose files are absent is skipped and
+said so.
 ``--model``: ``NAME=PATH`` of an ONNX model or a training checkpoint, repeatable; default: every published model
 (``models/*/model.onnx``). Always scored beside them: **mean mask**, a fixed road mask fitted on the set's labels,
 leave-one-out: each frame against the per-pixel mean of the set's *other* labels, thresholded at 0.5 — a reference
@@ -24,7 +25,7 @@ set                frames  labels
                            don't care)
 ``camvid_dusk``    62      CamVid's dusk drive ``0001TP`` (frames of ``train``; their labels ``duskannot``)
 ``camvid_pool``    163     ``camvid_val`` and ``camvid_dusk`` pooled: the CamVid development pool
-``polygons``       6       recall inside conservative drawn road polygons (``bench/real_frames.py``)
+``polygons``       6       recall inside conservative drawn road polygons (``freespace/evaluation/real_frames.py``)
 =================  ======  ============================================================================
 
 Each set's figures: pooled precision, recall, F and IoU (counts summed over its frames, p ≥ 0.5) with a 95 %
@@ -117,7 +118,7 @@ def score_set(predictor: Any, frames: list[tuple[str, Any]]) -> PooledScores:
 
 def polygon_recall(predictor: Any) -> dict[str, Any] | None:
     """Recall inside the drawn road polygons (pooled over the polygons' pixels; mean over frames), or None."""
-    import real_frames
+    from freespace.evaluation import real_frames
 
     frames = [f for f in real_frames.available() if f.kind == "polygon"]
     if not frames:

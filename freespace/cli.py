@@ -82,15 +82,17 @@ class _Parser(argparse.ArgumentParser):
 
 def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, required: bool = True,
                       split: bool = True) -> None:
-    """``--dataset``, ``--root`` and (optionally) ``--split``, shared by every command that reads a dataset."""
-    from freespace.data.registry import list_datasets
+    """``--dataset``, ``--root`` and (optionally) ``--split``, shared by every command that reads a dataset. A
+    layout's earlier name (``synth``, ``kitti_road``, ``kitti_raw``, ``syn-stereo``) is read as its name."""
+    from freespace.data.registry import canonical_dataset, list_datasets
 
-    p.add_argument("--dataset", choices=list_datasets(), required=required,
-                   help="layout: kitti (KITTI road; synth = the renderer's output), kitti-raw (KITTI raw drives), "
-                        "synthia, carla/syn-stereo, generic")
+    p.add_argument("--dataset", choices=list_datasets(aliases=False), required=required, type=canonical_dataset,
+                   help="layout: kitti (KITTI road, and the renderer's output: `freespace synth` writes a KITTI road "
+                        "tree), kitti-raw (KITTI raw drives), synthia, carla (CARLA exports, e.g. SYN-Stereo), generic")
     p.add_argument("--root", metavar="DIR", required=required, help="dataset folder")
     if split:
-        p.add_argument("--split", help="on-disk split (KITTI: training or testing; default: the first)")
+        p.add_argument("--split", help="the dataset's on-disk split, a folder it ships (KITTI road: training or "
+                                       "testing; default: the first); not train/val/test, which are subsets")
 
 
 def _open_dataset(args: argparse.Namespace, needs_right: str | None = None):  # -> StereoRoadDataset (lazy import)

@@ -144,20 +144,6 @@ def refused(capsys: pytest.CaptureFixture, argv: list[str], *, match: str | None
     return err
 
 
-def real_frames():
-    """``bench/real_frames.py`` of this checkout (the real labelled test set: road polygons and full masks),
-    imported once."""
-    import importlib.util
-    import sys
-
-    if "real_frames" not in sys.modules:
-        spec = importlib.util.spec_from_file_location("real_frames", Path(__file__).resolve().parents[1] / "bench"
-                                                      / "real_frames.py")
-        module = sys.modules["real_frames"] = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return sys.modules["real_frames"]
-
-
 def road_frame(shape: tuple[int, int], seed: int) -> tuple[np.ndarray, np.ndarray]:
     """A generated frame (``uint8 H×W×3``) and its road mask (``bool H×W``): the road is a dark noisy band below a
     random horizon (45–65 % of the height), widening towards the bottom, under a bright texture."""

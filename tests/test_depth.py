@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, ShapeMismatchError
+from freespace.evaluation.real_frames import KITTI_ROAD_POLYGONS
 from freespace.geometry import fit_road_model
 from freespace.geometry.depth import (
     DEFAULT_VIRTUAL_BASELINE_M,
@@ -26,7 +27,7 @@ from freespace.geometry.depth import (
 from freespace.io.codecs import read_depth, write_disparity
 from freespace.io.kitti import read_kitti_calib
 
-from helpers import disparity_from_depth_file, real_frames, shared_path
+from helpers import disparity_from_depth_file, shared_path
 
 # --- d = f·B/Z ---------------------------------------------------------------------------------------
 
@@ -138,8 +139,8 @@ def test_rig_from_kitti_real_and_virtual() -> None:
 
 # --- real KITTI road frames with LiDAR depth ---------------------------------------------------------
 
-# (split folder, frame) → road polygon (u, v) drawn on the left image (bench/real_frames.py)
-ROAD_POLYGONS = real_frames().KITTI_ROAD_POLYGONS
+# (split folder, frame) → road polygon (u, v) drawn on the left image (freespace/evaluation/real_frames.py)
+ROAD_POLYGONS = KITTI_ROAD_POLYGONS
 
 
 @pytest.fixture(params=sorted(ROAD_POLYGONS), ids=lambda k: k[1])

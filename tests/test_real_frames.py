@@ -1,5 +1,5 @@
-"""The real labelled test set (``bench/real_frames.py``): every drawn polygon lies on one road plane, and the
-full masks are the road.
+"""The real labelled test set (:mod:`freespace.evaluation.real_frames`): every drawn polygon lies on one road plane,
+and the full masks are the road.
 
 A polygon that strayed onto a car, a kerb or the grass would fit the road model of section 2 badly: the
 disparity inside it (SGBM from the real pair, or the frame's LiDAR depth) must be explained by one road plane
@@ -11,13 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from freespace.evaluation import real_frames
 from freespace.geometry import compute_disparity, fit_road_model
 from freespace.io.codecs import read_image
 
 from helpers import SHARED, disparity_from_depth_file
-from helpers import real_frames as real_frames_module
-
-real_frames = real_frames_module()
 
 pytestmark = pytest.mark.skipif(not SHARED.is_dir(), reason=f"shared sample data not available ({SHARED})")
 

@@ -2,6 +2,13 @@
 
 Each layout registers itself with :func:`register_dataset`; ``freespace/data/__init__.py`` imports every
 layout, so importing this module (which imports the package first) makes all of them available.
+
+One name per layout: ``kitti`` (KITTI road, and the renderer's output, which ``freespace synth`` writes as a KITTI
+road tree), ``kitti-raw``, ``synthia``, ``carla`` (CARLA exports such as the paper's SYN-Stereo) and ``generic``.
+The names of earlier versions (``kitti_road``, ``synth``, ``kitti_raw``, ``syn-stereo``) stay accepted as aliases,
+so that configurations and run folders written with them still load; they are shown nowhere
+(``list_datasets(aliases=False)`` leaves them out) and :func:`canonical_dataset` turns them into the layout's
+name.
 """
 
 from __future__ import annotations
@@ -14,30 +21,48 @@ from freespace.data.base import StereoRoadDataset
 from freespace.errors import InvalidOptionError, param
 from freespace.io.files import PathLike
 
-__all__ = ["register_dataset", "list_datasets", "get_dataset_class", "get_dataset"]
+__all__ = ["register_dataset", "list_datasets", "canonical_dataset", "get_dataset_class", "get_dataset"]
 
+#: every name a layout answers to (its own and its aliases) → the layout
 _REGISTRY: dict[str, type[StereoRoadDataset]] = {}
 
 
-def register_dataset(*names: str) -> Callable[[type[StereoRoadDataset]], type[StereoRoadDataset]]:
-    """Class decorator: make a layout available under ``names`` (first = canonical, its ``name``)."""
+def register_dataset(name: str, *aliases: str) -> Callable[[type[StereoRoadDataset]], type[StereoRoadDataset]]:
+    """Class decorator: make a layout available as ``name`` (its one name, shown in help and messages: the class's
+    ``name``) and as ``aliases`` (earlier names, still accepted, shown nowhere)."""
     def wrap(cls: type[StereoRoadDataset]) -> type[StereoRoadDataset]:
-        cls.name = names[0]
-        for n in names:
+        cls.name = name
+        for n in (name, *aliases):
+            if n in _REGISTRY and _REGISTRY[n] is not cls:
+                raise ValueError(f"dataset name {n!r} is taken by {_REGISTRY[n].__name__}")
             _REGISTRY[n] = cls
         return cls
     return wrap
 
 
-def list_datasets() -> list[str]:
-    """Registered dataset names, aliases included, sorted."""
-    return sorted(_REGISTRY)
+def list_datasets(aliases: bool = True) -> list[str]:
+    """Every name a layout answers to, sorted; ``aliases=False``: one per layout, its name (what help and messages
+    show)."""
+    return sorted(_REGISTRY if aliases else {cls.name for cls in _REGISTRY.values()})
+
+
+def canonical_dataset(name: str) -> str:
+    """The layout's name of ``name``, which may be an alias: ``canonical_dataset("synth") == "kitti"``.
+
+    Raises:
+        InvalidOptionError: no layout answers to ``name`` (the message lists the layouts' names).
+    """
+    return get_dataset_class(name).name
 
 
 def get_dataset_class(name: str) -> type[StereoRoadDataset]:
-    """The layout registered as ``name``; InvalidOptionError listing the names if there is none."""
-    if name not in _REGISTRY:
-        raise InvalidOptionError(f"unknown dataset {name!r}; choose one of {', '.join(sorted(_REGISTRY))}")
+    """The layout registered as ``name`` (its name or an alias).
+
+    Raises:
+        InvalidOptionError: no layout answers to ``name`` (the message lists the layouts' names).
+    """
+    if not isinstance(name, str) or name not in _REGISTRY:
+        raise InvalidOptionError(f"unknown dataset {name!r}; choose one of {', '.join(list_datasets(aliases=False))}")
     return _REGISTRY[name]
 
 
@@ -53,7 +78,7 @@ def get_dataset(name: str, root: PathLike, split: str | None = None, **options: 
     layout = get_dataset_class(name)
     unknown = sorted(set(options) - _options_of(layout))
     if unknown:
-        raise InvalidOptionError(f"{param(unknown[0])} is not an option of the {name} layout (it takes "
+        raise InvalidOptionError(f"{param(unknown[0])} is not an option of the {layout.name} layout (it takes "
                                  f"{', '.join(sorted(_options_of(layout)))}); leave it out")
     return layout(root, split, **options)
 

@@ -25,7 +25,6 @@ from freespace.experiments.protocol import Protocol
 from freespace.experiments.variants import (
     DEFAULT_TEST_SET,
     METRICS,
-    MIX_HUMAN_SHARE,
     VARIANTS,
     TestRoots,
     Variant,
@@ -93,7 +92,9 @@ def cell_config(dataset: str | None, root: PathLike | None, out: Path, model: st
         from freespace.engine.config import check_label_tree
 
         check_label_tree(autolabels, dataset, root, options.get("split"), option="autolabels")  # named as given
-        options.update(labels=str(autolabels), human_share=MIX_HUMAN_SHARE if spec.labels == "mix" else 0.0)
+        options.update(labels=str(autolabels), human_share=0.0)
+    if spec.controls:  # a study control the variant reads (X-mix: mix_human_share), from the study's protocol
+        options.update((protocol or Protocol()).control_values(variant))
     config = TrainConfig(dataset=dataset, root=str(root),
                          out=str(out / "runs" / run_name(model, variant, seed, vocabulary)), model=model,
                          augment=spec.augment, seed=seed, **{k: True for k in spec.samples}, **options)

@@ -22,6 +22,13 @@ method's own defaults hold (:data:`~freespace.experiments.variants.DEFAULT_VARIA
       margin: 1.0                           # the equivalence margin, in points
     test_sets: {fixed: fixed, shifted: shifted}   # optional: NAME: DIR, as test_root takes NAME=DIR
     reference: "..."                        # optional: a sentence under the gains table (published gains)
+    controls: {mix_human_share: 0.2}        # the study controls its variants read (CONTROLS; X-mix: this one)
+
+A study control (:data:`~freespace.experiments.variants.CONTROLS`) is a value a built-in variant needs that the
+paper does not fix, so the study that runs the variant declares it: X-mix's ``mix_human_share``, the share of
+the training drives that keep the dataset's labels. The library has no default for it: running X-mix without
+a protocol that declares it is refused before any cell trains, and a protocol that declares a control none of
+its variants or gains reads is refused.
 
 A study whose arms train on *other data* declares them, each with its training data (:class:`DataSource`,
 :attr:`Protocol.declared`); ``reproduce`` then takes no ``dataset``/``root`` parameters::
@@ -29,7 +36,7 @@ A study whose arms train on *other data* declares them, each with its training d
     data:                                   # named training sources (paths: ${VAR} from the environment,
       real: {dataset: kitti-raw, root: "${RAW}", labels: "${WORK}/autolabels", splits: "${WORK}/splits",
              cache_dir: "${WORK}/sgbm-cache"}    # then relative ones from the protocol file's folder)
-      rendered: {dataset: synth, root: syn}
+      rendered: {dataset: kitti, root: syn}   # the renderer's output: a KITTI road tree
     variants:                               # a mapping: NAME: {data, augment, flip, photometric}; in this order
       S: {data: rendered}
       R-auto: {data: real}
@@ -52,6 +59,7 @@ from typing import Any
 
 from freespace.errors import InvalidOptionError, param
 from freespace.experiments.variants import (
+    CONTROLS,
     DEFAULT_VARIANTS,
     GAIN_METRICS,
     GAINS,
@@ -71,6 +79,8 @@ _VARIANT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9+_-]{0,39}")
 _DATA_NAME = re.compile(r"[a-z][a-z0-9_-]{0,39}")
 #: the per-sample augmentations a declared variant may switch on (TrainConfig's switches)
 _SAMPLES = ("flip", "photometric")
+#: a protocol file's keys
+_KEYS = ("variants", "gains", "primary", "test_sets", "reference", "data", "controls")
 #: ``${NAME}`` in a training source's paths: the environment variable's value
 _ENV = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
 
@@ -190,11 +200,28 @@ class Protocol:
     reference: str | None = None
     data: dict[str, DataSource] = field(default_factory=dict)
     declared: dict[str, Variant] = field(default_factory=dict)
+    controls: dict[str, float] = field(default_factory=dict)
 
     @property
     def vocabulary(self) -> dict[str, Variant]:
         """The variants this protocol's names mean, in table order: its declared ones, else :data:`VARIANTS`."""
         return self.declared or VARIANTS
+
+    def control_values(self, variant: str) -> dict[str, float]:
+        """The :class:`~freespace.engine.config.TrainConfig` values the study controls of ``variant`` set
+        (X-mix: ``{"human_share": mix_human_share}``), from :attr:`controls`.
+
+        Raises:
+            InvalidOptionError: the protocol does not declare a control the variant reads (named, with how).
+        """
+        values = {}
+        for name in self.vocabulary[variant].controls:
+            if name not in self.controls:
+                raise InvalidOptionError(f"{variant} reads the study control {name} ({CONTROLS[name].help}), which "
+                                         f"the study declares: give {param('protocol')} a file with controls: "
+                                         f"{{{name}: VALUE}}")
+            values[CONTROLS[name].field] = self.controls[name]
+        return values
 
     @classmethod
     def load(cls, path: PathLike) -> Protocol:
@@ -215,12 +242,11 @@ class Protocol:
             raise missing_input(path, param("protocol"), hint="give a study's protocol.yaml")
         data = load_yaml(path)
         if not isinstance(data, dict):
-            raise InvalidOptionError(f"{where} is not a mapping of variants, gains, primary, test_sets, reference "
-                                     f"and data")
-        unknown = sorted(set(map(str, data)) - {"variants", "gains", "primary", "test_sets", "reference", "data"})
+            raise InvalidOptionError(f"{where} is not a mapping of {', '.join(_KEYS[:-1])} and {_KEYS[-1]}")
+        unknown = sorted(set(map(str, data)) - set(_KEYS))
         if unknown:
-            raise InvalidOptionError(f"{where}: unknown key {unknown[0]!r}; the keys are variants, gains, primary, "
-                                     f"test_sets, reference and data")
+            raise InvalidOptionError(f"{where}: unknown key {unknown[0]!r}; the keys are {', '.join(_KEYS[:-1])} and "
+                                     f"{_KEYS[-1]}")
         try:
             return _protocol(data, Path(path).resolve().parent, str(path))
         except InvalidOptionError as exc:
@@ -266,7 +292,34 @@ def _protocol(data: dict[str, Any], base: Path = Path("."), file: str = "") -> P
         if not isinstance(data["reference"], str) or "\n" in data["reference"].strip():
             raise InvalidOptionError("reference must be one line of text")
         values["reference"] = data["reference"].strip()
+    if data.get("controls") is not None:
+        named = {*values.get("variants", DEFAULT_VARIANTS), *(v for g in values.get("gains", GAINS) for v in g)}
+        values["controls"] = _controls(data["controls"], [vocabulary[v] for v in vocabulary if v in named])
     return Protocol(**values)
+
+
+def _controls(data: Any, variants: list[Variant]) -> dict[str, float]:
+    """The ``controls`` mapping → ``{name: value}``, each a known control (:data:`CONTROLS`) that one of
+    ``variants`` (the protocol's variants and those of its gains) reads, with a value within its bounds."""
+    if not isinstance(data, dict):
+        raise InvalidOptionError(f"controls must map study controls to values (e.g. {{mix_human_share: 0.2}}); the "
+                                 f"controls are {', '.join(CONTROLS)}")
+    controls = {}
+    for name, value in data.items():
+        if name not in CONTROLS:
+            raise InvalidOptionError(f"controls: unknown control {name!r}; the controls are "
+                                     + "; ".join(f"{c.name} ({c.help})" for c in CONTROLS.values()))
+        control = CONTROLS[name]
+        readers = [v.name for v in VARIANTS.values() if name in v.controls]
+        if not any(name in v.controls for v in variants):
+            raise InvalidOptionError(f"controls: {name} is read by {', '.join(readers)}, which this protocol neither "
+                                     f"runs nor reports; name it in variants or gains, or leave {name} out")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not control.low < value < control.high:
+            raise InvalidOptionError(f"controls: {name} must be a number strictly between {control.low:g} and "
+                                     f"{control.high:g} ({control.help}), got {value!r}")
+        controls[name] = float(value)
+    return controls
 
 
 def _gain(text: Any, variants: dict[str, Variant] = VARIANTS) -> tuple[str, str]:
@@ -284,7 +337,7 @@ def _data(data: Any, base: Path, file: str) -> dict[str, DataSource]:
     from freespace.data.registry import list_datasets
 
     if not isinstance(data, dict) or not data:
-        raise InvalidOptionError("data must map names to training sources (e.g. {rendered: {dataset: synth, root: "
+        raise InvalidOptionError("data must map names to training sources (e.g. {rendered: {dataset: kitti, root: "
                                  "syn}})")
     sources = {}
     for name, spec in data.items():
@@ -299,9 +352,9 @@ def _data(data: Any, base: Path, file: str) -> dict[str, DataSource]:
             if "$" in _ENV.sub("", value):
                 raise InvalidOptionError(f"data {name}: {key} {value}: write an environment variable as ${{NAME}}, "
                                          f"and no other $")
-        if spec["dataset"] not in list_datasets():
+        if spec["dataset"] not in list_datasets(aliases=True):  # an earlier name too (studies' files keep theirs)
             raise InvalidOptionError(f"data {name}: unknown dataset {spec['dataset']!r}; choose one of "
-                                     f"{', '.join(list_datasets())}")
+                                     f"{', '.join(list_datasets(aliases=False))}")
         sources[name] = DataSource(name=name, base=base, file=file, **spec)
     return sources
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from freespace.errors import InvalidOptionError, param
 from freespace.io.files import PathLike
 
-__all__ = ["Variant", "VARIANTS", "MIX_HUMAN_SHARE", "DEFAULT_VARIANTS", "GAINS", "ALL_NETWORKS",
+__all__ = ["Variant", "VARIANTS", "Control", "CONTROLS", "DEFAULT_VARIANTS", "GAINS", "ALL_NETWORKS",
            "PAPER_NETWORKS", "GAIN_METRICS", "METRICS", "METRIC_NAMES", "DEFAULT_TEST_SET",
            "RESERVED_TEST_SETS", "TEST_SET_NAME", "MAX_SEEDS", "TestRoots", "variant_tag", "run_name", "run_of",
            "parse_models", "parse_variants", "parse_cell", "parse_test_roots"]
@@ -23,7 +23,8 @@ class Variant:
     ``tag`` of its run folders (``runs/<model>-<tag>-s<seed>``), ``budget``, the factor on the epoch cap
     and on the early-stopping patience (X-long: 2, as many optimiser steps as HA-X), and where the training
     labels come from: ``human`` (the dataset's), ``auto`` (the ``autolabels`` tree) or ``mix`` (the
-    dataset's on :data:`MIX_HUMAN_SHARE` of the training drives, the tree's on the rest). ``data``: the
+    dataset's on a share of the training drives, the tree's on the rest). ``controls``: the study controls the
+    variant reads from the protocol (:data:`CONTROLS`; X-mix: that share). ``data``: the
     training source (a :attr:`Protocol.data` name) of a variant a protocol file declares; None for the built-in
     ones, which train on ``reproduce``'s dataset. ``samples``: the per-sample augmentations a declared variant
     adds to the conventional one (``flip``, ``photometric``: :class:`~freespace.engine.config.TrainConfig`'s
@@ -36,6 +37,7 @@ class Variant:
     labels: str = "human"
     data: str | None = None
     samples: tuple[str, ...] = ()
+    controls: tuple[str, ...] = ()
 
     def label(self, model: str) -> str:
         """The table row of ``model``: ``X`` replaced by the network's name (``HA-X`` → ``HA-unet``); a declared
@@ -52,10 +54,30 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in (
     Variant("X-dup", ("duplicate",), "dup"),               # control: HA-X's step count, the frames' own images
     Variant("X-long", (), "long", budget=2),               # control: HA-X's step count, each frame once per epoch
     Variant("X-auto", (), "auto", labels="auto"),          # labels nobody drew (freespace autolabel)
-    Variant("X-mix", (), "mix", labels="mix"),             # people's labels on a fifth of the drives, autolabels after
+    Variant("X-mix", (), "mix", labels="mix",              # people's labels on a share of the drives, autolabels after
+            controls=("mix_human_share",)),
 )}
-#: the share of the training drives that keep the dataset's labels in X-mix
-MIX_HUMAN_SHARE = 0.2
+
+
+@dataclass(frozen=True)
+class Control:
+    """A study control: a value a built-in variant needs that the method leaves to the study, which declares it
+    in its protocol file (``controls: {name: value}``; :attr:`~freespace.experiments.protocol.Protocol.controls`).
+    ``field``: the :class:`~freespace.engine.config.TrainConfig` field it sets in the variant's cells; the value
+    lies strictly between ``low`` and ``high``; ``help``: what it is, for the messages."""
+
+    name: str
+    field: str
+    low: float
+    high: float
+    help: str
+
+
+#: the study controls, by name (the paper defines none of them: no defaults)
+CONTROLS: dict[str, Control] = {c.name: c for c in (
+    Control("mix_human_share", "human_share", 0.0, 1.0, "X-mix: the share of the training drives that keep the "
+            "dataset's labels (the label tree's on the rest)"),
+)}
 DEFAULT_VARIANTS = ("X", "HA-X", "X-dup")
 #: the paired gains reported (variant, versus), when both were run (X-dup − X-long: the second draw of the
 #: conventional augmentation at equal optimiser steps)

@@ -27,6 +27,18 @@ class _StderrHandler(logging.StreamHandler):
         pass
 
 
+class _Clean(logging.Formatter):
+    """A record as one clean text: a parameter named with :func:`freespace.errors.param` shown by its name (never
+    its NUL-delimited marker), and every control byte but newline and tab shown escaped (``\\x1b``), so that a
+    file name cannot move the terminal's cursor, ring its bell or hide the rest of the line."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        from freespace.errors import render
+
+        text = render(super().format(record))
+        return "".join(c if c.isprintable() or c in "\n\t" else ascii(c)[1:-1] for c in text)
+
+
 def setup_logging(verbosity: int = 0) -> None:
     """Install a stderr handler on the ``freespace`` logger.
 
@@ -38,7 +50,7 @@ def setup_logging(verbosity: int = 0) -> None:
     logger.setLevel(level)
     if not any(getattr(h, "_freespace", False) for h in logger.handlers):
         handler = _StderrHandler()
-        handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+        handler.setFormatter(_Clean("%(levelname)s %(name)s: %(message)s"))
         handler._freespace = True  # type: ignore[attr-defined]
         logger.addHandler(handler)
     logger.propagate = False
@@ -74,6 +86,6 @@ def quiet_lightning() -> None:
         logger = logging.getLogger(name)
         logger.handlers = [h for h in logger.handlers if not isinstance(h, logging.StreamHandler)]
         logger.addHandler(_StderrHandler())
-        logger.handlers[-1].setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+        logger.handlers[-1].setFormatter(_Clean("%(levelname)s %(name)s: %(message)s"))
         logger.propagate = False
         logger.setLevel(logging.DEBUG if debug else logging.WARNING)

@@ -4,9 +4,9 @@
     python studies/real-roads/evaluate.py --rendered TREE RUN [RUN ...]   # also RUN/rendered.json
     python studies/real-roads/evaluate.py --table RUNS      # the variants' table (Markdown) from RUNS/*/real.json
 
-Each run's best checkpoint predicts the real labelled frames of ``bench/real_frames.py`` at full resolution
-(the network at its training size, the probabilities upsampled; road where p ≥ 0.5). Full-mask frames: precision,
-recall, F and IoU per frame and pooled over the frames' pixels; polygon frames: recall inside the polygon. A
+Each run's best checkpoint predicts the real labelled frames of ``freespace/evaluation/real_frames.py`` at full
+resolution (the network at its training size, the probabilities upsampled; road where p ≥ 0.5). Full-mask frames:
+precision, recall, F and IoU per frame and pooled over the frames' pixels; polygon frames: recall inside the polygon. A
 frame the run trained or validated on (its ``splits/train.txt``/``val.txt``) is left out and named.
 
 ``--rendered TREE`` also scores the run on every frame of a rendered tree (``freespace synth``'s KITTI road
@@ -27,13 +27,11 @@ import argparse
 import json
 import math
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "bench"))
 
 VARIANT_TAGS = {"s": "S", "r-auto": "R-auto", "ha-r-auto": "HA-R-auto", "r-auto-dup": "R-auto-dup",
                 "s_r-auto": "S+R-auto", "r-auto-fp": "R-auto-fp", "s_r-auto-fp": "S+R-auto-fp"}
@@ -59,10 +57,10 @@ def evaluate(run: Path) -> dict:
     """Measure ``run``'s best checkpoint on the real frames; return (and write to ``run/real.json``) the
     per-frame figures, the pooled full-mask figures and the frames left out."""
     from freespace.evaluation.metrics import Counts, confusion_counts
+    from freespace.evaluation.real_frames import available
     from freespace.inference.predictor import Predictor
     from freespace.io.codecs import read_image
     from freespace.io.files import atomic_write_text
-    from real_frames import available
 
     predictor = Predictor(checkpoint=run / "checkpoints" / "best.ckpt")
     seen = _seen(run)
@@ -95,16 +93,23 @@ def evaluate(run: Path) -> dict:
 def evaluate_rendered(run: Path, tree: Path) -> dict:
     """Measure ``run``'s best checkpoint on every frame of the rendered tree ``tree``; return (and write to
     ``run/rendered.json``) F at p ≥ 0.5, the MaxF and the number of frames."""
+    from freespace.evaluation.labelled import pair_labelled_frames, parse_label_format
+    from freespace.evaluation.metrics import RoadEvaluator
     from freespace.inference.predictor import Predictor
     from freespace.io.files import atomic_write_text
-    from realtime import f_scores, rendered_pairs
 
-    pairs = rendered_pairs(tree, None)
-    if not pairs:
+    training = tree / "data_road" / "training"
+    if not (training / "image_2").is_dir() or not any((training / "image_2").glob("*.png")):
         raise SystemExit(f"--rendered {tree}: no data_road/training/image_2 frames; give a `freespace synth` tree")
-    scores = f_scores(Predictor(checkpoint=run / "checkpoints" / "best.ckpt"), pairs)
+    kitti = parse_label_format("kitti")
+    predictor = Predictor(checkpoint=run / "checkpoints" / "best.ckpt")
+    evaluator = RoadEvaluator()  # F and MaxF from the counts summed over the frames, at each image's own size
+    for frame in pair_labelled_frames(training / "image_2", training / "gt_image_2", kitti):
+        image, label = frame.read(kitti)
+        evaluator.process(predictor.predict([image])[0], label.road, label.valid)
+    scores = evaluator.evaluate()
     result = {"checkpoint": str(run / "checkpoints" / "best.ckpt"), "tree": str(tree), "threshold": THRESHOLD,
-              **scores}
+              "f": scores["f_score"], "max_f": scores["max_f"], "images": scores["images"]}
     atomic_write_text(run / "rendered.json", json.dumps(result, indent=2) + "\n")
     return result
 

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 WIDTH = 620  # pixels per picture: two KITTI frames side by side stay legible at ~1240 px
@@ -26,10 +25,10 @@ WIDTH = 620  # pixels per picture: two KITTI frames side by side stay legible at
 def variant_rows(runs: Path, seed: int, model: str) -> np.ndarray:
     from evaluate import THRESHOLD, VARIANT_TAGS
     from freespace.evaluation.metrics import confusion_counts
+    from freespace.evaluation.real_frames import available
     from freespace.evaluation.viz import caption, grid, overlay_errors
     from freespace.inference.predictor import Predictor
     from freespace.io.codecs import read_image
-    from real_frames import available
 
     frames = [f for f in available() if f.kind == "mask"]
     images = [read_image(f.image) for f in frames]

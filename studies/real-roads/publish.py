@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # evaluate.py beside it
 
 #: the example frames (drive, frame): in the test blocks of their drives
 EXAMPLES = (("2011_09_26_drive_0001_sync", "0000000100"), ("2011_09_26_drive_0000_sync", "0000000070"))
@@ -39,10 +39,10 @@ def failures(run: Path, out: Path) -> None:
 
     from evaluate import THRESHOLD
     from freespace.evaluation.metrics import confusion_counts
+    from freespace.evaluation.real_frames import available
     from freespace.evaluation.viz import caption, grid, overlay_errors
     from freespace.inference.predictor import Predictor
     from freespace.io.codecs import read_image
-    from real_frames import available
 
     frames = [f for f in available() if f.kind == "mask"]
     images = [read_image(f.image) for f in frames]

@@ -78,14 +78,13 @@ def test_the_table_gives_the_rendered_f_where_runs_have_it(tmp_path: Path) -> No
     assert gains["unet"].endswith("| — |")  # no rendered score: no gain
 
 
-def test_rendered_scores_every_frame_of_a_tree_and_refuses_an_empty_one(tmp_path: Path) -> None:
+def test_rendered_scores_every_frame_of_a_tree_and_refuses_an_empty_one(tmp_path: Path, road_frame,
+                                                                        tiny_road_checkpoint) -> None:
     """``evaluate.py --rendered``: a run's best checkpoint on a rendered tree's frames (F and MaxF from summed
     counts), written to RUN/rendered.json; a folder without frames is a one-line refusal."""
     import numpy as np
 
     from freespace.io.codecs import write_image
-
-    from helpers import road_frame, tiny_road_checkpoint
 
     evaluate = _load("evaluate")
     run = tmp_path / "fastscnn-s-s0"
@@ -139,11 +138,10 @@ def test_mix_links_both_sources_and_splits_them(tmp_path: Path) -> None:
 
 # --- hostile probe 4 (issue 59): no false success, nothing half made ---------------------------------------
 
-def test_evaluate_with_no_real_frame_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_evaluate_with_no_real_frame_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                    tiny_road_checkpoint) -> None:
     """No real frame here (or every one trained on): a refusal, not F = 1 of no pixel."""
-    import real_frames
-
-    from helpers import tiny_road_checkpoint
+    from freespace.evaluation import real_frames
 
     evaluate = _load("evaluate")
     run = tmp_path / "fastscnn-s-s0"

@@ -22,12 +22,14 @@ frame                                        where it lies
 ===========================================  ===========================================================
 ``um_000000``, ``uu_000000``, ``uu_000001``  ``shared/data/kitti_road_depth`` (KITTI road, left image only)
 ``2011_09_26_drive_0001_sync/0000000090``    ``shared/data/kitti_raw`` — drive 0001's last time block
-``2011_09_26_drive_0001_sync/0000000105``    (frames 87–107): never in a training split (``--block-split``)
+``2011_09_26_drive_0001_sync/0000000105``    (frames 87–107), held out of the time-block subsets
 ``2011_09_26_drive_0000_sync/0000000065``    the second drive of that day (stop-and-go traffic), under
                                              ``$FREESPACE_KITTI_RAW``: frames 60–77 are its held-out block
 ===========================================  ===========================================================
 
-Frames whose files are absent are skipped by :func:`available`.
+Frames whose files are absent are skipped by :func:`available`. The tests, the benchmarks (``bench/``) and the
+studies read this one module. The files are found under :data:`SHARED` (``FREESPACE_SHARED_DATA``, else
+``shared/data`` beside a checkout of the repository) and :data:`KITTI_RAW`, read when this module is imported.
 """
 
 from __future__ import annotations
@@ -38,7 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+#: the repository's folder, for a checkout (``freespace/evaluation/real_frames.py`` lies two folders down)
+ROOT = Path(__file__).resolve().parents[2]
 #: the shared real samples (as the tests find them)
 SHARED = Path(os.environ.get("FREESPACE_SHARED_DATA") or ROOT.parent / "shared" / "data")
 #: a KITTI raw root with the whole drives (fetched, never in the repository); default: none
