@@ -857,36 +857,12 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_predict(args: argparse.Namespace) -> int:
     """``freespace predict``: road confidence PNGs (KITTI format) and overlays, or the overlaid video."""
-    from freespace.inference.predict import Predictor, predict_folder, predict_video
-    from freespace.io.files import check_outputs, check_suffix, check_writable
-    from freespace.io.video import is_video_path
-    from freespace.runtime.shard import parse_shard
+    from freespace.inference.predict import predict, predict_report
 
-    video = is_video_path(args.out)
-    check_writable(args.out, folder=not video)  # before the model is loaded
-    check_outputs({"out": args.out}, {"input": args.input, "checkpoint": args.checkpoint, "onnx": args.onnx})
-    if video:
-        check_suffix(args.out, (".mp4",))
-    shard = parse_shard(args.shard) if args.shard is not None else None
-    if video and shard:
-        raise InvalidOptionError("--shard writes frames into a folder; a video --out is one file: leave out --shard")
-    if video and args.no_overlays:
-        raise InvalidOptionError("--no-overlays leaves out the overlay PNGs of a folder --out; a video --out is the "
-                                 "overlay: leave out --no-overlays")
-    predictor = Predictor(checkpoint=args.checkpoint, onnx=args.onnx, threads=args.threads)
-    if video:
-        summary = predict_video(predictor, args.input, args.out, batch_size=args.batch_size,
-                                progress=not args.no_progress)
-    else:
-        summary = predict_folder(predictor, args.input, args.out, batch_size=args.batch_size,
-                                 progress=not args.no_progress, shard=shard, overlays=not args.no_overlays)
-    if not summary["frames"]:
-        print(f"0 frames in shard {args.shard} → {args.out}")
-        return 0
-    print(f"{summary['frames']} frames in {summary['seconds']:.2f} s: {summary['frames_per_second']:.1f} frames per "
-          f"second end to end (first frame read to last written); the network {summary['seconds_per_frame'] * 1000:.1f}"
-          f" ms per frame, {100 * summary['network_share']:.0f} % of the time"
-          + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
+    summary = predict(args.input, args.out, checkpoint=args.checkpoint, onnx=args.onnx, threads=args.threads,
+                      batch_size=args.batch_size, shard=args.shard, overlays=not args.no_overlays,
+                      progress=not args.no_progress)
+    print(predict_report(summary, args.out, args.shard))
     return 0
 
 
@@ -907,7 +883,7 @@ def _export_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """``freespace export``: ONNX or TorchScript, validated against PyTorch."""
-    from freespace.inference.predict import export_model
+    from freespace.inference.export import export_model, export_report
 
     if args.fp16 and args.int8:
         raise InvalidOptionError("--fp16 and --int8 exclude each other: a model is exported in float16 or in int8; "
@@ -915,22 +891,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     if args.int8 != (args.calibration is not None):
         raise InvalidOptionError("--int8 and --calibration DIR go together: int8 quantisation is calibrated on real "
                                  "frames" if args.int8 else "--calibration is for --int8: add --int8, or leave it out")
-    r = export_model(args.checkpoint, args.fmt, args.out, calibration=args.calibration, fp16=args.fp16)
-    if "fp16" in r:
-        h = r["fp16"]
-        print(f"onnx float16 → {r['path']}  against the checkpoint: max probability difference "
-              f"{h['max_prob_diff']:.2e} (allowed {h['tolerance']}), masks agree on {100 * h['mask_agreement']:.2f} % "
-              f"of the pixels (sizes {', '.join('×'.join(map(str, s[2:])) for s in r['checked_sizes'])})")
-        return 0
-    if "int8" in r:
-        q = r["int8"]
-        print(f"onnx int8 → {r['path']}  (float32 export: max abs difference to PyTorch {r['max_abs_diff']:.2e}); "
-              f"against float32 on {q['frames']} calibration frames: masks agree on {100 * q['mask_agreement']:.2f} % "
-              f"of the pixels, F {100 * q['f_vs_float']:.2f} (float32's masks as the reference), max probability "
-              f"difference {q['max_prob_diff']:.3f}")
-        return 0
-    print(f"{r['format']} → {r['path']}  max abs difference to PyTorch {r['max_abs_diff']:.2e} "
-          f"(sizes {', '.join('×'.join(map(str, s[2:])) for s in r['checked_sizes'])})")
+    print(export_report(export_model(args.checkpoint, args.fmt, args.out, calibration=args.calibration,
+                                     fp16=args.fp16)))
     return 0
 
 
@@ -989,10 +951,9 @@ def _kitti_submit_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_kitti_submit(args: argparse.Namespace) -> int:
     """``freespace kitti-submit``: the testing split in the benchmark's BEV format, zipped."""
-    from freespace.inference.predict import kitti_submit
+    from freespace.inference.submission import kitti_submit, submit_report
 
-    r = kitti_submit(args.checkpoint, args.root, args.out, progress=not args.no_progress)
-    print(f"{r['frames']} bird's-eye-view maps → {args.out}; upload {r['zip']}")
+    print(submit_report(kitti_submit(args.checkpoint, args.root, args.out, progress=not args.no_progress), args.out))
     return 0
 
 
