@@ -95,31 +95,12 @@ def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, requ
 
 
 def _open_dataset(args: argparse.Namespace, needs_right: str | None = None):  # -> StereoRoadDataset (lazy import)
-    """The dataset the options name; ``needs_right`` (what needs right images) refuses up front a layout that
-    knows some of its drives have none (KITTI raw's ``require_right``)."""
-    from freespace.data.registry import get_dataset
+    """The dataset the options name (:func:`~freespace.data.options.open_dataset`)."""
+    from freespace.data.options import open_dataset
 
-    options = {"disparity_source": args.disparity_source, "cache_dir": args.cache_dir,
-               "max_disparity": args.max_disparity}
-    if args.disparity_dir is not None:
-        if args.dataset not in ("kitti", "synth"):
-            raise InvalidOptionError("--disparity-dir is for KITTI road trees; other layouts name their "
-                                     "disparity folder in freespace.yaml")
-        if args.disparity_source not in ("auto", "file"):
-            raise InvalidOptionError(f"--disparity-dir is read with --disparity-source auto or file; with "
-                                     f"{args.disparity_source} it would be ignored: leave one of them out")
-        options["disparity_dir"] = args.disparity_dir
-    if args.lidar_densify is not None:
-        if args.disparity_source != "lidar":
-            raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
-        if args.dataset not in ("kitti", "synth", "kitti-raw", "kitti_raw"):
-            raise InvalidOptionError("--lidar-densify is for KITTI road and KITTI raw trees (the layouts with Velodyne "
-                                     "scans)")
-        options["lidar_densify"] = args.lidar_densify
-    dataset = get_dataset(args.dataset, args.root, args.split, **options)
-    if needs_right is not None and hasattr(dataset, "require_right"):
-        dataset.require_right(needs_right)
-    return dataset
+    return open_dataset(args.dataset, args.root, args.split, disparity_source=args.disparity_source,
+                        cache_dir=args.cache_dir, max_disparity=args.max_disparity, disparity_dir=args.disparity_dir,
+                        lidar_densify=args.lidar_densify, needs_right=needs_right)
 
 
 @dataclass(frozen=True)
@@ -610,19 +591,10 @@ def cmd_datasets_info(args: argparse.Namespace) -> int:
 
 def cmd_datasets_split(args: argparse.Namespace) -> int:
     """``freespace datasets split``: the paper's train/val/test split by scenario, as list files."""
-    from freespace.data.registry import get_dataset
-    from freespace.data.splits import check_split_by, parse_fractions, split_frames, write_splits
-    from freespace.io.files import check_outputs, check_writable
-    from freespace.io.outdir import claim_folder
+    from freespace.data.splits import split_dataset
 
-    check_writable(args.out, folder=True)
-    check_outputs({"out": args.out}, {"root": args.root})
-    fractions = parse_fractions(args.fractions) if args.fractions is not None else None
-    check_split_by(args.by, args.gap)
-    dataset = get_dataset(args.dataset, args.root, args.split, disparity_source="none")
-    splits = split_frames(dataset, args.by, seed=args.seed, fractions=fractions, gap=args.gap)
-    with claim_folder(args.out, "datasets split") as folder, folder.staged() as staging:
-        write_splits(staging, splits)
+    splits = split_dataset(args.dataset, args.root, args.out, split=args.split, by=args.by, seed=args.seed,
+                           fractions=args.fractions, gap=args.gap)
     print(" ".join(f"{k} {len(v)}" for k, v in splits.items()) + f" → {args.out}/{{train,val,test}}.txt")
     return 0
 
@@ -771,34 +743,14 @@ def _evaluate_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """``freespace evaluate``: a model on a subset of a dataset's split, or on a labelled folder."""
-    from freespace.inference.evaluate import evaluate_checkpoint, evaluate_labelled
+    from freespace.inference.evaluate import evaluate, evaluate_report
 
-    folder = [n for n in ("images", "labels", "label_format") if getattr(args, n) is not None]
-    if args.dataset is not None and folder:
-        raise InvalidOptionError("give either --dataset/--root or --images/--labels/--label-format, not both")
-    if folder:
-        from freespace.evaluation.labelled import parse_label_format
-
-        missing = [f"--{n.replace('_', '-')}" for n in ("images", "labels", "label_format") if n not in folder]
-        if missing:
-            raise InvalidOptionError(f"a labelled folder needs --images, --labels and --label-format; add "
-                                     f"{', '.join(missing)}")
-        fmt = parse_label_format(args.label_format, args.road, args.ignore, args.tolerance)
-        m = evaluate_labelled(args.images, args.labels, fmt, args.out, checkpoint=args.checkpoint, onnx=args.onnx,
-                              threads=args.threads, overlays=not args.no_overlays, progress=not args.no_progress)
-    else:
-        if args.dataset is None or args.root is None:
-            raise InvalidOptionError("give the frames to evaluate on: --dataset NAME --root DIR, or a labelled folder "
-                                     "(--images DIR --labels DIR --label-format FORMAT)")
-        if any(getattr(args, n) is not None for n in ("road", "ignore", "tolerance")):
-            raise InvalidOptionError("--road, --ignore and --tolerance describe a labelled folder's labels "
-                                     "(--images/--labels/--label-format), not a dataset's")
-        m = evaluate_checkpoint(args.checkpoint, args.dataset, args.root, args.out, subset=args.subset,
-                                splits_dir=args.splits_dir, split=args.split, progress=not args.no_progress,
-                                onnx=args.onnx, threads=args.threads)
-    ci = m["intervals"]["f_score"]
-    print(" ".join(f"{k} {m[k]:.4f}" for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
-          + f"  F 95 % [{ci[0]:.4f}, {ci[1]:.4f}] ({m['frames']} frames) → {args.out}")
+    m = evaluate(args.out, checkpoint=args.checkpoint, onnx=args.onnx, dataset=args.dataset, root=args.root,
+                 split=args.split, subset=args.subset, splits_dir=args.splits_dir, images=args.images,
+                 labels=args.labels, label_format=args.label_format, road=args.road, ignore=args.ignore,
+                 tolerance=args.tolerance, threads=args.threads, overlays=not args.no_overlays,
+                 progress=not args.no_progress)
+    print(evaluate_report(m, args.out))
     return 0
 
 
@@ -813,23 +765,9 @@ def _evaluate_kitti_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
-    from freespace.evaluation.kitti import evaluate_kitti_dirs
-    from freespace.io.files import check_outputs, check_suffix, check_writable, write_json
+    from freespace.evaluation.kitti import evaluate_kitti, kitti_table
 
-    if args.bev and not args.calib:
-        raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
-    if args.calib and not args.bev:
-        raise InvalidOptionError("--calib is only used with --bev (the bird's-eye view); add --bev, or leave out "
-                                 "--calib for the perspective view")
-    check_writable(args.out)
-    check_outputs({"out": args.out}, {"gt": args.gt, "pred": args.pred, "calib": args.calib})
-    check_suffix(args.out, (".json",))
-    results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib)
-    write_json(args.out, results)
-    print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
-    for cat, r in results.items():
-        print(f"{cat:<10} {r['images']:>6} "
-              + " ".join(f"{100 * r[k]:7.2f}" for k in ("max_f", "ap", "pre", "rec", "fpr", "fnr")))
+    print(kitti_table(evaluate_kitti(args.gt, args.pred, args.out, calib=args.calib, bev=args.bev)))
     return 0
 
 
@@ -997,32 +935,14 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """``freespace reproduce``: every network with and without the augmentation (and the control); tables,
     paired gains and figures; one cell with ``--only``, the tables alone with ``--tables``."""
-    from freespace.experiments import Protocol, parse_models, parse_variants, write_tables
-    from freespace.experiments.reproduce import reproduce
+    from freespace.experiments.reproduce import run_reproduce
 
-    protocol = Protocol.load(args.protocol) if args.protocol is not None else None
-    if args.models is not None:  # names checked in every mode
-        parse_models(args.models)
-    if args.variants is not None:
-        parse_variants(args.variants, protocol.vocabulary if protocol is not None else None)
-    if args.tables:
-        unused = [flag for flag, value in (("--only", args.only), ("--models", args.models),
-                                           ("--variants", args.variants), ("--test-root", args.test_root)) if value]
-        if unused:
-            raise InvalidOptionError(f"--tables collects the finished cells in --out, whatever they are; it takes no "
-                                     f"{', '.join(unused)}")
-        r = write_tables(args.out, protocol=protocol)
-    else:
-        if (args.dataset is None or args.root is None) and not (protocol is not None and protocol.data):
-            raise InvalidOptionError("reproduce needs --dataset and --root (only --tables, and a --protocol with "
-                                     "data, do without)")
-        options = _config_values(args, REPRODUCE_OPTIONS)
-        r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=args.models, seeds=args.seeds,
-                      progress=not args.no_progress, variants=args.variants, test_root=args.test_root,
-                      only=args.only, autolabels=args.autolabels, protocol=protocol, **options)
-        if args.only:
-            print(f"{r['runs'][0]['run']}: {r['runs'][0]['status']} (collect the cells with --tables)")
-            return 0
+    r = run_reproduce(args.out, protocol=args.protocol, tables=args.tables, models=args.models, seeds=args.seeds,
+                      variants=args.variants, test_root=args.test_root, only=args.only, autolabels=args.autolabels,
+                      progress=not args.no_progress, **_config_values(args, REPRODUCE_OPTIONS))
+    if args.only:
+        print(f"{r['runs'][0]['run']}: {r['runs'][0]['status']} (collect the cells with --tables)")
+        return 0
     print(Path(args.out, "results.md").read_text().rstrip())
     print(f"{len(r['runs'])} runs → {args.out} (results.md, results.csv, gains.csv, figures/, index.json)")
     return 0
@@ -1042,25 +962,12 @@ def _demo_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
-    from freespace.demo import run_demo
+    from freespace.demo import demo_report, run_demo
 
-    result = run_demo(args.out, num_frames=args.num_frames, seed=args.seed, full=args.full, epochs=args.epochs)
-    print(f"{'frame':<12} {'weather':<8} {'roll':>7} {'fit':>7} {'SGBM fit':>8}   road |L−R|  road |L−G|")
-    for f in result["frames"]:
-        sgbm = f"{f['sgbm_roll_deg']:+8.3f}" if f["sgbm_roll_deg"] is not None else f"{'—':>8}"
-        print(f"{f['frame']:<12} {f['weather']:<8} {f['true_roll_deg']:+7.3f} {f['fitted_roll_deg']:+7.3f} "
-              f"{sgbm}   {f['road_mae_right']:10.1f}  {f['road_mae_generated']:10.1f}")
-    print(f"on the road the generated view differs from the left image by {result['mean_road_mae_generated']:.1f} "
-          f"grey levels on average, the raw right image by {result['mean_road_mae_right']:.1f}")
-    if "results_md" in result:
-        print()
-        print(Path(result["results_md"]).read_text().rstrip())
-    print(f"figures: {result['figures']}, {args.out}/experiment/figures   ({result['seconds']:.0f} s)")
-    from freespace.demo import published_lines
-
-    for line in published_lines(result["real"], result["models_folder"]):
-        print(line)
-    return 1 if result["generate_failed"] or any("error" in r for r in result["real"]) else 0
+    text, ok = demo_report(run_demo(args.out, num_frames=args.num_frames, seed=args.seed, full=args.full,
+                                    epochs=args.epochs), args.out)
+    print(text)
+    return 0 if ok else 1
 
 
 # --- the command ---------------------------------------------------------------------------------------
