@@ -15,9 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import signal
 import sys
-import threading
 from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -148,18 +146,15 @@ def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], o
     """The dataset mode of ``generate`` and ``autolabel``: ``run`` (``generate_dataset``, ``autolabel_dataset``)
     over the dataset the options name, then one line of counts (``summary[done]`` frames made) and one per
     failed frame; exit code 1 when a frame failed."""
+    from freespace.datagen.runner import run_report
     from freespace.runtime.shard import parse_shard
 
     shard = parse_shard(args.shard) if args.shard is not None else None
     summary = run(_open_dataset(args, needs_right), args.out, workers=args.workers, options=options,
                   overwrite=args.overwrite, shard=shard)
-    failed = summary["failed"]
-    print(f"{summary[done]} {done}, {summary['skipped']} already done, {len(failed)} failed of {summary['frames']} "
-          f"frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
-    errors, flags = summary.get("errors", {}), _flags(args.parser, [])
-    for name, reason in failed.items():  # this run's failures name flags, not parameters
-        print(f"  failed {name}: {errors[name].render(lambda n: flags.get(n, n)) if name in errors else reason}")
-    return 1 if failed else 0
+    flags = _flags(args.parser, [])  # this run's failures name flags, not parameters
+    print(run_report(summary, done, args.out, args.shard if shard else None, lambda n: flags.get(n, n)))
+    return 1 if summary["failed"] else 0
 
 
 # --- generate ------------------------------------------------------------------------------------------
@@ -1078,18 +1073,6 @@ def _flags(parser: argparse.ArgumentParser, argv: Sequence[str]) -> dict[str, st
     return flags
 
 
-#: the modules of the optional extras (pyproject.toml) by top-level name, and the extra that installs each
-_EXTRAS = {**dict.fromkeys(("torch", "torchvision", "segmentation_models_pytorch", "lightning", "albumentations",
-                            "pydantic", "matplotlib", "scipy"), "train"), "onnx": "export", "onnxruntime": "export"}
-
-
-def _raise_terminated(signum: int, frame: Any) -> None:
-    """``SIGTERM`` handler: raise :class:`~freespace.errors.Terminated` once (so that clean-ups run, as on
-    Ctrl-C); further ``SIGTERM`` signals are ignored while they do."""
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    raise Terminated()
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``freespace`` console script; returns the exit code.
 
@@ -1098,43 +1081,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     from freespace.io.files import writing_as
     from freespace.runtime.log import setup_logging
+    from freespace.runtime.signals import missing_extra, sigterm_raises
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)  # the global options take no value
-    main_thread = threading.current_thread() is threading.main_thread()  # signal handlers live there only
-    previous = signal.signal(signal.SIGTERM, _raise_terminated) if main_thread else None
     parser: argparse.ArgumentParser | None = None
-    try:
-        config = _config_file_options(argv) if command == "train" else None
-        parser = build_parser({command} if command else (), config)
-        args, extra = parser.parse_known_args(argv)
-        if extra:
-            _refuse_extra_arguments(parser, extra, command)
-        setup_logging(-1 if args.quiet else args.verbose)
-        with writing_as(command or "freespace"):  # the mark of the files it writes (freespace.io.files)
-            return int(args.func(args))
-    except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
-        flags = _flags(parser or build_parser({command} if command else ()), argv)
-        text = exc.render(lambda name: flags.get(name, name))
-        message = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
-        print(f"freespace: error: {message}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        print("freespace: interrupted", file=sys.stderr)
-        return 130
-    except Terminated as exc:
-        print("freespace: terminated (SIGTERM)", file=sys.stderr)
-        return exc.exit_code
-    except ModuleNotFoundError as exc:  # a command of an extra run in the base install (`pip install freespace`)
-        extra = _EXTRAS.get((exc.name or "").partition(".")[0])
-        if extra is None:
-            raise
-        print(f"freespace: error: `freespace {command}` needs {exc.name}, which this install lacks; install the "
-              f"extra: pip install 'freespace[{extra}]'", file=sys.stderr)
-        return 2
-    finally:
-        if main_thread:
-            signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
+    with sigterm_raises():  # SIGTERM raises Terminated until the message is out
+        try:
+            config = _config_file_options(argv) if command == "train" else None
+            parser = build_parser({command} if command else (), config)
+            args, extra = parser.parse_known_args(argv)
+            if extra:
+                _refuse_extra_arguments(parser, extra, command)
+            setup_logging(-1 if args.quiet else args.verbose)
+            with writing_as(command or "freespace"):  # the mark of the files it writes (freespace.io.files)
+                return int(args.func(args))
+        except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
+            flags = _flags(parser or build_parser({command} if command else ()), argv)
+            text = exc.render(lambda name: flags.get(name, name))
+            message = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
+            print(f"freespace: error: {message}", file=sys.stderr)
+            return exc.exit_code
+        except KeyboardInterrupt:
+            print("freespace: interrupted", file=sys.stderr)
+            return 130
+        except Terminated as exc:
+            print("freespace: terminated (SIGTERM)", file=sys.stderr)
+            return exc.exit_code
+        except ModuleNotFoundError as exc:  # a command of an extra in the base install (`pip install freespace`)
+            if (message := missing_extra(exc, command)) is None:
+                raise
+            print(f"freespace: error: {message}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":
