@@ -138,7 +138,8 @@ def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, mode
 
 def _train_options(seeds: int, options: dict[str, Any], virtual: dict[str, Any]) -> dict[str, Any]:
     """Every cell's training ``options`` with the ``virtual`` ones (``virtual_shift``, ``virtual_rotate``,
-    ``virtual_prob``), after checking ``seeds`` (1…:data:`MAX_SEEDS`) and that ``virtual`` holds nothing else.
+    ``virtual_prob``), after checking ``seeds`` (1…:data:`~freespace.experiments.variants.MAX_SEEDS`) and that
+    ``virtual`` holds nothing else.
 
     Raises:
         InvalidOptionError: ``seeds`` out of bounds. TypeError: another keyword in ``virtual``.
