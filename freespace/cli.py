@@ -15,9 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import signal
 import sys
-import threading
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -96,31 +94,12 @@ def _add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, requ
 
 
 def _open_dataset(args: argparse.Namespace, needs_right: str | None = None):  # -> StereoRoadDataset (lazy import)
-    """The dataset the options name; ``needs_right`` (what needs right images) refuses up front a layout that
-    knows some of its drives have none (KITTI raw's ``require_right``)."""
-    from freespace.data.registry import get_dataset
+    """The dataset the options name (:func:`~freespace.data.options.open_dataset`)."""
+    from freespace.data.options import open_dataset
 
-    options = {"disparity_source": args.disparity_source, "cache_dir": args.cache_dir,
-               "max_disparity": args.max_disparity}
-    if args.disparity_dir is not None:
-        if args.dataset not in ("kitti", "synth"):
-            raise InvalidOptionError("--disparity-dir is for KITTI road trees; other layouts name their "
-                                     "disparity folder in freespace.yaml")
-        if args.disparity_source not in ("auto", "file"):
-            raise InvalidOptionError(f"--disparity-dir is read with --disparity-source auto or file; with "
-                                     f"{args.disparity_source} it would be ignored: leave one of them out")
-        options["disparity_dir"] = args.disparity_dir
-    if args.lidar_densify is not None:
-        if args.disparity_source != "lidar":
-            raise InvalidOptionError("--lidar-densify is for --disparity-source lidar")
-        if args.dataset not in ("kitti", "synth", "kitti-raw", "kitti_raw"):
-            raise InvalidOptionError("--lidar-densify is for KITTI road and KITTI raw trees (the layouts with Velodyne "
-                                     "scans)")
-        options["lidar_densify"] = args.lidar_densify
-    dataset = get_dataset(args.dataset, args.root, args.split, **options)
-    if needs_right is not None and hasattr(dataset, "require_right"):
-        dataset.require_right(needs_right)
-    return dataset
+    return open_dataset(args.dataset, args.root, args.split, disparity_source=args.disparity_source,
+                        cache_dir=args.cache_dir, max_disparity=args.max_disparity, disparity_dir=args.disparity_dir,
+                        lidar_densify=args.lidar_densify, needs_right=needs_right)
 
 
 @dataclass(frozen=True)
@@ -168,18 +147,15 @@ def _run_dataset(args: argparse.Namespace, run: Callable[..., dict[str, Any]], o
     """The dataset mode of ``generate`` and ``autolabel``: ``run`` (``generate_dataset``, ``autolabel_dataset``)
     over the dataset the options name, then one line of counts (``summary[done]`` frames made) and one per
     failed frame; exit code 1 when a frame failed."""
+    from freespace.datagen.runner import run_report
     from freespace.runtime.shard import parse_shard
 
     shard = parse_shard(args.shard) if args.shard is not None else None
     summary = run(_open_dataset(args, needs_right), args.out, workers=args.workers, options=options,
                   overwrite=args.overwrite, shard=shard)
-    failed = summary["failed"]
-    print(f"{summary[done]} {done}, {summary['skipped']} already done, {len(failed)} failed of {summary['frames']} "
-          f"frames" + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
-    errors, flags = summary.get("errors", {}), _flags(args.parser, [])
-    for name, reason in failed.items():  # this run's failures name flags, not parameters
-        print(f"  failed {name}: {errors[name].render(lambda n: flags.get(n, n)) if name in errors else reason}")
-    return 1 if failed else 0
+    flags = _flags(args.parser, [])  # this run's failures name flags, not parameters
+    print(run_report(summary, done, args.out, args.shard if shard else None, lambda n: flags.get(n, n)))
+    return 1 if summary["failed"] else 0
 
 
 # --- generate ------------------------------------------------------------------------------------------
@@ -529,19 +505,10 @@ def cmd_datasets_info(args: argparse.Namespace) -> int:
 
 def cmd_datasets_split(args: argparse.Namespace) -> int:
     """``freespace datasets split``: the paper's train/val/test split by scenario, as list files."""
-    from freespace.data.registry import get_dataset
-    from freespace.data.splits import check_split_by, parse_fractions, split_frames, write_splits
-    from freespace.io.files import check_outputs, check_writable
-    from freespace.io.outdir import claim_folder
+    from freespace.data.splits import split_dataset
 
-    check_writable(args.out, folder=True)
-    check_outputs({"out": args.out}, {"root": args.root})
-    fractions = parse_fractions(args.fractions) if args.fractions is not None else None
-    check_split_by(args.by, args.gap)
-    dataset = get_dataset(args.dataset, args.root, args.split, disparity_source="none")
-    splits = split_frames(dataset, args.by, seed=args.seed, fractions=fractions, gap=args.gap)
-    with claim_folder(args.out, "datasets split") as folder, folder.staged() as staging:
-        write_splits(staging, splits)
+    splits = split_dataset(args.dataset, args.root, args.out, split=args.split, by=args.by, seed=args.seed,
+                           fractions=args.fractions, gap=args.gap)
     print(" ".join(f"{k} {len(v)}" for k, v in splits.items()) + f" → {args.out}/{{train,val,test}}.txt")
     return 0
 
@@ -690,34 +657,14 @@ def _evaluate_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """``freespace evaluate``: a model on a subset of a dataset's split, or on a labelled folder."""
-    from freespace.inference.evaluate import evaluate_checkpoint, evaluate_labelled
+    from freespace.inference.evaluate import evaluate, evaluate_report
 
-    folder = [n for n in ("images", "labels", "label_format") if getattr(args, n) is not None]
-    if args.dataset is not None and folder:
-        raise InvalidOptionError("give either --dataset/--root or --images/--labels/--label-format, not both")
-    if folder:
-        from freespace.evaluation.labelled import parse_label_format
-
-        missing = [f"--{n.replace('_', '-')}" for n in ("images", "labels", "label_format") if n not in folder]
-        if missing:
-            raise InvalidOptionError(f"a labelled folder needs --images, --labels and --label-format; add "
-                                     f"{', '.join(missing)}")
-        fmt = parse_label_format(args.label_format, args.road, args.ignore, args.tolerance)
-        m = evaluate_labelled(args.images, args.labels, fmt, args.out, checkpoint=args.checkpoint, onnx=args.onnx,
-                              threads=args.threads, overlays=not args.no_overlays, progress=not args.no_progress)
-    else:
-        if args.dataset is None or args.root is None:
-            raise InvalidOptionError("give the frames to evaluate on: --dataset NAME --root DIR, or a labelled folder "
-                                     "(--images DIR --labels DIR --label-format FORMAT)")
-        if any(getattr(args, n) is not None for n in ("road", "ignore", "tolerance")):
-            raise InvalidOptionError("--road, --ignore and --tolerance describe a labelled folder's labels "
-                                     "(--images/--labels/--label-format), not a dataset's")
-        m = evaluate_checkpoint(args.checkpoint, args.dataset, args.root, args.out, subset=args.subset,
-                                splits_dir=args.splits_dir, split=args.split, progress=not args.no_progress,
-                                onnx=args.onnx, threads=args.threads)
-    ci = m["intervals"]["f_score"]
-    print(" ".join(f"{k} {m[k]:.4f}" for k in ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap"))
-          + f"  F 95 % [{ci[0]:.4f}, {ci[1]:.4f}] ({m['frames']} frames) → {args.out}")
+    m = evaluate(args.out, checkpoint=args.checkpoint, onnx=args.onnx, dataset=args.dataset, root=args.root,
+                 split=args.split, subset=args.subset, splits_dir=args.splits_dir, images=args.images,
+                 labels=args.labels, label_format=args.label_format, road=args.road, ignore=args.ignore,
+                 tolerance=args.tolerance, threads=args.threads, overlays=not args.no_overlays,
+                 progress=not args.no_progress)
+    print(evaluate_report(m, args.out))
     return 0
 
 
@@ -732,23 +679,9 @@ def _evaluate_kitti_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
     """``freespace evaluate-kitti``: KITTI confidence maps against KITTI ground truth (perspective)."""
-    from freespace.evaluation.kitti import evaluate_kitti_dirs
-    from freespace.io.files import check_outputs, check_suffix, check_writable, write_json
+    from freespace.evaluation.kitti import evaluate_kitti, kitti_table
 
-    if args.bev and not args.calib:
-        raise InvalidOptionError("--bev needs --calib CALIB_DIR (the frames' <cat>_<id>.txt calibration files)")
-    if args.calib and not args.bev:
-        raise InvalidOptionError("--calib is only used with --bev (the bird's-eye view); add --bev, or leave out "
-                                 "--calib for the perspective view")
-    check_writable(args.out)
-    check_outputs({"out": args.out}, {"gt": args.gt, "pred": args.pred, "calib": args.calib})
-    check_suffix(args.out, (".json",))
-    results = evaluate_kitti_dirs(args.gt, args.pred, calib_dir=args.calib)
-    write_json(args.out, results)
-    print(f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}")
-    for cat, r in results.items():
-        print(f"{cat:<10} {r['images']:>6} "
-              + " ".join(f"{100 * r[k]:7.2f}" for k in ("max_f", "ap", "pre", "rec", "fpr", "fnr")))
+    print(kitti_table(evaluate_kitti(args.gt, args.pred, args.out, calib=args.calib, bev=args.bev)))
     return 0
 
 
@@ -776,36 +709,12 @@ def _predict_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_predict(args: argparse.Namespace) -> int:
     """``freespace predict``: road confidence PNGs (KITTI format) and overlays, or the overlaid video."""
-    from freespace.inference.predict import Predictor, predict_folder, predict_video
-    from freespace.io.files import check_outputs, check_suffix, check_writable
-    from freespace.io.video import is_video_path
-    from freespace.runtime.shard import parse_shard
+    from freespace.inference.predict import predict, predict_report
 
-    video = is_video_path(args.out)
-    check_writable(args.out, folder=not video)  # before the model is loaded
-    check_outputs({"out": args.out}, {"input": args.input, "checkpoint": args.checkpoint, "onnx": args.onnx})
-    if video:
-        check_suffix(args.out, (".mp4",))
-    shard = parse_shard(args.shard) if args.shard is not None else None
-    if video and shard:
-        raise InvalidOptionError("--shard writes frames into a folder; a video --out is one file: leave out --shard")
-    if video and args.no_overlays:
-        raise InvalidOptionError("--no-overlays leaves out the overlay PNGs of a folder --out; a video --out is the "
-                                 "overlay: leave out --no-overlays")
-    predictor = Predictor(checkpoint=args.checkpoint, onnx=args.onnx, threads=args.threads)
-    if video:
-        summary = predict_video(predictor, args.input, args.out, batch_size=args.batch_size,
-                                progress=not args.no_progress)
-    else:
-        summary = predict_folder(predictor, args.input, args.out, batch_size=args.batch_size,
-                                 progress=not args.no_progress, shard=shard, overlays=not args.no_overlays)
-    if not summary["frames"]:
-        print(f"0 frames in shard {args.shard} → {args.out}")
-        return 0
-    print(f"{summary['frames']} frames in {summary['seconds']:.2f} s: {summary['frames_per_second']:.1f} frames per "
-          f"second end to end (first frame read to last written); the network {summary['seconds_per_frame'] * 1000:.1f}"
-          f" ms per frame, {100 * summary['network_share']:.0f} % of the time"
-          + (f" (shard {args.shard})" if shard else "") + f" → {args.out}")
+    summary = predict(args.input, args.out, checkpoint=args.checkpoint, onnx=args.onnx, threads=args.threads,
+                      batch_size=args.batch_size, shard=args.shard, overlays=not args.no_overlays,
+                      progress=not args.no_progress)
+    print(predict_report(summary, args.out, args.shard))
     return 0
 
 
@@ -826,7 +735,7 @@ def _export_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """``freespace export``: ONNX or TorchScript, validated against PyTorch."""
-    from freespace.inference.predict import export_model
+    from freespace.inference.export import export_model, export_report
 
     if args.fp16 and args.int8:
         raise InvalidOptionError("--fp16 and --int8 exclude each other: a model is exported in float16 or in int8; "
@@ -834,22 +743,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     if args.int8 != (args.calibration is not None):
         raise InvalidOptionError("--int8 and --calibration DIR go together: int8 quantisation is calibrated on real "
                                  "frames" if args.int8 else "--calibration is for --int8: add --int8, or leave it out")
-    r = export_model(args.checkpoint, args.fmt, args.out, calibration=args.calibration, fp16=args.fp16)
-    if "fp16" in r:
-        h = r["fp16"]
-        print(f"onnx float16 → {r['path']}  against the checkpoint: max probability difference "
-              f"{h['max_prob_diff']:.2e} (allowed {h['tolerance']}), masks agree on {100 * h['mask_agreement']:.2f} % "
-              f"of the pixels (sizes {', '.join('×'.join(map(str, s[2:])) for s in r['checked_sizes'])})")
-        return 0
-    if "int8" in r:
-        q = r["int8"]
-        print(f"onnx int8 → {r['path']}  (float32 export: max abs difference to PyTorch {r['max_abs_diff']:.2e}); "
-              f"against float32 on {q['frames']} calibration frames: masks agree on {100 * q['mask_agreement']:.2f} % "
-              f"of the pixels, F {100 * q['f_vs_float']:.2f} (float32's masks as the reference), max probability "
-              f"difference {q['max_prob_diff']:.3f}")
-        return 0
-    print(f"{r['format']} → {r['path']}  max abs difference to PyTorch {r['max_abs_diff']:.2e} "
-          f"(sizes {', '.join('×'.join(map(str, s[2:])) for s in r['checked_sizes'])})")
+    print(export_report(export_model(args.checkpoint, args.fmt, args.out, calibration=args.calibration,
+                                     fp16=args.fp16)))
     return 0
 
 
@@ -908,10 +803,9 @@ def _kitti_submit_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_kitti_submit(args: argparse.Namespace) -> int:
     """``freespace kitti-submit``: the testing split in the benchmark's BEV format, zipped."""
-    from freespace.inference.predict import kitti_submit
+    from freespace.inference.submission import kitti_submit, submit_report
 
-    r = kitti_submit(args.checkpoint, args.root, args.out, progress=not args.no_progress)
-    print(f"{r['frames']} bird's-eye-view maps → {args.out}; upload {r['zip']}")
+    print(submit_report(kitti_submit(args.checkpoint, args.root, args.out, progress=not args.no_progress), args.out))
     return 0
 
 
@@ -955,32 +849,14 @@ def _reproduce_parser(p: argparse.ArgumentParser) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """``freespace reproduce``: every network with and without the augmentation (and the control); tables,
     paired gains and figures; one cell with ``--only``, the tables alone with ``--tables``."""
-    from freespace.experiments import Protocol, parse_models, parse_variants, write_tables
-    from freespace.experiments.reproduce import reproduce
+    from freespace.experiments.reproduce import run_reproduce
 
-    protocol = Protocol.load(args.protocol) if args.protocol is not None else None
-    if args.models is not None:  # names checked in every mode
-        parse_models(args.models)
-    if args.variants is not None:
-        parse_variants(args.variants, protocol.vocabulary if protocol is not None else None)
-    if args.tables:
-        unused = [flag for flag, value in (("--only", args.only), ("--models", args.models),
-                                           ("--variants", args.variants), ("--test-root", args.test_root)) if value]
-        if unused:
-            raise InvalidOptionError(f"--tables collects the finished cells in --out, whatever they are; it takes no "
-                                     f"{', '.join(unused)}")
-        r = write_tables(args.out, protocol=protocol)
-    else:
-        if (args.dataset is None or args.root is None) and not (protocol is not None and protocol.data):
-            raise InvalidOptionError("reproduce needs --dataset and --root (only --tables, and a --protocol with "
-                                     "data, do without)")
-        options = _config_values(args, REPRODUCE_OPTIONS)
-        r = reproduce(options.pop("dataset"), options.pop("root"), args.out, models=args.models, seeds=args.seeds,
-                      progress=not args.no_progress, variants=args.variants, test_root=args.test_root,
-                      only=args.only, autolabels=args.autolabels, protocol=protocol, **options)
-        if args.only:
-            print(f"{r['runs'][0]['run']}: {r['runs'][0]['status']} (collect the cells with --tables)")
-            return 0
+    r = run_reproduce(args.out, protocol=args.protocol, tables=args.tables, models=args.models, seeds=args.seeds,
+                      variants=args.variants, test_root=args.test_root, only=args.only, autolabels=args.autolabels,
+                      progress=not args.no_progress, **_config_values(args, REPRODUCE_OPTIONS))
+    if args.only:
+        print(f"{r['runs'][0]['run']}: {r['runs'][0]['status']} (collect the cells with --tables)")
+        return 0
     print(Path(args.out, "results.md").read_text().rstrip())
     print(f"{len(r['runs'])} runs → {args.out} (results.md, results.csv, gains.csv, figures/, index.json)")
     return 0
@@ -1000,25 +876,12 @@ def _demo_parser(p: argparse.ArgumentParser) -> None:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """``freespace demo``: render a stereo scene, run the DS-Generator, write the pictures."""
-    from freespace.demo import run_demo
+    from freespace.demo import demo_report, run_demo
 
-    result = run_demo(args.out, num_frames=args.num_frames, seed=args.seed, full=args.full, epochs=args.epochs)
-    print(f"{'frame':<12} {'weather':<8} {'roll':>7} {'fit':>7} {'SGBM fit':>8}   road |L−R|  road |L−G|")
-    for f in result["frames"]:
-        sgbm = f"{f['sgbm_roll_deg']:+8.3f}" if f["sgbm_roll_deg"] is not None else f"{'—':>8}"
-        print(f"{f['frame']:<12} {f['weather']:<8} {f['true_roll_deg']:+7.3f} {f['fitted_roll_deg']:+7.3f} "
-              f"{sgbm}   {f['road_mae_right']:10.1f}  {f['road_mae_generated']:10.1f}")
-    print(f"on the road the generated view differs from the left image by {result['mean_road_mae_generated']:.1f} "
-          f"grey levels on average, the raw right image by {result['mean_road_mae_right']:.1f}")
-    if "results_md" in result:
-        print()
-        print(Path(result["results_md"]).read_text().rstrip())
-    print(f"figures: {result['figures']}, {args.out}/experiment/figures   ({result['seconds']:.0f} s)")
-    from freespace.demo import published_lines
-
-    for line in published_lines(result["real"], result["models_folder"]):
-        print(line)
-    return 1 if result["generate_failed"] or any("error" in r for r in result["real"]) else 0
+    text, ok = demo_report(run_demo(args.out, num_frames=args.num_frames, seed=args.seed, full=args.full,
+                                    epochs=args.epochs), args.out)
+    print(text)
+    return 0 if ok else 1
 
 
 # --- the command ---------------------------------------------------------------------------------------
@@ -1129,18 +992,6 @@ def _flags(parser: argparse.ArgumentParser, argv: Sequence[str]) -> dict[str, st
     return flags
 
 
-#: the modules of the optional extras (pyproject.toml) by top-level name, and the extra that installs each
-_EXTRAS = {**dict.fromkeys(("torch", "torchvision", "segmentation_models_pytorch", "lightning", "albumentations",
-                            "pydantic", "matplotlib", "scipy"), "train"), "onnx": "export", "onnxruntime": "export"}
-
-
-def _raise_terminated(signum: int, frame: Any) -> None:
-    """``SIGTERM`` handler: raise :class:`~freespace.errors.Terminated` once (so that clean-ups run, as on
-    Ctrl-C); further ``SIGTERM`` signals are ignored while they do."""
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    raise Terminated()
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``freespace`` console script; returns the exit code.
 
@@ -1149,43 +1000,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     from freespace.io.files import writing_as
     from freespace.runtime.log import setup_logging
+    from freespace.runtime.signals import missing_extra, sigterm_raises
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)  # the global options take no value
-    main_thread = threading.current_thread() is threading.main_thread()  # signal handlers live there only
-    previous = signal.signal(signal.SIGTERM, _raise_terminated) if main_thread else None
     parser: argparse.ArgumentParser | None = None
-    try:
-        config = _config_file_options(argv) if command == "train" else None
-        parser = build_parser({command} if command else (), config)
-        args, extra = parser.parse_known_args(argv)
-        if extra:
-            _refuse_extra_arguments(parser, extra, command)
-        setup_logging(-1 if args.quiet else args.verbose)
-        with writing_as(command or "freespace"):  # the mark of the files it writes (freespace.io.files)
-            return int(args.func(args))
-    except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
-        flags = _flags(parser or build_parser({command} if command else ()), argv)
-        text = exc.render(lambda name: flags.get(name, name))
-        message = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
-        print(f"freespace: error: {message}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        print("freespace: interrupted", file=sys.stderr)
-        return 130
-    except Terminated as exc:
-        print("freespace: terminated (SIGTERM)", file=sys.stderr)
-        return exc.exit_code
-    except ModuleNotFoundError as exc:  # a command of an extra run in the base install (`pip install freespace`)
-        extra = _EXTRAS.get((exc.name or "").partition(".")[0])
-        if extra is None:
-            raise
-        print(f"freespace: error: `freespace {command}` needs {exc.name}, which this install lacks; install the "
-              f"extra: pip install 'freespace[{extra}]'", file=sys.stderr)
-        return 2
-    finally:
-        if main_thread:
-            signal.signal(signal.SIGTERM, previous if previous is not None else signal.SIG_DFL)
+    with sigterm_raises():  # SIGTERM raises Terminated until the message is out
+        try:
+            config = _config_file_options(argv) if command == "train" else None
+            parser = build_parser({command} if command else (), config)
+            args, extra = parser.parse_known_args(argv)
+            if extra:
+                _refuse_extra_arguments(parser, extra, command)
+            setup_logging(-1 if args.quiet else args.verbose)
+            with writing_as(command or "freespace"):  # the mark of the files it writes (freespace.io.files)
+                return int(args.func(args))
+        except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
+            flags = _flags(parser or build_parser({command} if command else ()), argv)
+            text = exc.render(lambda name: flags.get(name, name))
+            message = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
+            print(f"freespace: error: {message}", file=sys.stderr)
+            return exc.exit_code
+        except KeyboardInterrupt:
+            print("freespace: interrupted", file=sys.stderr)
+            return 130
+        except Terminated as exc:
+            print("freespace: terminated (SIGTERM)", file=sys.stderr)
+            return exc.exit_code
+        except ModuleNotFoundError as exc:  # a command of an extra in the base install (`pip install freespace`)
+            if (message := missing_extra(exc, command)) is None:
+                raise
+            print(f"freespace: error: {message}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":

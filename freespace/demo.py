@@ -33,7 +33,7 @@ from freespace.io.outdir import claim_folder
 
 log = logging.getLogger(__name__)
 
-__all__ = ["run_demo", "models_folder", "published_models", "run_published_models", "published_lines"]
+__all__ = ["run_demo", "demo_report", "models_folder", "published_models", "run_published_models", "published_lines"]
 
 #: what the demo writes into OUT (:mod:`freespace.io.outdir` entries); ``real/<name>/``: each published
 #: model's predictions on its example frames
@@ -114,6 +114,26 @@ def published_lines(results: list[dict[str, Any]], folder: PathLike | None = Non
                          f"({fps:.1f} frames per second end to end)" if fps else
                          f"real frames, model {r['name']}: {r['frames']} example frames, overlays in {r['overlays']}")
     return lines
+
+
+def demo_report(result: dict[str, Any], out: PathLike) -> tuple[str, bool]:
+    """What ``freespace demo`` prints of :func:`run_demo`'s ``result`` (written into ``out``): per frame the true
+    and fitted roll and the road's grey-level differences, the results table, where the figures are and the
+    published models' lines (:func:`published_lines`); and whether everything succeeded (no frame failed to
+    generate, no published model failed)."""
+    lines = [f"{'frame':<12} {'weather':<8} {'roll':>7} {'fit':>7} {'SGBM fit':>8}   road |L−R|  road |L−G|"]
+    for f in result["frames"]:
+        sgbm = f"{f['sgbm_roll_deg']:+8.3f}" if f["sgbm_roll_deg"] is not None else f"{'—':>8}"
+        lines.append(f"{f['frame']:<12} {f['weather']:<8} {f['true_roll_deg']:+7.3f} {f['fitted_roll_deg']:+7.3f} "
+                     f"{sgbm}   {f['road_mae_right']:10.1f}  {f['road_mae_generated']:10.1f}")
+    lines.append(f"on the road the generated view differs from the left image by "
+                 f"{result['mean_road_mae_generated']:.1f} grey levels on average, the raw right image by "
+                 f"{result['mean_road_mae_right']:.1f}")
+    if "results_md" in result:
+        lines += ["", Path(result["results_md"]).read_text().rstrip()]
+    lines.append(f"figures: {result['figures']}, {out}/experiment/figures   ({result['seconds']:.0f} s)")
+    lines += published_lines(result["real"], result["models_folder"])
+    return "\n".join(lines), not (result["generate_failed"] or any("error" in r for r in result["real"]))
 
 
 def _mae(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:

@@ -216,7 +216,7 @@ def test_checkpoint_from_onnx_rebuilds_the_exported_weights(model: Path, tmp_pat
     from onnx import numpy_helper
 
     from freespace.engine.adapt_io import checkpoint_from_onnx
-    from freespace.inference.predict import export_model
+    from freespace.inference.export import export_model
     from freespace.inference.predictor import load_checkpoint
 
     first, again = tmp_path / "first.onnx", tmp_path / "again.onnx"
@@ -260,7 +260,7 @@ def test_the_published_checkpoint_exports_to_the_published_onnx_bit_for_bit(name
     import onnx
     from onnx import numpy_helper
 
-    from freespace.inference.predict import export_model
+    from freespace.inference.export import export_model
 
     folder = ROOT / "models" / name
     export_model(folder / "model.ckpt", "onnx", tmp_path / "m.onnx", fp16=True)

@@ -112,9 +112,9 @@ def test_fp16_mistakes_are_one_line_and_write_nothing(files: dict[str, Path], tm
 def test_fp16_beyond_its_tolerance_is_refused(files: dict[str, Path], tmp_path: Path, monkeypatch, capsys) -> None:
     """A float16 model that differs from its checkpoint by more than the tolerance is refused in one line,
     and no file is written: here the tolerance is set below the difference this model has."""
-    import freespace.inference.predict as predict
+    import freespace.inference.export as export
 
-    monkeypatch.setattr(predict, "FP16_MAX_PROB_DIFF", 1e-9)
+    monkeypatch.setattr(export, "FP16_MAX_PROB_DIFF", 1e-9)
     out = tmp_path / "m.onnx"
     assert main(["export", "--checkpoint", str(files["ckpt"]), "--format", "onnx", "--fp16", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()

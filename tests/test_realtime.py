@@ -41,7 +41,7 @@ def _frames(n: int, shape: tuple[int, int] = FRAME, seed: int = 0) -> list[np.nd
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    from freespace.inference.predict import export_model
+    from freespace.inference.export import export_model
 
     base = tmp_path_factory.mktemp("realtime")
     ckpt = tiny_road_checkpoint(base / "model.ckpt", TRAIN_SIZE, width=0.25)

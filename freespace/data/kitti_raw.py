@@ -92,6 +92,25 @@ def _png_size(path: Path) -> tuple[int, int] | None:
     return header[:2] if header is not None else None
 
 
+def _size_problems(name: str, cam_file: Path, calib: dict[str, np.ndarray], lefts: dict[str, Path],
+                   rights: dict[str, Path]) -> list[_TreeProblem]:
+    """The drive ``name``'s images (left, and right ones with a left) whose size (from the PNG header) is not the
+    calibration's rectified size ``S_rect_02``: one problem naming the first and counting them, or none."""
+    width, height = (int(x) for x in calib["S_rect_02"])
+    wrong = []
+    for stem, path in list(lefts.items()) + [(s, p) for s, p in rights.items() if s in lefts]:
+        size = _png_size(path)
+        if size is not None and size != (width, height):
+            wrong.append((stem, path, size))
+    if not wrong:
+        return []
+    stem, path, (w, h) = wrong[0]
+    return [_TreeProblem(f"{name}/{stem}", f"{path} is {w}×{h} but {cam_file} gives S_rect_02 "
+                         f"{width}×{height} ({len(wrong)} image{'s' if len(wrong) > 1 else ''} of "
+                         f"drive {name}); give the rectified images of the _sync zip (not _extract) "
+                         f"and the calibration of their day", ShapeMismatchError)]
+
+
 def _mixed_kinds(name: str, lefts: dict[str, Path], rights: dict[str, Path]) -> _TreeProblem | None:
     """One problem for the pairs of drive ``name`` whose left and right PNGs differ in kind (grey or colour), or
     None."""
@@ -216,34 +235,54 @@ class KittiRaw(StereoRoadDataset):
     def _list_drive(self, drive: Path, problems: list[_TreeProblem]) -> list[FrameRef]:
         """The frames of one drive; problems that spoil single frames go to ``problems``, a problem that
         spoils the drive raises :class:`_TreeProblem`."""
-        name = drive.name
-        day = drive.parent
+        name, day = drive.name, drive.parent
         lefts = _files(drive / LEFT_DIR, ".png")
         if not lefts:
             raise _TreeProblem(name, f"drive folder {drive} holds no left image ({LEFT_DIR}/*.png): unpack the "
                                      f"drive's _sync zip into it, or remove the empty folder")
+        calib = self._drive_calib(drive, problems)
+        cam_file = day / CAM_TO_CAM
+        scans = _files(drive / VELODYNE_DIR, ".bin")
+        if scans and calib is not None and "Tr_velo_to_cam" not in calib:
+            problem = _TreeProblem(name, f"{day / VELO_TO_CAM} not found: drive {name} has Velodyne scans, and "
+                                         f"projecting them needs the Velodyne calibration; unpack KITTI raw's "
+                                         f"{day.name}_calib.zip into {day}", InputFileError)
+            if self.disparity_source == "lidar" or not self.strict:
+                problems.append(problem)
+        rights = self._pair_rights(drive, lefts, problems)
+        mixed = _mixed_kinds(name, lefts, rights) if self.strict else None  # datasets info: the scan, per drive
+        if mixed is not None:
+            problems.append(mixed)
+        if calib is not None:
+            problems.extend(_size_problems(name, cam_file, calib, lefts, rights))
+        problems.extend(self._scan_problems(drive, lefts, scans))
+        match = _DRIVE.match(name)
+        return [FrameRef(name=f"{name}/{stem}", category=match.group(1) if match else day.name, scenario=name,
+                         left=left, right=rights.get(stem), calib=cam_file if calib is not None else None,
+                         velodyne=scans.get(stem)) for stem, left in lefts.items()]
+
+    def _drive_calib(self, drive: Path, problems: list[_TreeProblem]) -> dict[str, np.ndarray] | None:
+        """The calibration of the day of ``drive`` (its cameras, and its Velodyne when that file is there); None
+        when the cameras' file is missing, which goes to ``problems`` (raised when ``strict``: the frames are
+        still listed, and counted, by datasets info). An unreadable file raises :class:`_TreeProblem`."""
+        name, day = drive.name, drive.parent
         cam_file, velo_file = day / CAM_TO_CAM, day / VELO_TO_CAM
-        calib: dict[str, np.ndarray] | None = None
         if not cam_file.is_file():
             missing = _TreeProblem(name, f"{cam_file} not found: drive {name} needs its day's camera calibration; "
                                          f"unpack KITTI raw's {day.name}_calib.zip into {day}", InputFileError)
             if self.strict:
                 raise missing
-            problems.append(missing)  # the frames are still listed (and counted) by datasets info
-        else:
-            try:
-                calib = self._read_calib(cam_file, velo_file if velo_file.is_file() else None)
-            except FreespaceError as exc:
-                raise _TreeProblem(name, exc.render(param), type(exc)) from None
-        velodyne_dir = drive / VELODYNE_DIR
-        scans = _files(velodyne_dir, ".bin")
-        if scans and calib is not None and "Tr_velo_to_cam" not in calib:
-            problem = _TreeProblem(name, f"{velo_file} not found: drive {name} has Velodyne scans, and projecting "
-                                         f"them needs the Velodyne calibration; unpack KITTI raw's "
-                                         f"{day.name}_calib.zip into {day}", InputFileError)
-            if self.disparity_source == "lidar" or not self.strict:
-                problems.append(problem)
-        right_dir = drive / RIGHT_DIR
+            problems.append(missing)
+            return None
+        try:
+            return self._read_calib(cam_file, velo_file if velo_file.is_file() else None)
+        except FreespaceError as exc:
+            raise _TreeProblem(name, exc.render(param), type(exc)) from None
+
+    def _pair_rights(self, drive: Path, lefts: dict[str, Path], problems: list[_TreeProblem]) -> dict[str, Path]:
+        """The right images of ``drive`` by stem; a drive without any is noted (:meth:`require_right`), and left
+        images without a right one, or right images without a left one, go to ``problems``."""
+        name, right_dir = drive.name, drive / RIGHT_DIR
         rights = _files(right_dir, ".png")
         if not right_dir.is_dir() or not rights:
             self._missing_right.append(right_dir)
@@ -257,22 +296,13 @@ class KittiRaw(StereoRoadDataset):
             if no_left:
                 problems.append(_unpaired(name, no_left, ("right", right_dir), ("left", drive / LEFT_DIR),
                                           "copy the missing left images or delete those right images"))
-        mixed = _mixed_kinds(name, lefts, rights) if self.strict else None  # datasets info: the scan, per drive
-        if mixed is not None:
-            problems.append(mixed)
-        width, height = (int(x) for x in calib["S_rect_02"]) if calib is not None else (0, 0)
-        wrong = []
-        for stem, path in (list(lefts.items()) + [(s, p) for s, p in rights.items() if s in lefts]
-                           if calib is not None else []):
-            size = _png_size(path)
-            if size is not None and size != (width, height):
-                wrong.append((stem, path, size))
-        if wrong:
-            stem, path, (w, h) = wrong[0]
-            problems.append(_TreeProblem(f"{name}/{stem}", f"{path} is {w}×{h} but {cam_file} gives S_rect_02 "
-                                         f"{width}×{height} ({len(wrong)} image{'s' if len(wrong) > 1 else ''} of "
-                                         f"drive {name}); give the rectified images of the _sync zip (not _extract) "
-                                         f"and the calibration of their day", ShapeMismatchError))
+        return rights
+
+    def _scan_problems(self, drive: Path, lefts: dict[str, Path], scans: dict[str, Path]) -> list[_TreeProblem]:
+        """The problems of the Velodyne scans of ``drive``: with the lidar source (``strict``) a scan of a size no
+        point cloud has; for datasets info (not ``strict``) a scan without a left image and left images without
+        a scan (which the lidar source fails on)."""
+        name, problems = drive.name, []
         if self.disparity_source == "lidar" and self.strict:  # datasets info (not strict) reads every scan itself
             for stem, path in scans.items():
                 size = path.stat().st_size
@@ -281,22 +311,20 @@ class KittiRaw(StereoRoadDataset):
                                                  f"non-empty multiple of {VELODYNE_POINT_BYTES} (float32 x, y, z, "
                                                  f"reflectance per point): a truncated copy? copy it again or "
                                                  f"delete it", CorruptFileError))
-        if not self.strict:
-            for stem, path in scans.items():
-                if stem not in lefts:
-                    problems.append(_TreeProblem(f"{name}/{stem}", f"Velodyne scan {path} has no left image "
-                                                 f"({drive / LEFT_DIR / (stem + '.png')} not found)"))
-            unscanned = sorted(set(lefts) - set(scans)) if scans else []
-            if unscanned and not self.strict:  # those frames fail alone under disparity_source lidar
-                problems.append(_TreeProblem(f"{name}/{unscanned[0]}", f"{velodyne_dir / (unscanned[0] + '.bin')} "
-                                             f"not found: {len(unscanned)} left "
-                                             f"image{'s' if len(unscanned) > 1 else ''}"
-                                             f" of drive {name} {'have' if len(unscanned) > 1 else 'has'} no Velodyne "
-                                             f"scan (first {unscanned[0]}); the lidar disparity source fails on them"))
-        match = _DRIVE.match(name)
-        return [FrameRef(name=f"{name}/{stem}", category=match.group(1) if match else day.name, scenario=name,
-                         left=left, right=rights.get(stem), calib=cam_file if calib is not None else None,
-                         velodyne=scans.get(stem)) for stem, left in lefts.items()]
+        if self.strict:
+            return problems
+        for stem, path in scans.items():
+            if stem not in lefts:
+                problems.append(_TreeProblem(f"{name}/{stem}", f"Velodyne scan {path} has no left image "
+                                             f"({drive / LEFT_DIR / (stem + '.png')} not found)"))
+        unscanned = sorted(set(lefts) - set(scans)) if scans else []
+        if unscanned:  # those frames fail alone under disparity_source lidar
+            problems.append(_TreeProblem(f"{name}/{unscanned[0]}", f"{drive / VELODYNE_DIR / (unscanned[0] + '.bin')} "
+                                         f"not found: {len(unscanned)} left "
+                                         f"image{'s' if len(unscanned) > 1 else ''}"
+                                         f" of drive {name} {'have' if len(unscanned) > 1 else 'has'} no Velodyne "
+                                         f"scan (first {unscanned[0]}); the lidar disparity source fails on them"))
+        return problems
 
     def _read_calib(self, cam_file: Path, velo_file: Path | None) -> dict[str, np.ndarray]:
         """A day's calibration (:func:`freespace.io.kitti.read_kitti_raw_calib`), read once."""

@@ -27,7 +27,7 @@ from freespace.errors import DatasetError, InputFileError, InvalidOptionError, c
 from freespace.io.files import PathLike, atomic_write_text
 
 __all__ = ["SPLIT_NAMES", "SPLIT_BY", "split_sizes", "make_splits", "make_block_splits", "split_frames",
-           "parse_fractions", "check_split_by", "write_splits", "read_splits"]
+           "parse_fractions", "check_split_by", "write_splits", "read_splits", "split_dataset"]
 
 SPLIT_NAMES = ("train", "val", "test")
 SPLIT_BY = ("scenario", "time")
@@ -229,3 +229,28 @@ def read_splits(folder: PathLike, known: Sequence[str] | None = None) -> dict[st
             raise DatasetError(f"{len(unknown)} frames in the split lists of {folder} are not in the dataset "
                                f"(first: {unknown[0]}); the lists belong to another dataset")
     return out
+
+
+def split_dataset(dataset: str, root: PathLike, out: PathLike, *, split: str | None = None, by: str = "scenario",
+                  seed: int = 0, fractions: Sequence[float] | str | None = None,
+                  gap: int = 0) -> dict[str, list[str]]:
+    """``freespace datasets split``: the frames of ``dataset`` at ``root`` (its on-disk ``split``) split
+    (:func:`split_frames`) and written as ``train.txt``, ``val.txt`` and ``test.txt`` into the folder ``out``
+    (:mod:`freespace.io.outdir`: checked before any work, written all or nothing).
+
+    Returns:
+        ``{"train": names, "val": names, "test": names}``.
+    """
+    from freespace.data.registry import get_dataset
+    from freespace.io.files import check_outputs, check_writable
+    from freespace.io.outdir import claim_folder
+
+    check_writable(out, folder=True)
+    check_outputs({"out": out}, {"root": root})
+    fractions = parse_fractions(fractions) if fractions is not None else None
+    check_split_by(by, gap)
+    frames = get_dataset(dataset, root, split, disparity_source="none")
+    splits = split_frames(frames, by, seed=seed, fractions=fractions, gap=gap)
+    with claim_folder(out, "datasets split") as folder, folder.staged() as staging:
+        write_splits(staging, splits)
+    return splits

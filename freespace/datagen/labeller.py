@@ -389,9 +389,38 @@ def autolabel(disparity: np.ndarray, *, baseline: float | None = None,
     h, w = disparity.shape
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(disparity) & (disparity > 0)
-    model = _fit_seed(disparity, valid, options.max_roll_deg)
-    seed = _seed_window((h, w))
     min_speck = max(1, int(round(options.min_speck * h * w)))
+    road, model, p = _grow_road(disparity, valid, baseline, options, min_speck)
+    if options.max_camber_deg > 0:
+        road = road | _side_planes(disparity, valid, model, road, p, options, min_speck)
+    nonroad = (p["nonroad"] | p["sky"]) & ~road
+    _, _, nonroad_specks = _components(nonroad & ~p["sky"], min_speck)
+    nonroad &= ~nonroad_specks
+    filled = _enclosed_holes(road, nonroad, options.max_hole)
+    road |= filled
+    label = RoadLabel(road=road, valid=road | nonroad)
+    centre = p["m"][:, w // 2]
+    below = np.nonzero(centre > 0)[0]
+    stats = {"noise_px": round(float(p["noise"]), 4), "roughness_m": round(float(p["roughness"]), 4),
+             "camera_height_m": round(float(p["camera_height"]), 4),
+             "horizon_row": int(below[0]) if below.size else None,
+             "coverage": round(float(label.valid.mean()), 4), "road_fraction": round(float(road.mean()), 4),
+             "valid_disparity": round(float(valid.mean()), 4)}
+    return AutolabelResult(label=label, confidence=_confidence(road, filled, nonroad, p, options.band), model=model,
+                           stats=stats)
+
+
+def _grow_road(disparity: np.ndarray, valid: np.ndarray, baseline: float | None, options: AutolabelOptions,
+               min_speck: int) -> tuple[np.ndarray, RoadModel, dict[str, Any]]:
+    """The road connected to the lower image centre (``bool H×W``), the road model refitted to it and the last
+    labelling's maps (:func:`_label_once`): label with the seed plane's model, refit to that road, twice. A
+    rough seed plane (no road found, noise estimated) widens its noise band until it finds road.
+
+    Raises:
+        RoadFitError: no road of at least 50 pixels connected to the lower centre.
+    """
+    model = _fit_seed(disparity, valid, options.max_roll_deg)
+    seed = _seed_window(disparity.shape)
     noise = options.noise
     road = model.inlier_mask if model.inlier_mask is not None else valid
     for final in (False, False, True):  # label with the seed's plane, refit to that road, twice
@@ -413,34 +442,33 @@ def autolabel(disparity: np.ndarray, *, baseline: float | None = None,
         model = fit_road_model(disparity, road, inlier_threshold=max(1.0, options.noise_factor * p["noise"]))
         _check_road_plane(model, options.max_roll_deg)
         noise = options.noise
-    if options.max_camber_deg > 0:
-        road = road | _side_planes(disparity, valid, model, road, p, options, min_speck)
-    nonroad = (p["nonroad"] | p["sky"]) & ~road
-    _, _, nonroad_specks = _components(nonroad & ~p["sky"], min_speck)
-    nonroad &= ~nonroad_specks
-    # holes: don't-care regions enclosed by road and small become road
+    return road, model, p
+
+
+def _enclosed_holes(road: np.ndarray, nonroad: np.ndarray, max_hole: float) -> np.ndarray:
+    """The don't-care regions (neither ``road`` nor ``nonroad``, ``bool H×W``) that road encloses: touching
+    neither the image border nor non-road, and at most ``max_hole`` of the image's pixels. They become road."""
+    h, w = road.shape
     unknown = ~(road | nonroad)
     hole_labels, hole_sizes, _ = _components(unknown, 1)
     border = np.unique(np.concatenate([hole_labels[0], hole_labels[-1], hole_labels[:, 0], hole_labels[:, -1]]))
     touching = np.unique(hole_labels[cv2.dilate(nonroad.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0])
     fill_ok = np.zeros(hole_sizes.size, bool)
-    fill_ok[1:] = hole_sizes[1:] <= options.max_hole * h * w
+    fill_ok[1:] = hole_sizes[1:] <= max_hole * h * w
     fill_ok[border] = False
     fill_ok[touching] = False
-    filled = fill_ok[hole_labels] & unknown
-    road |= filled
-    label = RoadLabel(road=road, valid=road | nonroad)
-    conf = np.zeros((h, w), np.float32)
+    return fill_ok[hole_labels] & unknown
+
+
+def _confidence(road: np.ndarray, filled: np.ndarray, nonroad: np.ndarray, p: dict[str, Any],
+                band: float) -> np.ndarray:
+    """The label's confidence (``float32 H×W`` in [0, 1]; 0 where don't care): road from how well its disparity
+    fits the model (``p["ratio"]``: residual over the noise band), filled holes 0.5, non-road from how far it
+    lies beyond the band, sky 1."""
+    conf = np.zeros(road.shape, np.float32)
     ratio = np.nan_to_num(p["ratio"], nan=0.0)
     conf[road] = 0.5 + 0.5 * np.clip(1.0 - ratio[road], 0, 1)
     conf[filled] = 0.5
-    conf[nonroad] = 0.5 + 0.5 * np.clip((ratio[nonroad] - options.band) / options.band, 0, 1)
+    conf[nonroad] = 0.5 + 0.5 * np.clip((ratio[nonroad] - band) / band, 0, 1)
     conf[nonroad & p["sky"]] = 1.0
-    centre = p["m"][:, w // 2]
-    below = np.nonzero(centre > 0)[0]
-    stats = {"noise_px": round(float(p["noise"]), 4), "roughness_m": round(float(p["roughness"]), 4),
-             "camera_height_m": round(float(p["camera_height"]), 4),
-             "horizon_row": int(below[0]) if below.size else None,
-             "coverage": round(float(label.valid.mean()), 4), "road_fraction": round(float(road.mean()), 4),
-             "valid_disparity": round(float(valid.mean()), 4)}
-    return AutolabelResult(label=label, confidence=conf, model=model, stats=stats)
+    return conf

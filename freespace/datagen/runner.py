@@ -41,7 +41,7 @@ from freespace.runtime.shard import select_shard
 log = logging.getLogger(__name__)
 
 __all__ = ["FrameCommand", "FrameWork", "SETTINGS_NAME", "check_run", "frames_folder", "recorded_settings",
-           "run_dataset", "totals_names"]
+           "run_dataset", "run_report", "totals_names"]
 
 #: the work of one frame: ``work(dataset, index, out, report, options, settings)`` writes the frame's
 #: ``out`` image (and its extra files) and ``report`` JSON, and returns its record (``frame``, ``status``
@@ -248,3 +248,16 @@ def _write_report_csv(path: Path, records: list[dict[str, Any]], fields: tuple[s
         row["seconds"] = round(seconds.get("total", math.nan), 4) if seconds else ""
         rows.append(row)
     write_csv(path, list(fields), rows, extra="ignore")
+
+
+def run_report(summary: dict[str, Any], done: str, out: PathLike, shard: str | None = None,
+               spell: Callable[[str], str] = str) -> str:
+    """What a dataset run prints of its ``summary`` (:func:`run_dataset`'s return value) into ``out``: one line of
+    counts (``summary[done]`` frames made, e.g. ``done="generated"``; ``shard``: the run's ``"K/N"`` as given),
+    then one line per failed frame, its reason's parameters written as ``spell(name)``."""
+    failed, errors = summary["failed"], summary.get("errors", {})
+    lines = [f"{summary[done]} {done}, {summary['skipped']} already done, {len(failed)} failed of "
+             f"{summary['frames']} frames" + (f" (shard {shard})" if shard else "") + f" → {out}"]
+    lines += [f"  failed {name}: {errors[name].render(spell) if name in errors else reason}"
+              for name, reason in failed.items()]
+    return "\n".join(lines)

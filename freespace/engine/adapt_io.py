@@ -322,7 +322,7 @@ def write_model_folder(stage: Path, run: dict[str, Any], hp: dict[str, Any], fol
     import torch
 
     from freespace.engine.record import package_commit
-    from freespace.inference.predict import export_model
+    from freespace.inference.export import export_model
     from freespace.io.files import atomic_write_text, write_csv, write_json
 
     size = list(frames.images.shape[1:3])

@@ -15,14 +15,21 @@ from typing import Any
 
 import numpy as np
 
-from freespace.errors import CorruptFileError, DatasetError, InputFileError, ShapeMismatchError, param
+from freespace.errors import (
+    CorruptFileError,
+    DatasetError,
+    InputFileError,
+    InvalidOptionError,
+    ShapeMismatchError,
+    param,
+)
 from freespace.evaluation.bev import to_bev
 from freespace.evaluation.metrics import KITTI_CATEGORIES, RoadEvaluator
 from freespace.io.codecs import label_image_problem, read_image, road_label_from_image
-from freespace.io.files import PathLike, missing_input
+from freespace.io.files import PathLike, check_outputs, check_suffix, check_writable, missing_input, write_json
 from freespace.io.kitti import read_kitti_calib
 
-__all__ = ["evaluate_kitti_dirs", "read_confidence"]
+__all__ = ["evaluate_kitti", "evaluate_kitti_dirs", "kitti_table", "read_confidence"]
 
 _GT = re.compile(r"^(um|umm|uu)_road_(\d{6})$")
 
@@ -105,3 +112,37 @@ def evaluate_kitti_dirs(gt_dir: PathLike, pred_dir: PathLike, calib_dir: PathLik
                            f"magenta, non-road red)")
     keys = ("max_f", "ap", "pre", "rec", "fpr", "fnr", "threshold", "images")
     return {k: {m: v for m, v in evaluators[k].evaluate().items() if m in keys} for k in order}
+
+
+def evaluate_kitti(gt: PathLike, pred: PathLike, out: PathLike, calib: PathLike | None = None,
+                   bev: bool = False) -> dict[str, Any]:
+    """``freespace evaluate-kitti``: :func:`evaluate_kitti_dirs` of ``gt`` and ``pred`` (in the bird's-eye view
+    with ``bev``, which needs ``calib``), its result written to the JSON file ``out`` (checked before any work).
+
+    Returns:
+        :func:`evaluate_kitti_dirs`' result.
+
+    Raises:
+        InvalidOptionError: ``bev`` without ``calib`` or the reverse; an ``out`` that may not be written.
+    """
+    if bev and not calib:
+        raise InvalidOptionError(f"{param('bev')} needs {param('calib')} CALIB_DIR (the frames' <cat>_<id>.txt "
+                                 f"calibration files)")
+    if calib and not bev:
+        raise InvalidOptionError(f"{param('calib')} is only used with {param('bev')} (the bird's-eye view); add "
+                                 f"{param('bev')}, or leave out {param('calib')} for the perspective view")
+    check_writable(out)
+    check_outputs({"out": out}, {"gt": gt, "pred": pred, "calib": calib})
+    check_suffix(out, (".json",))
+    results = evaluate_kitti_dirs(gt, pred, calib_dir=calib)
+    write_json(out, results)
+    return results
+
+
+def kitti_table(results: dict[str, Any]) -> str:
+    """:func:`evaluate_kitti_dirs`' ``results`` as a table: a row per category, the scores in percent."""
+    lines = [f"{'category':<10} {'images':>6} {'MaxF':>7} {'AP':>7} {'PRE':>7} {'REC':>7} {'FPR':>7} {'FNR':>7}"]
+    for cat, r in results.items():
+        lines.append(f"{cat:<10} {r['images']:>6} "
+                     + " ".join(f"{100 * r[k]:7.2f}" for k in ("max_f", "ap", "pre", "rec", "fpr", "fnr")))
+    return "\n".join(lines)

@@ -67,7 +67,7 @@ from freespace.experiments.variants import (
 from freespace.io.files import PathLike, check_writable
 from freespace.io.outdir import claim_folder
 
-__all__ = ["reproduce"]
+__all__ = ["reproduce", "run_reproduce"]
 
 
 def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, models: str | list[str] | None = None,
@@ -104,47 +104,23 @@ def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, mode
     ``variants``, when given, must include it (a cluster job's command line stays consistent). The returned
     table and gains are then empty (collect the cells with :func:`~freespace.experiments.tables.write_tables`).
     """
-    if not 1 <= seeds <= MAX_SEEDS:
-        raise InvalidOptionError(f"{param('seeds')} must be in 1…{MAX_SEEDS}, got {seeds}")
-    options = dict(epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window,
-                   min_delta=min_delta, lr=lr, image_size=image_size, workers=workers, max_frames=max_frames,
-                   preset=preset, encoder_name=encoder_name, encoder_weights=encoder_weights)
-    unknown = sorted(set(virtual) - {"virtual_shift", "virtual_rotate", "virtual_prob"})
-    if unknown:
-        raise TypeError(f"reproduce() got unexpected keyword arguments {', '.join(unknown)}")
-    options.update(virtual)
+    options = _train_options(seeds, dict(
+        epochs=epochs, batch_size=batch_size, patience=patience, val_window=val_window, min_delta=min_delta, lr=lr,
+        image_size=image_size, workers=workers, max_frames=max_frames, preset=preset, encoder_name=encoder_name,
+        encoder_weights=encoder_weights), virtual)
     out = check_writable(out, folder=True)
     protocol = Protocol() if protocol is None else protocol
     vocabulary = protocol.vocabulary
-    if protocol.data and (dataset is not None or root is not None or autolabels is not None):
-        given = [param(k) for k, v in (("dataset", dataset), ("root", root), ("autolabels", autolabels))
-                 if v is not None]
-        raise InvalidOptionError(f"{param('protocol')} gives each variant its training data (its data); leave "
-                                 f"{' and '.join(given)} out")
-    if not protocol.data and (dataset is None or root is None):
-        raise InvalidOptionError(f"reproduce needs {param('dataset')} and {param('root')} (or a {param('protocol')} "
-                                 f"with data)")
+    _check_data_source(protocol, dataset, root, autolabels)
     roots = _test_roots(protocol, test_root)
     chosen_models = parse_models(models)
     chosen = parse_variants(variants if variants is not None else protocol.variants, vocabulary)
-    if only is not None:
-        model, variant, seed = parse_cell(only, seeds, vocabulary)
-        if (models is not None and model not in chosen_models) or (variants is not None and variant not in chosen):
-            what = (f"network {model!r} is not among {param('models')}" if model not in chosen_models
-                    else f"variant {variant!r} is not among {param('variants')}")
-            raise InvalidOptionError(f"{param('only')} {only}: its {what}; include it there, or leave the option out")
+    cell = None if only is None else _only_cell(only, seeds, protocol, models, chosen_models, variants, chosen)
     if not protocol.data:
-        check_autolabels_used(autolabels, [variant] if only is not None else chosen)
-    if only is not None:
-        config = cell_config(dataset, root, out, model, variant, seed, options, autolabels, protocol)
-        check_inputs(out, [config], vocabulary)
-        _check_test_roots([config], roots)
-        _check_data([config], protocol)
-        with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
-            status = run_cell(config, test_root=roots, progress=progress, variants=vocabulary)
-        entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": variant,
-                 "augment": augment_text(vocabulary[variant].augment), "seed": seed, "status": status}
-        return {"table": [], "gains": [], "runs": [entry]}
+        check_autolabels_used(autolabels, [cell[1]] if cell is not None else chosen)
+    if cell is not None:
+        config = cell_config(dataset, root, out, *cell, options, autolabels, protocol)
+        return _run_one(out, config, cell, roots, protocol, progress)
     configs = [cell_config(dataset, root, out, model, variant, seed, options, autolabels, protocol)  # all checked
                for model in chosen_models for variant in chosen for seed in range(seeds)]   # before any work
     for config in configs:
@@ -158,6 +134,105 @@ def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, mode
             statuses[Path(config.out).name] = run_cell(config, test_root=roots, progress=progress, variants=vocabulary)
             write_tables(out, figures=0, statuses=statuses, protocol=protocol)  # the tables so far, after every run
         return write_tables(out, figures=figures, statuses=statuses, protocol=protocol)
+
+
+def _train_options(seeds: int, options: dict[str, Any], virtual: dict[str, Any]) -> dict[str, Any]:
+    """Every cell's training ``options`` with the ``virtual`` ones (``virtual_shift``, ``virtual_rotate``,
+    ``virtual_prob``), after checking ``seeds`` (1…:data:`~freespace.experiments.variants.MAX_SEEDS`) and that
+    ``virtual`` holds nothing else.
+
+    Raises:
+        InvalidOptionError: ``seeds`` out of bounds. TypeError: another keyword in ``virtual``.
+    """
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise InvalidOptionError(f"{param('seeds')} must be in 1…{MAX_SEEDS}, got {seeds}")
+    unknown = sorted(set(virtual) - {"virtual_shift", "virtual_rotate", "virtual_prob"})
+    if unknown:
+        raise TypeError(f"reproduce() got unexpected keyword arguments {', '.join(unknown)}")
+    return {**options, **virtual}
+
+
+def _check_data_source(protocol: Protocol, dataset: str | None, root: PathLike | None,
+                       autolabels: PathLike | None) -> None:
+    """The training data comes from the ``protocol``'s data or from ``dataset`` and ``root``, never both.
+
+    Raises:
+        InvalidOptionError: both, or neither.
+    """
+    if protocol.data and (dataset is not None or root is not None or autolabels is not None):
+        given = [param(k) for k, v in (("dataset", dataset), ("root", root), ("autolabels", autolabels))
+                 if v is not None]
+        raise InvalidOptionError(f"{param('protocol')} gives each variant its training data (its data); leave "
+                                 f"{' and '.join(given)} out")
+    if not protocol.data and (dataset is None or root is None):
+        raise InvalidOptionError(f"reproduce needs {param('dataset')} and {param('root')} (or a {param('protocol')} "
+                                 f"with data)")
+
+
+def _only_cell(only: str, seeds: int, protocol: Protocol, models: str | list[str] | None, chosen_models: list[str],
+               variants: str | tuple[str, ...] | None, chosen: tuple[str, ...] | list[str]) -> tuple[str, str, int]:
+    """The cell ``only`` names, ``(network, variant, seed)``; ``models`` and ``variants``, when given, must
+    include it.
+
+    Raises:
+        InvalidOptionError: a cell outside ``models`` or ``variants`` (or not of their form).
+    """
+    model, variant, seed = parse_cell(only, seeds, protocol.vocabulary)
+    if (models is not None and model not in chosen_models) or (variants is not None and variant not in chosen):
+        what = (f"network {model!r} is not among {param('models')}" if model not in chosen_models
+                else f"variant {variant!r} is not among {param('variants')}")
+        raise InvalidOptionError(f"{param('only')} {only}: its {what}; include it there, or leave the option out")
+    return model, variant, seed
+
+
+def _run_one(out: Path, config: TrainConfig, cell: tuple[str, str, int], roots: dict[str, Path],
+             protocol: Protocol, progress: bool) -> dict[str, Any]:
+    """Check and run the one cell ``cell`` (``config``: its training run) in ``out``; :func:`reproduce`'s
+    result with that cell's entry alone in ``runs``."""
+    check_inputs(out, [config], protocol.vocabulary)
+    _check_test_roots([config], roots)
+    _check_data([config], protocol)
+    with claim_folder(out, "reproduce", entries=OUT_ENTRIES, shared=True):
+        status = run_cell(config, test_root=roots, progress=progress, variants=protocol.vocabulary)
+    model, variant, seed = cell
+    entry = {"run": str(Path(config.out).relative_to(out)), "model": model, "variant": variant,
+             "augment": augment_text(protocol.vocabulary[variant].augment), "seed": seed, "status": status}
+    return {"table": [], "gains": [], "runs": [entry]}
+
+
+def run_reproduce(out: PathLike, *, protocol: PathLike | None = None, tables: bool = False,
+                  dataset: str | None = None, root: PathLike | None = None, models: str | None = None,
+                  variants: str | None = None, test_root: TestRoots = None, only: str | None = None,
+                  **options: Any) -> dict[str, Any]:
+    """``freespace reproduce``: the ``protocol`` file read (None: the method's defaults), ``models`` and
+    ``variants`` checked in every mode; then with ``tables`` the tables rebuilt from the cells in ``out``
+    (:func:`~freespace.experiments.tables.write_tables`), else :func:`reproduce` with ``options`` (its other
+    keyword arguments).
+
+    Returns:
+        :func:`reproduce`'s (or :func:`~freespace.experiments.tables.write_tables`') result.
+
+    Raises:
+        InvalidOptionError: ``tables`` with a cell, networks, variants or test sets to run; no ``dataset`` and
+            ``root`` (without ``tables`` or a protocol with data).
+    """
+    loaded = Protocol.load(protocol) if protocol is not None else None
+    if models is not None:  # names checked in every mode
+        parse_models(models)
+    if variants is not None:
+        parse_variants(variants, loaded.vocabulary if loaded is not None else None)
+    if tables:
+        unused = [param(name) for name, value in (("only", only), ("models", models), ("variants", variants),
+                                                  ("test_root", test_root)) if value]
+        if unused:
+            raise InvalidOptionError(f"{param('tables')} collects the finished cells in {param('out')}, whatever they "
+                                     f"are; it takes no {', '.join(unused)}")
+        return write_tables(out, protocol=loaded)
+    if (dataset is None or root is None) and not (loaded is not None and loaded.data):
+        raise InvalidOptionError(f"reproduce needs {param('dataset')} and {param('root')} (only {param('tables')}, "
+                                 f"and a {param('protocol')} with data, do without)")
+    return reproduce(dataset, root, out, models=models, variants=variants, test_root=test_root, only=only,
+                     protocol=loaded, **options)
 
 
 #: the options that decide what a cell trains on (:func:`~freespace.engine.data.plan_data`)

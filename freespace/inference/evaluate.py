@@ -25,7 +25,7 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.registry import get_dataset
 from freespace.data.splits import read_splits
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, ShapeMismatchError, param
-from freespace.evaluation.labelled import LabelFormat, PooledScores, pair_labelled_frames
+from freespace.evaluation.labelled import LabelFormat, PooledScores, pair_labelled_frames, parse_label_format
 from freespace.evaluation.metrics import RoadEvaluator, confusion_counts
 from freespace.evaluation.viz import overlay_errors, write_pr_curve
 from freespace.inference.predictor import Predictor
@@ -34,7 +34,7 @@ from freespace.io.files import PathLike, check_outputs, check_writable, write_cs
 from freespace.io.outdir import claim_folder
 from freespace.labels import RoadLabel
 
-__all__ = ["evaluate_checkpoint", "evaluate_frames", "evaluate_labelled", "score_frames"]
+__all__ = ["evaluate", "evaluate_checkpoint", "evaluate_frames", "evaluate_labelled", "evaluate_report", "score_frames"]
 
 #: what metrics.json and the command's line report of the pooled counts
 SUMMARY_KEYS = ("accuracy", "precision", "recall", "f_score", "iou", "max_f", "ap")
@@ -170,3 +170,59 @@ def evaluate_labelled(images: PathLike, labels: PathLike, label_format: LabelFor
         return _write_results(staging, evaluator, scores, seconds,
                               {"images": str(images), "labels": str(labels),
                                "label_format": label_format.describe(), **record})
+
+
+#: the options of a labelled folder (``images``, ``labels``, ``label_format``) and of its labels' values
+_FOLDER = ("images", "labels", "label_format")
+_FOLDER_VALUES = ("road", "ignore", "tolerance")
+
+
+def evaluate(out: PathLike, *, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
+             dataset: str | None = None, root: PathLike | None = None, split: str | None = None,
+             subset: str = "test", splits_dir: PathLike | None = None, images: PathLike | None = None,
+             labels: PathLike | None = None, label_format: str | None = None, road: str | None = None,
+             ignore: str | None = None, tolerance: int | None = None, threads: int | None = None,
+             overlays: bool = True, progress: bool = True) -> dict[str, Any]:
+    """``freespace evaluate``: a model (``checkpoint`` or ``onnx``) on a dataset's frames (``dataset`` and
+    ``root``: :func:`evaluate_checkpoint`) or on a labelled folder (``images``, ``labels`` and ``label_format``,
+    with ``road``, ``ignore`` and ``tolerance`` as :func:`~freespace.evaluation.labelled.parse_label_format`
+    reads them: :func:`evaluate_labelled`); ``overlays`` is the labelled folder's. Writes ``out``.
+
+    Returns:
+        ``metrics.json``'s content.
+
+    Raises:
+        InvalidOptionError: both sources or neither, a labelled folder without all three of its parameters, or
+            the label values of a labelled folder given with a dataset.
+    """
+    given = dict(images=images, labels=labels, label_format=label_format)
+    folder = [n for n in _FOLDER if given[n] is not None]
+    if dataset is not None and folder:
+        raise InvalidOptionError(f"give either {param('dataset')}/{param('root')} or {param('images')}/"
+                                 f"{param('labels')}/{param('label_format')}, not both")
+    if folder:
+        missing = [param(n) for n in _FOLDER if n not in folder]
+        if missing:
+            raise InvalidOptionError(f"a labelled folder needs {param('images')}, {param('labels')} and "
+                                     f"{param('label_format')}; add {', '.join(missing)}")
+        fmt = parse_label_format(label_format, road, ignore, tolerance)  # type: ignore[arg-type]
+        return evaluate_labelled(images, labels, fmt, out, checkpoint=checkpoint, onnx=onnx,  # type: ignore[arg-type]
+                                 threads=threads, overlays=overlays, progress=progress)
+    if dataset is None or root is None:
+        raise InvalidOptionError(f"give the frames to evaluate on: {param('dataset')} NAME {param('root')} DIR, or a "
+                                 f"labelled folder ({param('images')} DIR {param('labels')} DIR {param('label_format')}"
+                                 f" FORMAT)")
+    if any(v is not None for v in (road, ignore, tolerance)):
+        raise InvalidOptionError(f"{param('road')}, {param('ignore')} and {param('tolerance')} describe a labelled "
+                                 f"folder's labels ({param('images')}/{param('labels')}/{param('label_format')}), not "
+                                 f"a dataset's")
+    return evaluate_checkpoint(checkpoint, dataset, root, out, subset=subset, splits_dir=splits_dir, split=split,
+                               progress=progress, onnx=onnx, threads=threads)
+
+
+def evaluate_report(metrics: dict[str, Any], out: PathLike) -> str:
+    """One line on an evaluation (``metrics``: :func:`evaluate`'s return value) written to ``out``: the pooled
+    scores, F's 95 % interval and the number of frames."""
+    ci = metrics["intervals"]["f_score"]
+    return (" ".join(f"{k} {metrics[k]:.4f}" for k in SUMMARY_KEYS)
+            + f"  F 95 % [{ci[0]:.4f}, {ci[1]:.4f}] ({metrics['frames']} frames) → {out}")

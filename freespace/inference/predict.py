@@ -1,47 +1,35 @@
-"""Inference for deployment: `predict` (images, folders, globs, videos; sharded), `export`, `kitti-submit`
-(the predictor itself: :mod:`freespace.inference.predictor`)."""
+"""Prediction for deployment: `predict` (images, folders, globs, videos; sharded) through a pipelined runner
+(the predictor itself: :mod:`freespace.inference.predictor`; export: :mod:`freespace.inference.export`; the KITTI
+submission: :mod:`freespace.inference.submission`)."""
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
-import io as _io
 import itertools
 import json
-import logging
 import os
 import queue
-import tempfile
 import threading
 import time
-import warnings
-import zipfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
-from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, param
+from freespace.errors import InvalidOptionError, param
 from freespace.evaluation.metrics import to_confidence
-from freespace.inference.predictor import Predictor, load_checkpoint
+from freespace.inference.export import export_model  # noqa: F401  (bench/realtime.py imports it from here)
+from freespace.inference.predictor import Predictor
 from freespace.io.codecs import write_image
-from freespace.io.files import PathLike, atomic_write_bytes, check_outputs, check_suffix, check_writable, write_json
-from freespace.io.kitti import read_kitti_calib
+from freespace.io.files import PathLike, check_outputs, check_suffix, check_writable, write_json
 from freespace.io.outdir import OwnedFolder, claim_folder
-from freespace.io.video import FrameSource, VideoFrame, VideoWriter, open_frames
-from freespace.runtime.shard import select_shard
+from freespace.io.video import FrameSource, VideoFrame, VideoWriter, is_video_path, open_frames
+from freespace.runtime.shard import parse_shard, select_shard
 
-log = logging.getLogger(__name__)
-
-__all__ = ["predict_folder", "predict_video", "export_model", "to_float16", "kitti_submit"]
-
-#: the size (H, W) of the example input an export is traced and checked with when the checkpoint states no
-#: training size: KITTI road's
-EXPORT_EXAMPLE_SIZE = (384, 1248)
-#: the suffixes an export's file may end in, by format
-EXPORT_SUFFIXES = {"onnx": (".onnx",), "torchscript": (".pt", ".pth")}
+__all__ = ["predict", "predict_folder", "predict_video", "predict_report", "run_frames", "fast_overlay"]
 
 
 def _input_paths(source: FrameSource) -> dict[str, Path]:
@@ -163,14 +151,30 @@ def run_frames(predictor: Any, frames: Iterable[VideoFrame], batch_size: int,
         write(frame, restore(prob, frame.image.shape[:2]))
         stats.frames += 1
 
-    if not pipeline:
-        it = iter(frames)
-        while batch := [(f, prepare(f.image)) for f in itertools.islice(it, batch_size)]:
-            for (frame, _), prob in zip(batch, network(batch)):
-                finish(frame, prob)
-        stats.wall_seconds = time.perf_counter() - t_start
-        return stats
+    (_run_pipelined if pipeline else _run_serially)(frames, batch_size, prepare, network, finish)
+    stats.wall_seconds = time.perf_counter() - t_start
+    return stats
 
+
+#: a batch of ``(frame, prepared network input)`` → the network's probabilities, one per frame
+_Network = Callable[[list[tuple[VideoFrame, Any]]], list[np.ndarray]]
+
+
+def _run_serially(frames: Iterable[VideoFrame], batch_size: int, prepare: Callable[[np.ndarray], Any],
+                  network: _Network, finish: Callable[[VideoFrame, np.ndarray], None]) -> None:
+    """:func:`run_frames` in the calling thread: ``prepare`` a batch of frames, run ``network`` on it, ``finish``
+    each frame with its probability, in order."""
+    it = iter(frames)
+    while batch := [(f, prepare(f.image)) for f in itertools.islice(it, batch_size)]:
+        for (frame, _), prob in zip(batch, network(batch)):
+            finish(frame, prob)
+
+
+def _run_pipelined(frames: Iterable[VideoFrame], batch_size: int, prepare: Callable[[np.ndarray], Any],
+                   network: _Network, finish: Callable[[VideoFrame, np.ndarray], None]) -> None:
+    """:func:`run_frames` in three threads: a reader (``prepare``), the calling thread (``network`` on batches)
+    and a writer (``finish``), joined by bounded queues; an error in any of them stops the others and is
+    raised here, after they have stopped."""
     stop = threading.Event()
     inbox: queue.Queue = queue.Queue(maxsize=batch_size)
     outbox: queue.Queue = queue.Queue(maxsize=WRITE_QUEUE)
@@ -201,18 +205,9 @@ def run_frames(predictor: Any, frames: Iterable[VideoFrame], batch_size: int,
     for t in threads:
         t.start()
     try:
-        done = False
-        while not done:
-            batch = []
-            while len(batch) < batch_size:
-                item = _get(inbox, stop)
-                if item is _END:
-                    done = True
-                    break
-                batch.append(item)
-            if batch:
-                for (frame, _), prob in zip(batch, network(batch)):
-                    _put(outbox, (frame, prob), stop)
+        for batch in _batches(inbox, batch_size, stop):
+            for (frame, _), prob in zip(batch, network(batch)):
+                _put(outbox, (frame, prob), stop)
         _put(outbox, _END, stop)
         threads[1].join()
     except _Stop:
@@ -223,8 +218,20 @@ def run_frames(predictor: Any, frames: Iterable[VideoFrame], batch_size: int,
             t.join()
     if errors:
         raise errors[0]
-    stats.wall_seconds = time.perf_counter() - t_start
-    return stats
+
+
+def _batches(inbox: queue.Queue, batch_size: int, stop: threading.Event) -> Iterator[list[Any]]:
+    """The items of ``inbox`` in lists of ``batch_size`` (the last one shorter, none empty) until its end mark."""
+    while True:
+        batch = []
+        while len(batch) < batch_size:
+            item = _get(inbox, stop)
+            if item is _END:
+                if batch:
+                    yield batch
+                return
+            batch.append(item)
+        yield batch
 
 
 def fast_overlay(image: np.ndarray, road: np.ndarray) -> np.ndarray:
@@ -423,195 +430,50 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
     return _summary(predictor, stats, fps=source.fps, path=str(out))
 
 
-def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: PathLike | None = None,
-                 fp16: bool = False) -> dict[str, Any]:
-    """Export a checkpoint to ONNX (dynamic N, H, W; opset 17) or TorchScript (traced; dynamic H, W),
-    validated against PyTorch at the training size and at an odd size. Returns the max abs differences.
+def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
+            threads: int | None = None, batch_size: int = 4, shard: str | tuple[int, int] | None = None,
+            overlays: bool = True, progress: bool = True) -> dict[str, Any]:
+    """``freespace predict``: the road confidence PNGs and overlays of every frame of ``inputs`` in the folder
+    ``out`` (:func:`predict_folder`), or, when ``out`` names a video (``.mp4``), the overlaid video
+    (:func:`predict_video`), with the model of ``checkpoint`` or ``onnx`` (one of them).
 
-    With ``fp16`` (ONNX only) the file written is the float16 model (:func:`to_float16`: weights and
-    computation in float16, the ``image`` input and ``logits`` output kept float32, so that
-    :class:`Predictor` and ``freespace predict --onnx`` take it as any export; the metadata kept), about
-    half the size. Its road probabilities are compared with the checkpoint's (PyTorch, float32) on the
-    check inputs: the result's ``fp16`` entry gives the largest difference and the share of pixels whose
-    road/non-road decision (p ≥ 0.5) is the same; a difference above :data:`FP16_MAX_PROB_DIFF` (or not
-    finite: a float16 overflow) refuses the export and writes nothing.
+    ``out`` is checked before the model is loaded. ``shard`` (``"K/N"`` or ``(K, N)``, 1-based) and
+    ``overlays=False`` are for a folder ``out`` only. ``threads``: the network's CPU threads (None: the cores
+    this process may use).
 
-    With ``calibration`` (ONNX only: a folder, glob or video of real frames) the file written is the int8
-    model (:func:`freespace.inference.quantize.quantize_int8`, calibrated on up to
-    :data:`~freespace.inference.quantize.CALIBRATION_FRAMES` of them at the training size), and the result's
-    ``int8`` entry says how its masks agree with the float32 model's on those frames
-    (:func:`~freespace.inference.quantize.compare_models`).
-    """
-    if fmt not in ("onnx", "torchscript"):
-        raise InvalidOptionError(f"{param('fmt')} must be onnx or torchscript, got {fmt!r}")
-    if calibration is not None and fmt != "onnx":
-        raise InvalidOptionError(f"int8 quantisation ({param('calibration')}) is for {param('fmt')} onnx")
-    if fp16 and fmt != "onnx":
-        raise InvalidOptionError(f"{param('fp16')} is for {param('fmt')} onnx (a float16 ONNX model); leave it out "
-                                 f"for {fmt}")
-    if fp16 and calibration is not None:
-        raise InvalidOptionError(f"{param('fp16')} and int8 quantisation ({param('calibration')}) exclude each other: "
-                                 f"a model is exported in float16 or in int8; leave out one of them")
-    check_writable(out)
-    check_outputs({"out": out}, {"checkpoint": checkpoint, **({"calibration": calibration} if calibration else {})})
-    check_suffix(out, EXPORT_SUFFIXES[fmt])
-    import torch
-
-    model, hp = load_checkpoint(checkpoint)
-    size = tuple(hp.get("image_size") or EXPORT_EXAMPLE_SIZE)
-    calib_inputs = None
-    if calibration is not None:  # read before the export: a bad folder fails fast
-        from freespace.inference.quantize import calibration_inputs
-
-        calib_inputs = calibration_inputs(calibration, size)
-    gen = torch.Generator().manual_seed(0)  # the same check inputs every time: a refusal is repeatable
-    example = torch.rand(1, 3, *size, generator=gen)
-    checks = [torch.rand(1, 3, *size, generator=gen), torch.rand(2, 3, size[0] - 7, size[1] - 13, generator=gen)]
-    out = Path(out)
-    meta = {"model": hp["model"], "image_size": json.dumps(list(size)), "producer": "freespace"}
-    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
-        if not log.isEnabledFor(logging.DEBUG):  # torch's deprecations and tracer notes, unless -v
-            warnings.simplefilter("ignore")
-        tmp_path = Path(tmp) / "model"
-        if fmt == "onnx":
-            import onnx
-            import onnxruntime as ort
-
-            torch.onnx.export(model, (example,), str(tmp_path), dynamo=False, opset_version=17,
-                              input_names=["image"], output_names=["logits"],
-                              dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}, "logits": {0: "n", 2: "h", 3: "w"}})
-            proto = onnx.load(str(tmp_path))
-            for k, v in meta.items():
-                proto.metadata_props.add(key=k, value=v)
-            data = proto.SerializeToString()
-            session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
-
-            def run(x: torch.Tensor) -> np.ndarray:
-                return session.run(None, {"image": x.numpy()})[0]
-        else:
-            with torch.no_grad():
-                traced = torch.jit.trace(model, example, check_trace=False)
-            buf = _io.BytesIO()
-            torch.jit.save(traced, buf, _extra_files={"freespace.json": json.dumps(meta)})
-            data = buf.getvalue()
-            loaded = torch.jit.load(_io.BytesIO(data))
-
-            def run(x: torch.Tensor) -> np.ndarray:
-                with torch.no_grad():
-                    return loaded(x).numpy()
-        diffs = []
-        with torch.no_grad():
-            references = [model(x).numpy() for x in checks]
-        for x, ref in zip(checks, references):
-            diffs.append(float(np.abs(run(x) - ref).max()))
-    if not np.isfinite(diffs).all():  # NaN or infinite class scores: of the checkpoint or of the export
-        raise CorruptFileError(f"the model {checkpoint} gives NaN or infinite class scores on the check inputs, so it "
-                               f"predicts no road probability; it is broken (e.g. an overflow): train it anew")
-    result = {"format": fmt, "path": str(out), "max_abs_diff": max(diffs),
-              "checked_sizes": [list(x.shape) for x in checks]}
-    if fp16:
-        half = to_float16(data, {**meta, "precision": "float16 (weights and computation; image and logits float32)"})
-        result["fp16"] = _check_float16(half, [x.numpy() for x in checks], references, checkpoint)
-        data = half
-    if calib_inputs is not None:
-        from freespace.inference.quantize import compare_models, quantize_int8
-
-        quantized = quantize_int8(data, calib_inputs, {**meta, "quantization": "int8 static, QDQ, per-channel weights, "
-                                                                             f"{len(calib_inputs)} calibration frames"})
-        result["int8"] = compare_models(data, quantized, calib_inputs)
-        data = quantized
-    atomic_write_bytes(out, data)
-    return result
-
-
-#: the largest road probability difference a float16 export may have from its checkpoint on the check inputs
-FP16_MAX_PROB_DIFF = 0.05
-
-
-def to_float16(model: bytes, metadata: dict[str, str]) -> bytes:
-    """The float16 version of the float32 ONNX ``model`` (onnxruntime's ``convert_float_to_float16``): weights
-    and computation in float16, the graph's input and output kept float32 (``keep_io_types``: a cast after
-    the input and before the output), so that it is called as the float32 model is; ``metadata`` is set on
-    it (replacing what it had)."""
-    import onnx
-    from onnxruntime.transformers.float16 import convert_float_to_float16
-
-    proto = convert_float_to_float16(onnx.load_from_string(model), keep_io_types=True)
-    del proto.metadata_props[:]
-    for k, v in metadata.items():
-        proto.metadata_props.add(key=k, value=v)
-    return proto.SerializeToString()
-
-
-def _road_probability(logits: np.ndarray) -> np.ndarray:
-    """Softmax road probability (``N×H×W``, float64) of ``N×C×H×W`` class scores."""
-    logits = logits.astype(np.float64)
-    with np.errstate(invalid="ignore", over="ignore"):  # infinite logits (a float16 overflow) give NaN: refused
-        e = np.exp(logits - logits.max(1, keepdims=True))
-        return e[:, 1] / e.sum(1)
-
-
-def _check_float16(model: bytes, inputs: list[np.ndarray], references: list[np.ndarray],
-                   checkpoint: PathLike) -> dict[str, Any]:
-    """Run the float16 ONNX ``model`` on ``inputs`` (``float32 N×3×H×W``) and compare its road probabilities
-    with the checkpoint's logits ``references``: ``max_prob_diff`` and ``mask_agreement`` (p ≥ 0.5).
+    Returns:
+        The run's summary (:func:`predict_folder` or :func:`predict_video`).
 
     Raises:
-        InvalidOptionError: the difference exceeds :data:`FP16_MAX_PROB_DIFF` or is not finite.
+        InvalidOptionError: ``shard`` or ``overlays=False`` with a video ``out``, a bad ``shard``, an ``out``
+            that may not be written.
     """
-    import onnxruntime as ort
-
-    session = ort.InferenceSession(model, providers=["CPUExecutionProvider"])
-    diff, same, total = 0.0, 0, 0
-    for x, ref in zip(inputs, references):
-        a, b = _road_probability(ref), _road_probability(session.run(None, {"image": x})[0])
-        d = float(np.abs(a - b).max())
-        diff = d if not np.isfinite(d) else max(diff, d)
-        same, total = same + int(((a >= 0.5) == (b >= 0.5)).sum()), total + a.size
-    if not diff <= FP16_MAX_PROB_DIFF:  # NaN too: a float16 overflow
-        raise InvalidOptionError(f"{checkpoint}: in float16 the road probabilities differ from the checkpoint's by up "
-                                 f"to {diff:.3g} (allowed {FP16_MAX_PROB_DIFF}); export it without {param('fp16')}")
-    return {"max_prob_diff": diff, "mask_agreement": same / total, "tolerance": FP16_MAX_PROB_DIFF}
-
-
-def kitti_submit(checkpoint: PathLike, root: PathLike, out: PathLike, progress: bool = True) -> dict[str, Any]:
-    """Predict the KITTI road testing split and write the benchmark's bird's-eye-view confidence maps
-    (``OUT/<cat>_road_<id>.png``, 800×400) and ``OUT/submission.zip`` holding them.
-
-    Every calibration file is read before any prediction; the folder is written all or nothing and
-    replaces the files of an earlier submission there (:mod:`freespace.io.outdir`)."""
-    from freespace.data.kitti_road import KittiRoad
-
-    check_writable(out, folder=True)
-    check_outputs({"out": out}, {"checkpoint": checkpoint, "root": root})
-    ds = KittiRoad(root, "testing", disparity_source="none")
-    missing = [f.name for f in ds.frames if f.calib is None]
-    if missing:
-        raise InputFileError(f"{len(missing)} testing frames have no calibration (first: {missing[0]}); the BEV "
-                             f"transform needs data_road/testing/calib/<frame>.txt")
-    calibs = [read_kitti_calib(f.calib) for f in ds.frames]  # type: ignore[arg-type]  # every file checked first
-    predictor = Predictor(checkpoint=checkpoint)
-    with claim_folder(out, "kitti-submit") as folder, folder.staged() as staging:
-        names = _submit_into(predictor, ds, calibs, staging, progress)
-    return {"frames": len(names), "zip": str(Path(out) / "submission.zip")}
+    video = is_video_path(out)
+    check_writable(out, folder=not video)  # before the model is loaded
+    check_outputs({"out": out}, {"input": inputs, "checkpoint": checkpoint, "onnx": onnx})
+    if video:
+        check_suffix(out, (".mp4",))
+    if isinstance(shard, str):
+        shard = parse_shard(shard)
+    if video and shard:
+        raise InvalidOptionError(f"{param('shard')} writes frames into a folder; a video {param('out')} is one file: "
+                                 f"leave out {param('shard')}")
+    if video and not overlays:
+        raise InvalidOptionError(f"{param('no_overlays')} leaves out the overlay PNGs of a folder {param('out')}; a "
+                                 f"video {param('out')} is the overlay: leave out {param('no_overlays')}")
+    predictor = Predictor(checkpoint=checkpoint, onnx=onnx, threads=threads)
+    if video:
+        return predict_video(predictor, inputs, out, batch_size=batch_size, progress=progress)
+    return predict_folder(predictor, inputs, out, batch_size=batch_size, progress=progress, shard=shard,
+                          overlays=overlays)
 
 
-def _submit_into(predictor: Predictor, ds: Any, calibs: list[dict[str, np.ndarray]], out: Path,
-                 progress: bool) -> list[str]:
-    from freespace.evaluation.bev import to_bev
-    from freespace.runtime.log import progress_bar
-
-    names = []
-    for i, frame in enumerate(progress_bar(ds.frames, desc="kitti-submit", unit="frame", enabled=progress)):
-        image = ds.load(i, right=False, label=False, disparity=False).left
-        conf = to_confidence(predictor.predict([image])[0])
-        bev = to_bev(conf, calibs[i])
-        name = f"{frame.category}_road_{frame.name.split('_')[1]}.png"
-        write_image(out / name, bev)
-        names.append(name)
-    buf = _io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
-        for name in names:
-            zf.write(out / name, arcname=name)
-    atomic_write_bytes(out / "submission.zip", buf.getvalue())
-    return names
+def predict_report(summary: dict[str, Any], out: PathLike, shard: str | None = None) -> str:
+    """One line on a :func:`predict` run (``summary``: its return value) into ``out``: frames, frames per second
+    end to end, the network's time per frame and share; ``shard``: the run's ``"K/N"`` as given."""
+    if not summary["frames"]:
+        return f"0 frames in shard {shard} → {out}"
+    return (f"{summary['frames']} frames in {summary['seconds']:.2f} s: {summary['frames_per_second']:.1f} frames per "
+            f"second end to end (first frame read to last written); the network "
+            f"{summary['seconds_per_frame'] * 1000:.1f} ms per frame, {100 * summary['network_share']:.0f} % of the "
+            f"time" + (f" (shard {shard})" if shard else "") + f" → {out}")
