@@ -184,7 +184,7 @@ def rendered_pairs(root: Path, split_file: Path | None) -> list[tuple[Path, Path
 
 def bench_model(key: str, ckpt: Path, frames: Path, video: Path, work: Path, repeat: int,
                 real: list, rendered: list) -> dict[str, Any]:
-    from freespace.inference.predict import export_model
+    from freespace.inference.export import export_model
     from freespace.inference.predictor import Predictor
     from freespace.io.codecs import read_image
 

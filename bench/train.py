@@ -20,7 +20,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, write_section  # noqa: E402
 from freespace.data.synthetic import SynthConfig, write_dataset  # noqa: E402
-from freespace.engine.config import parse_size  # noqa: E402
+from freespace.engine.option_values import parse_size  # noqa: E402
 from freespace.models import create_model, list_models  # noqa: E402
 
 

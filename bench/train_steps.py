@@ -24,7 +24,8 @@ from _common import machine, timeit, write_section  # noqa: E402
 from freespace.data.registry import get_dataset  # noqa: E402
 from freespace.data.synthetic import SynthConfig, write_dataset  # noqa: E402
 from freespace.data.torch_dataset import RoadSegmentationDataset  # noqa: E402
-from freespace.engine.config import TrainConfig, parse_size  # noqa: E402
+from freespace.engine.config import TrainConfig  # noqa: E402
+from freespace.engine.option_values import parse_size  # noqa: E402
 from freespace.engine.train import run_training  # noqa: E402
 from freespace.labels import IGNORE_INDEX  # noqa: E402
 from freespace.models import create_model  # noqa: E402

@@ -15,7 +15,8 @@ import yaml
 
 from freespace.cli import CONFIG_FLAGS, REPRODUCE_OPTIONS, _flags, build_parser, main
 from freespace.data.synthetic import SynthConfig, write_dataset
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, read_config_yaml
+from freespace.engine.config import TrainConfig, read_config_yaml
+from freespace.engine.option_values import FIRST_FRAME_SIZE
 from freespace.engine.options import options
 from freespace.errors import InvalidOptionError, param
 

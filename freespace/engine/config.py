@@ -30,18 +30,13 @@ from pydantic import BeforeValidator, Field
 from freespace.data.label_tree import check_label_tree, file_record, resolved_path, tree_record
 from freespace.engine import config_yaml
 from freespace.engine.config_yaml import option
-from freespace.engine.option_values import (  # noqa: F401  (AUGMENTS, parse_augment, ...: importable from here)
-    AUGMENT_NAMES,
+from freespace.engine.option_values import (
     AUGMENTS,
     FIRST_FRAME_SIZE,
     Augment,
     ImageSize,
     PathText,
     Ranges,
-    augment_text,
-    parse_augment,
-    parse_size,
-    ranges_text,
     weights_path,
 )
 from freespace.errors import MAX_SEED, CorruptFileError, InvalidOptionError, param
@@ -57,10 +52,7 @@ from freespace.limits import (
     check_workers,
 )
 
-__all__ = ["TrainConfig", "read_config_yaml", "content_hashes", "PRESETS", "STRATEGIES", "PATH_OPTIONS",
-           # the spellings of the values (freespace.engine.option_values) and the label tree's check, here too
-           "AUGMENTS", "AUGMENT_NAMES", "FIRST_FRAME_SIZE", "parse_augment", "augment_text", "ranges_text",
-           "parse_size", "weights_path", "check_label_tree"]
+__all__ = ["TrainConfig", "read_config_yaml", "content_hashes", "PRESETS", "STRATEGIES", "PATH_OPTIONS"]
 
 PRESETS = ("light", "paper")
 STRATEGIES = ("auto", "ddp")
@@ -115,7 +107,7 @@ class TrainConfig:
     lists (default: the paper's split by scenario); ``disparity_source`` where the DS-Generator's
     disparities come from (:data:`freespace.data.disparity.DISPARITY_SOURCES`); ``augment`` the
     augmentations on top of the conventional one (random translation and rotation, always on in training):
-    ``()`` none, else names of :data:`AUGMENT_NAMES`.
+    ``()`` none, else names of :data:`~freespace.engine.option_values.AUGMENT_NAMES`.
 
     Raises:
         InvalidOptionError: a value of the wrong type, out of bounds or not among the choices (naming the

@@ -119,7 +119,7 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
     Returns ``{"dataset", "train", "val", "test"}`` (lists of :class:`Item`; ``train`` starts with the
     training frames themselves, ``"frames"`` of them, and the views or duplicates follow), ``"size"``
     (H, W: ``config.image_size``, or the first labelled frame's for
-    :data:`~freespace.engine.config.FIRST_FRAME_SIZE`: :meth:`TrainConfig.with_size`) and ``"virtual"`` (a
+    :data:`~freespace.engine.option_values.FIRST_FRAME_SIZE`: :meth:`TrainConfig.with_size`) and ``"virtual"`` (a
     :class:`VirtualAugment`, or None).
     """
     plan = plan_data(config, run_dir)

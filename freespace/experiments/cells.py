@@ -89,7 +89,7 @@ def cell_config(dataset: str | None, root: PathLike | None, out: Path, model: st
         if autolabels is None:
             raise InvalidOptionError(f"{variant} trains on labels nobody drew: give {param('autolabels')} DIR, the "
                                      f"label tree of {root} that `freespace autolabel` wrote")
-        from freespace.engine.config import check_label_tree
+        from freespace.data.label_tree import check_label_tree
 
         check_label_tree(autolabels, dataset, root, options.get("split"), option="autolabels")  # named as given
         options.update(labels=str(autolabels), human_share=0.0)
@@ -149,7 +149,7 @@ def check_cell(config: TrainConfig) -> bool:
     """Refuse ``config`` when the cell in ``config.out`` was started with other settings (``key old → new``, in
     config.yaml's spelling), but for a larger ``epochs`` or ``patience``; return whether one of those grew
     (:meth:`~freespace.engine.config.TrainConfig.diff`: the cell's config.yaml may be of any version; paths
-    compare resolved; an ``image_size`` of :data:`~freespace.engine.config.FIRST_FRAME_SIZE` matches the size
+    compare resolved; an ``image_size`` of :data:`~freespace.engine.option_values.FIRST_FRAME_SIZE` matches the size
     it was resolved to)."""
     run_dir = Path(config.out)
     saved_path = run_dir / "config.yaml"

@@ -362,7 +362,7 @@ def _data(data: Any, base: Path, file: str) -> dict[str, DataSource]:
 def _declared(data: Any, sources: dict[str, DataSource]) -> dict[str, Variant]:
     """A protocol's ``variants`` mapping (``NAME: {data, augment, flip, photometric}``) → its :class:`Variant` s,
     in the file's order, each training on one of ``sources``."""
-    from freespace.engine.config import AUGMENTS, parse_augment
+    from freespace.engine.option_values import AUGMENTS, parse_augment
 
     if not data:
         raise InvalidOptionError("variants must declare at least one variant")

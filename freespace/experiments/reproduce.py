@@ -43,7 +43,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from freespace.engine.config import FIRST_FRAME_SIZE, TrainConfig, augment_text
+from freespace.engine.config import TrainConfig
+from freespace.engine.option_values import FIRST_FRAME_SIZE, augment_text
 from freespace.errors import InvalidOptionError, param
 from freespace.experiments.cells import (
     cell_config,
@@ -94,7 +95,7 @@ def reproduce(dataset: str | None, root: PathLike | None, out: PathLike, *, mode
     ``test_root``: further test sets (:func:`~freespace.experiments.variants.parse_test_roots`), added to the
     protocol's. ``autolabels``: the label tree of ``root``
     that X-auto and X-mix train on (made by ``freespace autolabel``).
-    ``image_size``: (H, W), or :data:`~freespace.engine.config.FIRST_FRAME_SIZE`.
+    ``image_size``: (H, W), or :data:`~freespace.engine.option_values.FIRST_FRAME_SIZE`.
     ``preset``: every network's size (``"light"`` for a CPU, ``"paper"``: the paper's backbones).
     ``encoder_name``, ``encoder_weights``: every run's encoder and its initial weights (``"imagenet"`` or a
     state-dict file; see :mod:`freespace.models.weights`), for the networks that take them.

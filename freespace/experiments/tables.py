@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from freespace.engine.config import augment_text, read_config_yaml
+from freespace.engine.config import read_config_yaml
+from freespace.engine.option_values import augment_text
 from freespace.errors import FreespaceError, InvalidOptionError
 from freespace.experiments.cells import read_metrics
 from freespace.experiments.figures import frames_figure, gain_figure

@@ -21,7 +21,6 @@ import numpy as np
 
 from freespace.errors import InvalidOptionError, param
 from freespace.evaluation.metrics import to_confidence
-from freespace.inference.export import export_model  # noqa: F401  (bench/realtime.py imports it from here)
 from freespace.inference.predictor import Predictor
 from freespace.io.codecs import write_image
 from freespace.io.files import PathLike, check_outputs, check_suffix, check_writable, write_json

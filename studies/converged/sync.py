@@ -14,7 +14,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from freespace.experiments.reproduce import OUT_ENTRIES
+from freespace.experiments.tables import OUT_ENTRIES
 from freespace.io.outdir import claim_folder
 
 SKIP = {"checkpoints", "generated", "tensorboard"}
