@@ -225,3 +225,49 @@ def test_collect_copies_a_record_whole_or_not_at_all(tmp_path: Path) -> None:
     assert "skipped" in res.stderr and "unet-r-auto-s0" in res.stderr, res.stderr
     assert sorted(p.name for p in (study / "runs").iterdir()) == ["unet-s-s0"]
     assert (study / "runs" / "unet-s-s0" / "splits" / "train.txt").is_file()
+
+
+class _RedIsRoad:
+    """A stand-in teacher session: road logit +6 where the input's red channel is above ½, −6 where it is below."""
+
+    def run(self, names, feeds):
+        import numpy as np
+
+        x = feeds["image"]
+        road = np.where(x[:, 0] > 0.5, 6.0, -6.0).astype(np.float32)
+        return [np.stack([-road, road], 1)]
+
+
+def test_student_labels_the_teacher_s_confident_road_beside_the_drives(tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    import cv2
+    import numpy as np
+
+    student = _load("student")
+    drive = tmp_path / "raw" / "2011_09_26" / "2011_09_26_drive_0001_sync" / "image_02" / "data"
+    drive.mkdir(parents=True)
+    labels = tmp_path / "al" / "2011_09_26_drive_0001_sync"
+    labels.mkdir(parents=True)
+    for frame in ("0000000000", "0000000001"):
+        (drive / f"{frame}.png").write_bytes(b"png")
+        (labels / f"{frame}.png").write_bytes(b"label")
+    splits = tmp_path / "splits"
+    splits.mkdir()
+    for part, frame in (("train", "0000000000"), ("val", "0000000001"), ("test", "")):
+        (splits / f"{part}.txt").write_text(f"2011_09_26_drive_0001_sync/{frame}\n" if frame else "")
+    frames = tmp_path / "other"
+    frames.mkdir()
+    image = np.zeros((36, 48, 3), np.uint8)
+    image[18:] = (40, 40, 240)  # BGR: red below (road), dark above (not road)
+    cv2.imwrite(str(frames / "a.png"), image)
+    monkeypatch.setattr(student, "_sessions", lambda teachers: [(_RedIsRoad(), (16, 24))])
+    out = tmp_path / "mix"
+    report = student.build(tmp_path / "raw", tmp_path / "al", splits, frames, [tmp_path / "t"], out)
+    assert report["counts"] == {"train": 2, "val": 1, "test": 0} and report["teacher_frames"] == 1
+    assert (out / "splits" / "train.txt").read_text().split() == ["2011_09_26_drive_0001_sync-0000000000", "camvid-a"]
+    label = cv2.imread(str(out / "label" / "camvid-a.png"))
+    assert label.shape == (36, 48, 3)  # at the frame's size
+    assert (label[24:] == student.ROAD_BGR).all() and (label[:12] == student.NON_ROAD_BGR).all()
+    assert 0.4 < report["road_share"] < 0.6 and report["confident_share"] > 0.8
+    with pytest.raises(SystemExit, match="exists"):
+        student.build(tmp_path / "raw", tmp_path / "al", splits, frames, [tmp_path / "t"], out)
