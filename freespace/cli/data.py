@@ -310,11 +310,12 @@ def datasets_parser(p: argparse.ArgumentParser) -> None:
                                    "when there is none.")
     add_dataset_root(q, split=False)
     q.add_argument("--disparity-dir", metavar="DIR", help="KITTI: folder of user-supplied disparities")
-    q.add_argument("--seed", type=SEED, default=0, help="seed of the train/val/test split shown (default 0)")
+    q.add_argument("--seed", type=SEED, default=0, help="seed of the subsets shown (default 0)")
     _split_options(q, "shown")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.set_defaults(func=cmd_datasets_info, parser=q)
-    q = sub.add_parser("split", help="write the paper's train/val/test split by scenario as list files",
+    q = sub.add_parser("split", help="divide the labelled frames into the subsets train/val/test and write their "
+                                     "subset lists",
                        description="Split the labelled frames (every frame of kitti-raw, which has no labels of its "
                                    "own) by scenario with the paper's sizes (289 → 173/58/58, 300 → 180/60/60, else "
                                    "60/20/20 %), or with --by time each drive into contiguous time blocks (train "
@@ -323,7 +324,7 @@ def datasets_parser(p: argparse.ArgumentParser) -> None:
     add_dataset_root(q)
     q.add_argument("--seed", type=SEED, default=0, help="shuffling seed (default 0)")
     _split_options(q, "written")
-    q.add_argument("--out", required=True, help="folder for the list files")
+    q.add_argument("--out", required=True, help="folder for the subset lists")
     q.set_defaults(func=cmd_datasets_split)
 
 
@@ -355,7 +356,8 @@ def cmd_datasets_info(args: argparse.Namespace) -> int:
 
 
 def cmd_datasets_split(args: argparse.Namespace) -> int:
-    """``freespace datasets split``: the paper's train/val/test split by scenario, as list files."""
+    """``freespace datasets split``: the labelled frames divided into the subsets train/val/test, written as
+    their subset lists."""
     from freespace.data.splits import split_dataset
 
     splits = split_dataset(args.dataset, args.root, args.out, split=args.split, by=args.by, seed=args.seed,

@@ -50,10 +50,10 @@ def evaluate_parser(p: argparse.ArgumentParser) -> None:
     src.add_argument("--onnx", help="a model exported with `freespace export --format onnx`")
     d = p.add_argument_group("a dataset's frames (its labels)")
     add_dataset_root(d, required=False)
-    d.add_argument("--subset", default="test", help="train, val, test (the run's lists) or all labelled frames "
-                                                    "(default test)")
+    d.add_argument("--subset", default="test", help="the subset to score: train, val or test (as the subset lists "
+                                                    "say) or all labelled frames of the split (default test)")
     d.add_argument("--splits", dest="splits_dir", metavar="DIR",
-                   help="train.txt/val.txt/test.txt (default: the checkpoint's run folder)")
+                   help="subset lists train.txt/val.txt/test.txt (default: the checkpoint's run folder's splits/)")
     f = p.add_argument_group("a labelled folder (real sets' label images, paired with the images by name)")
     f.add_argument("--images", metavar="DIR", help="the images")
     f.add_argument("--labels", metavar="DIR", help="the label images (frames without one are not scored)")
@@ -168,8 +168,9 @@ def reproduce_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variants", help="comma-separated arms: X, HA-X (DS-Generator views), "
                    "X-dup (the control: X with HA-X's number of steps), X-long (X with twice the epochs and "
                    "patience), HV-X (road-plane virtual views), HAV-X (both), X-auto (training labels from "
-                   "--autolabels), X-mix (the dataset's labels on 20%% of the training drives, --autolabels' on the "
-                   "rest) (default: --protocol's, else X,HA-X,X-dup)")
+                   "--autolabels), X-mix (the dataset's labels on the share of the training drives the protocol's "
+                   "controls give (mix_human_share), --autolabels' on the rest) (default: --protocol's, else "
+                   "X,HA-X,X-dup)")
     p.add_argument("--autolabels", metavar="DIR", help="for X-auto and X-mix: the label tree of --root that "
                    "`freespace autolabel --dataset` wrote")
     p.add_argument("--test-root", metavar="[NAME=]DIR", action="append",
