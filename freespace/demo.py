@@ -231,7 +231,7 @@ def _demo(out: Path, num_frames: int, seed: int, config: SynthConfig, train: boo
 
         log.info("training %s with and without the augmentation", "all six networks" if full else "U-Net")
         epochs = epochs if epochs is not None else 30 if full else 12
-        experiment = reproduce("synth", out / "dataset", out / "experiment",
+        experiment = reproduce("kitti", out / "dataset", out / "experiment",
                                models=list(PAPER_NETWORKS) if full else ["unet"], seeds=3 if full else 1,
                                epochs=epochs, patience=5, batch_size=8, figures=3, variants=("X", "HA-X"))
         result["results"] = experiment["table"]

@@ -67,3 +67,23 @@ def test_an_earlier_name_on_the_command_line_is_read_as_the_layouts(tmp_path: Pa
         assert capsys.readouterr().out.startswith("kitti at ")
     err = refused(capsys, ["datasets", "info", "--dataset", "kitty", "--root", str(tmp_path)])
     assert "carla, generic, kitti, kitti-raw, synthia" in err and "synth," not in err
+
+
+@pytest.mark.parametrize("alias", ["synth", "kitti_road", "kitti_raw", "syn-stereo"])
+def test_the_options_of_a_layout_follow_its_aliases(alias: str, tmp_path: Path) -> None:
+    """open_dataset (a dataset from a command's options) checks ``disparity_dir`` and ``lidar_densify`` against the
+    layout an earlier name means, as the command line (which canonicalises the name) does; a layout that reads the
+    option goes on to the missing root."""
+    from freespace.data.options import open_dataset
+    from freespace.errors import FreespaceError
+
+    def refusal(**options: object) -> str:
+        with pytest.raises(FreespaceError) as caught:
+            open_dataset(alias, tmp_path / "none", **options)  # type: ignore[arg-type]
+        return str(caught.value)
+
+    layout = canonical_dataset(alias)
+    by_dir = refusal(disparity_dir=tmp_path)
+    assert ("disparity_dir is for KITTI road trees" in by_dir) == (layout != "kitti"), by_dir
+    by_lidar = refusal(disparity_source="lidar", lidar_densify=2.0)
+    assert ("lidar_densify is for KITTI road and KITTI raw" in by_lidar) == (layout not in ("kitti", "kitti-raw"))

@@ -125,6 +125,7 @@ def test_predict_then_evaluate_kitti_equals_evaluate(trained: dict[str, Path], t
     kitti = json.loads((tmp_path / "kitti.json").read_text())["all"]
     evaluated = json.loads((tmp_path / "eval" / "metrics.json").read_text())
     assert kitti["images"] == evaluated["frames"] == TRAINED_FRAMES
+    assert evaluated["subset"] == "all" and "split" not in evaluated  # the glossary's word (split: on disk)
     assert kitti["max_f"] == pytest.approx(evaluated["max_f"], abs=1e-12)
     assert kitti["ap"] == pytest.approx(evaluated["ap"], abs=1e-12)
     assert 0.3 < evaluated["max_f"] <= 1 and 0 < evaluated["ap"] <= 1  # better than no road at all (max_f 0)

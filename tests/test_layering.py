@@ -182,15 +182,15 @@ _COMMAND = re.compile(r"(freespace [a-z-]+|pip install|sbatch|SLURM)[^`\n]*$")
 
 def test_flags_live_in_the_cli_only() -> None:
     """The library speaks in parameters (``freespace.errors.param``), the command line in flags: no module but
-    ``cli.py`` spells a ``--flag``, in code, messages or docstrings, except inside a command the text tells
-    the user to run (``freespace export --format onnx``, ``pip install --force-reinstall ...``)."""
+    those of ``freespace/cli/`` spells a ``--flag``, in code, messages or docstrings, except inside a command the
+    text tells the user to run (``freespace export --format onnx``, ``pip install --force-reinstall ...``)."""
     found = []
     for module, path in _modules().items():
-        if module == "freespace.cli":
+        if module == "freespace.cli" or module.startswith("freespace.cli."):
             continue
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.Constant) and isinstance(node.value, str):
                 for m in re.finditer(r"--[a-z][a-z0-9-]*", node.value):
                     if not _COMMAND.search(node.value[:m.start()]):
                         found.append(f"{path.relative_to(ROOT)}:{node.lineno} {m.group()}")
-    assert not found, "flags outside cli.py (name the parameter with errors.param):\n" + "\n".join(found)
+    assert not found, "flags outside freespace/cli/ (name the parameter with errors.param):\n" + "\n".join(found)

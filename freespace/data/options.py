@@ -5,23 +5,25 @@ from __future__ import annotations
 from typing import Any
 
 from freespace.data.base import StereoRoadDataset
-from freespace.data.registry import get_dataset
+from freespace.data.registry import canonical_dataset, get_dataset
 from freespace.errors import InvalidOptionError, param
 from freespace.io.files import PathLike
 
 __all__ = ["open_dataset"]
 
-#: the layouts that read a ``disparity_dir`` (KITTI road trees), and those with Velodyne scans (``lidar_densify``)
-DISPARITY_DIR_LAYOUTS = ("kitti", "synth")
-LIDAR_LAYOUTS = ("kitti", "synth", "kitti-raw", "kitti_raw")
+#: the layouts (by their own names: :func:`~freespace.data.registry.canonical_dataset`) that read a
+#: ``disparity_dir`` (KITTI road trees), and those with Velodyne scans (``lidar_densify``)
+DISPARITY_DIR_LAYOUTS = ("kitti",)
+LIDAR_LAYOUTS = ("kitti", "kitti-raw")
 
 
 def open_dataset(dataset: str, root: PathLike, split: str | None = None, *, disparity_source: str = "auto",
                  cache_dir: PathLike | None = None, max_disparity: int | None = None,
                  disparity_dir: PathLike | None = None, lidar_densify: float | None = None,
                  needs_right: str | None = None) -> StereoRoadDataset:
-    """The layout ``dataset`` at ``root`` (:func:`~freespace.data.registry.get_dataset`), its disparity read as
-    ``disparity_source`` says (``cache_dir``: the SGBM cache; ``max_disparity``: SGBM's range in pixels).
+    """The layout ``dataset`` (its name or an alias) at ``root`` (:func:`~freespace.data.registry.get_dataset`),
+    its disparity read as ``disparity_source`` says (``cache_dir``: the SGBM cache; ``max_disparity``: SGBM's range
+    in pixels).
 
     ``disparity_dir`` (KITTI road trees only, with the sources ``auto`` or ``file``) names a folder of
     disparities; ``lidar_densify`` (pixels; the source ``lidar``, layouts with Velodyne scans) fills holes of
@@ -29,12 +31,14 @@ def open_dataset(dataset: str, root: PathLike, split: str | None = None, *, disp
     some of its drives have none (KITTI raw's ``require_right``).
 
     Raises:
-        InvalidOptionError: an option that the layout or the disparity source would ignore, named.
+        InvalidOptionError: an option that the layout or the disparity source would ignore, named; no layout
+            answers to ``dataset``.
     """
+    layout = canonical_dataset(dataset)
     options: dict[str, Any] = {"disparity_source": disparity_source, "cache_dir": cache_dir,
                                "max_disparity": max_disparity}
     if disparity_dir is not None:
-        if dataset not in DISPARITY_DIR_LAYOUTS:
+        if layout not in DISPARITY_DIR_LAYOUTS:
             raise InvalidOptionError(f"{param('disparity_dir')} is for KITTI road trees; other layouts name their "
                                      f"disparity folder in freespace.yaml")
         if disparity_source not in ("auto", "file"):
@@ -44,7 +48,7 @@ def open_dataset(dataset: str, root: PathLike, split: str | None = None, *, disp
     if lidar_densify is not None:
         if disparity_source != "lidar":
             raise InvalidOptionError(f"{param('lidar_densify')} is for {param('disparity_source')} lidar")
-        if dataset not in LIDAR_LAYOUTS:
+        if layout not in LIDAR_LAYOUTS:
             raise InvalidOptionError(f"{param('lidar_densify')} is for KITTI road and KITTI raw trees (the layouts "
                                      f"with Velodyne scans)")
         options["lidar_densify"] = lidar_densify

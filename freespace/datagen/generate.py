@@ -1,5 +1,6 @@
 """The DS-Generator over files: one stereo pair (:func:`generate_pair`), or every labelled frame of a dataset
-(:func:`generate_dataset`, through the per-frame runner :mod:`freespace.datagen.runner`). One reference image
+(:func:`generate_dataset`, through the per-frame runner :mod:`freespace.datagen.runner`; fitted to a label tree's
+labels: :func:`generate_with_labels`). One reference image
 seen from a virtual camera pose: :mod:`freespace.datagen.virtual`.
 
 This is what ``freespace generate`` runs. It imports NumPy and OpenCV only (never torch), reads and
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from freespace.data.base import StereoRoadDataset
+from freespace.data.label_tree import hold_labels_record, labelled_from_tree
 from freespace.datagen.inputs import check_sgbm_range, dataset_settings
 from freespace.datagen.runner import FrameCommand, check_run, run_dataset
 from freespace.errors import DatasetError, FreespaceError, InvalidOptionError, RoadFitError, ShapeMismatchError, param
@@ -50,8 +52,8 @@ from freespace.labels import RoadLabel
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FitOptions", "GenerateResult", "generate_arrays", "generate_pair", "generate_dataset", "road_to_fit",
-           "check_output_image_path"]
+__all__ = ["FitOptions", "GenerateResult", "generate_arrays", "generate_pair", "generate_dataset",
+           "generate_with_labels", "road_to_fit", "check_output_image_path"]
 
 
 @dataclass(frozen=True)
@@ -309,3 +311,28 @@ def generate_dataset(dataset: StereoRoadDataset, out_dir: PathLike, *, workers: 
                                                   "max_disparity": options.max_disparity,
                                                   "disparity_source": dataset.disparity_source}})
     return summary
+
+
+def generate_with_labels(dataset: StereoRoadDataset, out_dir: PathLike, labels: PathLike | None, *, name: str,
+                         root: PathLike, split: str | None = None, **run: Any) -> dict[str, Any]:
+    """``freespace generate --dataset``: :func:`generate_dataset` (``run``: its keyword arguments) of the road labels
+    the frames have. With ``labels`` (a label tree, ``freespace autolabel``'s output) the frames of ``dataset``
+    that have a label there, labelled from it (:func:`~freespace.data.label_tree.labelled_from_tree`; ``name``,
+    ``root`` and ``split`` as the user gave them, checked against the tree's record); without, the dataset's own
+    labels. ``OUT/labels.json`` records which (:func:`~freespace.data.label_tree.hold_labels_record`: an ``out_dir``
+    fitted to other labels is refused unless ``run["overwrite"]``).
+
+    Raises:
+        DatasetError: no ``labels`` and no frame of ``dataset`` has a road label (the message says how to make
+            some), or the tree labels none of its frames.
+        InvalidOptionError: ``out_dir`` holds frames fitted to other labels.
+    """
+    tree = None
+    if labels is not None:
+        dataset, tree = labelled_from_tree(dataset, labels, name, root, split)
+    elif not any(dataset.has_label(f) for f in dataset.frames):
+        autolabel = "freespace autolabel --dataset {} --root {} --out TREE".format(name, root)  # a command: flags
+        raise DatasetError(f"{name} at {root} has no road labels, which the DS-Generator fits the road model to; "
+                           f"label it with `{autolabel}` and give {param('labels')} TREE")
+    with hold_labels_record(out_dir, tree, dataset.root, labels, run.get("overwrite", False)):
+        return generate_dataset(dataset, out_dir, **run)

@@ -275,7 +275,7 @@ def train(dataset: str, root: str | os.PathLike, out: str | os.PathLike, *, resu
 
     Example (not run here: it trains)::
 
-        metrics = freespace.train("synth", "data/syn", "runs/unet-ha", model="unet", augment=("homography",),
+        metrics = freespace.train("kitti", "data/syn", "runs/unet-ha", model="unet", augment=("homography",),
                                   epochs=1, image_size=(96, 128))
     """
     unknown = sorted(set(options) - {f.name for f in dataclasses.fields(TrainConfig)})

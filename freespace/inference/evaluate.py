@@ -1,14 +1,16 @@
 """`freespace evaluate`: a model (checkpoint or ONNX) on labelled frames — metrics, per-frame scores, overlays,
 PR curve.
 
-Two sources of labelled frames: a dataset's split (``dataset`` and ``root``: the run's lists or all labelled frames)
-or a *labelled folder* (``images`` and ``labels`` in one of the formats of :mod:`freespace.evaluation.labelled`:
-KITTI road ground truth, binary masks, class ids, palette colours). Predictions are made at the model's input size
-and resized back (bilinear probabilities) to each frame's own size, where the metrics are counted (the benchmark's
-way). Outputs in ``OUT``: ``metrics.json`` (pooled accuracy, precision, recall, f_score, iou at p ≥ 0.5, with
-frame-level bootstrap intervals of precision, recall, F and IoU; the KITTI max_f and ap from the 256 thresholds;
-seconds per frame; what was evaluated), ``per_frame.csv`` (each frame's counts and scores), ``overlays/<frame>.png``
-(TP green, FN red, FP blue) and ``pr_curve.png``.
+Two sources of labelled frames: a subset of a dataset's split (``dataset`` and ``root``: train, val or test as the
+subset lists say, or all labelled frames) or a *labelled folder* (``images`` and ``labels`` in one of the formats of
+:mod:`freespace.evaluation.labelled`: KITTI road ground truth, binary masks, class ids, palette colours).
+Predictions are made at the model's input size and resized back (bilinear probabilities) to each frame's own size,
+where the metrics are counted (the benchmark's way). Outputs in ``OUT``: ``metrics.json`` (pooled accuracy,
+precision, recall, f_score, iou at p ≥ 0.5, with frame-level bootstrap intervals of precision, recall, F and IoU; the
+KITTI max_f and ap from the 256 thresholds; seconds per frame; what was evaluated: the model, and ``subset``,
+``dataset`` and ``root`` or the labelled folder; files written by earlier versions call the subset ``split``),
+``per_frame.csv`` (each frame's counts and scores), ``overlays/<frame>.png`` (TP green, FN red, FP blue) and
+``pr_curve.png``.
 """
 
 from __future__ import annotations
@@ -148,7 +150,7 @@ def evaluate_checkpoint(checkpoint: PathLike | None, dataset: str, root: PathLik
         evaluator, scores, seconds = score_frames(predictor, _dataset_frames(ds, names), progress=progress,
                                                   overlays=staging / "overlays", total=len(names))
         return _write_results(staging, evaluator, scores, seconds,
-                              {"split": subset, "dataset": dataset, "root": str(root), **record})
+                              {"subset": subset, "dataset": dataset, "root": str(root), **record})
 
 
 def evaluate_labelled(images: PathLike, labels: PathLike, label_format: LabelFormat, out: PathLike, *,
