@@ -15,7 +15,7 @@ Labels are KITTI colours everywhere (road magenta, non-road red, don't care blac
 confident and road shares.
 
     python studies/real-roads/student.py --raw RAW --autolabels AL --splits SPLITS \\
-        --frames CAMVID/train --teacher MODEL [--teacher MODEL ...] --out MIX
+        --frames CAMVID/train --teacher MODEL [--teacher MODEL ...] [--drive-copies N] --out MIX
 """
 
 from __future__ import annotations
@@ -70,9 +70,11 @@ def teacher_labels(image: np.ndarray, sessions: list[tuple[object, tuple[int, in
 
 
 def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
-          prefix: str = "camvid", threshold: float = THRESHOLD) -> dict[str, object]:
+          prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1) -> dict[str, object]:
     """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
-    (a new folder); return the report."""
+    (a new folder); return the report. ``drive_copies``: each training frame of the drives is listed this many
+    times (``<name>-c1``, ...: each copy draws its own augmentation), to weigh the drives against the other
+    frames."""
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
     lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}
@@ -81,8 +83,10 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
         for frame in (splits / f"{part}.txt").read_text().split():
             drive, number = frame.split("/")
             label = autolabels / drive / f"{number}.png"
-            if label.is_file():
-                name = f"{drive}-{number}"
+            if not label.is_file():
+                continue
+            for copy in range(drive_copies if part == "train" else 1):
+                name = f"{drive}-{number}" + (f"-c{copy}" if copy else "")
                 _link(drives[drive] / "image_02" / "data" / f"{number}.png", out / "left" / f"{name}.png")
                 _link(label, out / "label" / f"{name}.png")
                 lists[part].append(name)
@@ -103,6 +107,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
         (out / "splits" / f"{part}.txt").write_text("".join(f"{n}\n" for n in names))
     report = {"teachers": [str(t) for t in teachers], "threshold": threshold, "frames": str(frames),
               "counts": {k: len(v) for k, v in lists.items()}, "teacher_frames": len(road),
+              "drive_copies": drive_copies,
               "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road))}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
@@ -115,8 +120,10 @@ def main() -> None:
     ap.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder (model.onnx)")
     ap.add_argument("--prefix", default="camvid")
     ap.add_argument("--threshold", type=float, default=THRESHOLD)
+    ap.add_argument("--drive-copies", type=int, default=1, help="list each training frame of the drives N times")
     a = ap.parse_args()
-    print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold)))
+    print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold,
+                           a.drive_copies)))
 
 
 if __name__ == "__main__":

@@ -271,3 +271,8 @@ def test_student_labels_the_teacher_s_confident_road_beside_the_drives(tmp_path:
     assert 0.4 < report["road_share"] < 0.6 and report["confident_share"] > 0.8
     with pytest.raises(SystemExit, match="exists"):
         student.build(tmp_path / "raw", tmp_path / "al", splits, frames, [tmp_path / "t"], out)
+    twice = student.build(tmp_path / "raw", tmp_path / "al", splits, frames, [tmp_path / "t"], tmp_path / "mix2",
+                          drive_copies=2)  # the drives' training frames listed twice, the rest once
+    assert twice["counts"] == {"train": 3, "val": 1, "test": 0}
+    assert (tmp_path / "mix2" / "splits" / "train.txt").read_text().split() == [
+        "2011_09_26_drive_0001_sync-0000000000", "2011_09_26_drive_0001_sync-0000000000-c1", "camvid-a"]
