@@ -21,6 +21,25 @@ def _link(target: Path, link: Path) -> None:
     os.symlink(target.resolve(), link)
 
 
+def link_drives(raw: Path, autolabels: Path, splits: Path, out: Path, lists: dict[str, list[str]],
+                copies: int = 1) -> None:
+    """Link the KITTI raw frames of the split lists ``splits/{train,val,test}.txt`` that ``autolabels`` labels, with
+    their labels, as ``out/left/<drive>-<frame>.png`` and ``out/label/...``, appending their names to ``lists``;
+    ``copies``: each training frame is listed this many times (``<name>-c1``, ...)."""
+    drives = {p.name: p for p in raw.rglob("*_drive_*_sync") if p.is_dir()}
+    for part in lists:
+        for frame in (splits / f"{part}.txt").read_text().split():
+            drive, number = frame.split("/")
+            label = autolabels / drive / f"{number}.png"
+            if not label.is_file():
+                continue
+            for copy in range(copies if part == "train" else 1):
+                name = f"{drive}-{number}" + (f"-c{copy}" if copy else "")
+                _link(drives[drive] / "image_02" / "data" / f"{number}.png", out / "left" / f"{name}.png")
+                _link(label, out / "label" / f"{name}.png")
+                lists[part].append(name)
+
+
 def build(syn: Path, raw: Path, autolabels: Path, splits: Path, out: Path) -> dict[str, list[str]]:
     """Write the links, ``freespace.yaml`` and ``splits/{train,val,test}.txt`` under ``out`` (a new folder);
     return the split lists (frame names)."""
@@ -35,17 +54,7 @@ def build(syn: Path, raw: Path, autolabels: Path, splits: Path, out: Path) -> di
         _link(syn / "data_road" / "training" / "gt_image_2" / f"{category}_road_{number}.png",
               out / "label" / f"{name}.png")
         lists["train"].append(name)
-    drives = {p.name: p for p in raw.rglob("*_drive_*_sync") if p.is_dir()}
-    for part in lists:
-        for frame in (splits / f"{part}.txt").read_text().split():
-            drive, number = frame.split("/")
-            label = autolabels / drive / f"{number}.png"
-            if not label.is_file():
-                continue
-            name = f"{drive}-{number}"
-            _link(drives[drive] / "image_02" / "data" / f"{number}.png", out / "left" / f"{name}.png")
-            _link(label, out / "label" / f"{name}.png")
-            lists[part].append(name)
+    link_drives(raw, autolabels, splits, out, lists)
     (out / "freespace.yaml").write_text("left: left\nlabel: label\nlabel_encoding: kitti\n")
     (out / "splits").mkdir()
     for part, names in lists.items():

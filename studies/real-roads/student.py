@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
+import sys
 from pathlib import Path
 
 import cv2
@@ -30,14 +30,12 @@ import numpy as np
 
 from freespace.engine.adapt import road_probabilities
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from mix import _link, link_drives  # noqa: E402  (the study's own script: the drives' links)
+
 #: road where the teacher's mean probability is above this, not road below 1 - this (adapt's default)
 THRESHOLD = 0.9
 ROAD_BGR, NON_ROAD_BGR = (255, 0, 255), (0, 0, 255)
-
-
-def _link(target: Path, link: Path) -> None:
-    link.parent.mkdir(parents=True, exist_ok=True)
-    os.symlink(target.resolve(), link)
 
 
 def _sessions(teachers: list[Path]) -> list[tuple[object, tuple[int, int]]]:
@@ -78,18 +76,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
     lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}
-    drives = {p.name: p for p in raw.rglob("*_drive_*_sync") if p.is_dir()}
-    for part in lists:
-        for frame in (splits / f"{part}.txt").read_text().split():
-            drive, number = frame.split("/")
-            label = autolabels / drive / f"{number}.png"
-            if not label.is_file():
-                continue
-            for copy in range(drive_copies if part == "train" else 1):
-                name = f"{drive}-{number}" + (f"-c{copy}" if copy else "")
-                _link(drives[drive] / "image_02" / "data" / f"{number}.png", out / "left" / f"{name}.png")
-                _link(label, out / "label" / f"{name}.png")
-                lists[part].append(name)
+    link_drives(raw, autolabels, splits, out, lists, drive_copies)
     sessions = _sessions(teachers)
     confident, road = [], []
     for path in sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png"):
