@@ -72,8 +72,9 @@ IGNORE = 255
 CROP_WIDTH = 0.5
 #: the teacher labels a frame after a gamma that brings its mean brightness to this (in [0, 1]; the published
 #: model's KITTI frames average 0.35) and a local contrast equalisation (:func:`normalise_light`): seeing CamVid's
-#: dusk frames so, the published model's F there rises from 0.35 to 0.76, on its daylight ones it stays 0.88
-#: (chosen on those development frames; the student still learns the frames as they are)
+#: dusk frames so, the first published ``real-road-fast``'s F there (commit 732c574) rises from 0.35 to 0.76, on
+#: its daylight ones it stays 0.88 (chosen on those development frames; the student still learns the frames as
+#: they are)
 LABEL_BRIGHTNESS = 0.40
 
 
