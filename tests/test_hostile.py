@@ -1087,7 +1087,7 @@ def test_issue20_config_that_is_a_folder(trained: dict[str, Path], tmp_path: Pat
 @pytest.mark.parametrize("argv,match", [
     (["datasets", "info", "--dataset", "synth", "--root", "{file}"], "dataset root {file} is a file"),
     (["train", "--dataset", "synth", "--root", "{data}", "--splits", "{file}", "--out", "{tmp}/run"],
-     "split lists {file} is a file"),
+     "subset lists {file} is a file"),
     (["predict", "--checkpoint", "{dir}", "--input", "{data}", "--out", "{tmp}/p"], "checkpoint {dir} is a folder"),
     (["predict", "--onnx", "{dir}", "--input", "{data}", "--out", "{tmp}/p"], "ONNX model {dir} is a folder"),
     (["evaluate-kitti", "--gt", "{file}", "--pred", "{dir}", "--out", "{tmp}/s.json"], "folder {file} is a file"),

@@ -241,7 +241,7 @@ def test_bad_data_or_options_are_one_line(study: Path, env: Path, tmp_path: Path
 
 @pytest.mark.parametrize("damage, message", [
     (lambda s: shutil.rmtree(s / "labels"), "data second: labels labels: no folder"),
-    (lambda s: (s / "lists/test.txt").unlink(), "data second: splits lists: split list not found"),
+    (lambda s: (s / "lists/test.txt").unlink(), "data second: splits lists: subset list not found"),
     (lambda s: (s / "lists/val.txt").write_text((s / "lists/train.txt").read_text()), "listed in more than one split"),
     (lambda s: (s / "cache").write_text("x"), "data second: cache_dir cache: "),
 ])

@@ -197,7 +197,7 @@ def write_splits(folder: PathLike, splits: dict[str, list[str]]) -> list[Path]:
 
 
 def read_splits(folder: PathLike, known: Sequence[str] | None = None) -> dict[str, list[str]]:
-    """Read split lists written by :func:`write_splits` (or by hand).
+    """Read subset lists written by :func:`write_splits` (or by hand).
 
     Args:
         known: the dataset's frame names; names not in it are an error (lists from another dataset).
@@ -207,13 +207,13 @@ def read_splits(folder: PathLike, known: Sequence[str] | None = None) -> dict[st
     """
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
-        raise InputFileError(f"split lists {folder} is a file; give the folder that holds train.txt, val.txt and "
+        raise InputFileError(f"subset lists {folder} is a file; give the folder that holds train.txt, val.txt and "
                              f"test.txt")
     out = {}
     for k in SPLIT_NAMES:
         path = folder / f"{k}.txt"
         if not path.is_file():
-            raise InputFileError(f"split list not found: {path} (expected train.txt, val.txt, test.txt)")
+            raise InputFileError(f"subset list not found: {path} (expected train.txt, val.txt, test.txt)")
         out[k] = [line.strip() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
     for k in SPLIT_NAMES:
         twice = sorted({n for n in out[k] if out[k].count(n) > 1})
@@ -226,7 +226,7 @@ def read_splits(folder: PathLike, known: Sequence[str] | None = None) -> dict[st
     if known is not None:
         unknown = sorted(set(seen) - set(known))
         if unknown:
-            raise DatasetError(f"{len(unknown)} frames in the split lists of {folder} are not in the dataset "
+            raise DatasetError(f"{len(unknown)} frames in the subset lists of {folder} are not in the dataset "
                                f"(first: {unknown[0]}); the lists belong to another dataset")
     return out
 

@@ -108,7 +108,7 @@ class EpochSampler(torch.utils.data.Sampler):
 
 
 def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
-    """Open the dataset, decide the splits (list files in ``run_dir/splits``) and, when ``config.augment``
+    """Open the dataset, decide the subsets (their lists in ``run_dir/splits``) and, when ``config.augment``
     holds ``"homography"``, make the DS-Generator views of the training frames (``run_dir/generated``).
     ``"duplicate"`` (the control of ``homography``) makes them too, only to know which frames have one, and
     adds those frames once more with their own left images: the same frames, labels and number of training
@@ -214,12 +214,12 @@ def _splits(config: TrainConfig, ds: StereoRoadDataset, labelled: list[Any], spl
         splits = read_splits(lists, known=[f.name for f in ds.frames])
         missing = [n for k in ("train", "val", "test") for n in splits[k] if n not in names]
         if missing:
-            raise DatasetError(f"{len(missing)} frames of the split lists {lists} have no label (first: {missing[0]}): "
+            raise DatasetError(f"{len(missing)} frames of the subset lists {lists} have no label (first: {missing[0]}): "
                                f"{_why_unlabelled(config, ds, missing[0])}")
     if not all(splits.values()):
         counts = ", ".join(f"{k} {len(v)}" for k, v in splits.items())
         if lists is not None:
-            raise DatasetError(f"the split lists {lists} leave a split empty ({counts}); list labelled frames in "
+            raise DatasetError(f"the subset lists {lists} leave a subset empty ({counts}); list labelled frames in "
                                f"each of train.txt, val.txt and test.txt")
         scenarios = len({f.scenario for f in labelled})
         raise DatasetError(f"a split is empty ({counts}): the {len(labelled)} labelled frames are {scenarios} "

@@ -52,7 +52,7 @@ def collect(out: Path, statuses: dict[str, str] | None = None,
     network, variant (``variants``: a protocol's :attr:`~freespace.experiments.protocol.Protocol.vocabulary`,
     by default :data:`VARIANTS`) and seed order, with its test metrics (and those of further test sets,
     ``test_sets``) when finished; and the settings that differ between the runs (a table should compare
-    like with like; the training data of a declared variant, its dataset, root, labels and split lists, is
+    like with like; the training data of a declared variant, its dataset, root, labels and subset lists, is
     compared among the variants of the same data only)."""
     from freespace.models import list_models
 

@@ -50,11 +50,11 @@ def _frames(ds: StereoRoadDataset, subset: str, checkpoint: Path | None, splits_
     if subset == "all":
         return [f.name for f in ds.labelled()]
     if splits_dir is None and checkpoint is None:
-        raise InvalidOptionError(f"an ONNX model has no run folder with split lists; give {param('splits_dir')} DIR "
+        raise InvalidOptionError(f"an ONNX model has no run folder with subset lists; give {param('splits_dir')} DIR "
                                  f"(train.txt, val.txt, test.txt) or {param('subset')} all")
     folder = Path(splits_dir) if splits_dir else checkpoint.parent.parent / "splits"  # type: ignore[union-attr]
     if not (folder / f"{subset}.txt").is_file():
-        raise InputFileError(f"no split lists at {folder}; give {param('splits_dir')} DIR (train.txt, val.txt, "
+        raise InputFileError(f"no subset lists at {folder}; give {param('splits_dir')} DIR (train.txt, val.txt, "
                              f"test.txt) or {param('subset')} all")
     return read_splits(folder, known=[f.name for f in ds.frames])[subset]
 

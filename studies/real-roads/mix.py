@@ -1,5 +1,5 @@
 """The S+R-auto dataset of the real-roads study: one generic ``freespace`` dataset of links to the rendered
-frames (their own labels) and the real KITTI raw frames (their autolabels), with its split lists.
+frames (their own labels) and the real KITTI raw frames (their autolabels), with its subset lists.
 
 Training: every rendered frame and the real drives' training block; validation and test: the real drives'
 val and test blocks (autolabels: no human label before the real test frames). Frame names: ``syn-<frame>``
@@ -23,7 +23,7 @@ def _link(target: Path, link: Path) -> None:
 
 def link_drives(raw: Path, autolabels: Path, splits: Path, out: Path, lists: dict[str, list[str]],
                 copies: int = 1) -> None:
-    """Link the KITTI raw frames of the split lists ``splits/{train,val,test}.txt`` that ``autolabels`` labels, with
+    """Link the KITTI raw frames of the subset lists ``splits/{train,val,test}.txt`` that ``autolabels`` labels, with
     their labels, as ``out/left/<drive>-<frame>.png`` and ``out/label/...``, appending their names to ``lists``;
     ``copies``: each training frame is listed this many times (``<name>-c1``, ...)."""
     drives = {p.name: p for p in raw.rglob("*_drive_*_sync") if p.is_dir()}
@@ -42,7 +42,7 @@ def link_drives(raw: Path, autolabels: Path, splits: Path, out: Path, lists: dic
 
 def build(syn: Path, raw: Path, autolabels: Path, splits: Path, out: Path) -> dict[str, list[str]]:
     """Write the links, ``freespace.yaml`` and ``splits/{train,val,test}.txt`` under ``out`` (a new folder);
-    return the split lists (frame names)."""
+    return the subset lists (frame names)."""
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
     lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}

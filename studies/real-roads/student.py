@@ -1,5 +1,5 @@
 """The student's dataset of issue 61 (item 3): the real drives' autolabels plus a teacher's confident road on
-unlabelled frames of another city and camera, as one generic ``freespace`` dataset with its split lists.
+unlabelled frames of another city and camera, as one generic ``freespace`` dataset with its subset lists.
 
 - Real drives: links to the KITTI raw frames and their label tree (``freespace autolabel``), split by the
   study's ``splits-raw`` lists (training block; validation and test blocks as they are: autolabels, no human
