@@ -1,7 +1,9 @@
 """House rules of the code's shape (issue 60, "one home for each job"): no function in ``freespace/`` longer than
 80 lines, and the command line, the package ``freespace/cli/``, parses options and dispatches (the work is the
 library's): no module of it over 800 lines, and its ``__init__.py`` holds the parser, the table of commands and
-``main``, each command's options and handler living in a module of its job."""
+``main``, each command's options and handler living in a module of its job; the training configuration
+(``engine/config.py``) does that one job in at most 400 lines, and the label tree is handled in one module that
+imports neither torch nor pydantic."""
 
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ PACKAGE = ROOT / "freespace"
 
 MAX_FUNCTION_LINES = 80
 MAX_CLI_LINES = 800
+MAX_CONFIG_LINES = 400
 
 
 def _long_functions(path: Path, limit: int) -> list[str]:
@@ -66,3 +69,27 @@ def test_the_cli_holds_no_folder_logic() -> None:
     found = [f"{p.relative_to(ROOT)}: {w}" for p in sorted((PACKAGE / "cli").glob("*.py")) for w in words
              if w in p.read_text()]
     assert not found, "move this into the library:\n" + "\n".join(found)
+
+
+def test_the_training_configuration_is_one_job() -> None:
+    config = PACKAGE / "engine" / "config.py"
+    n = len(config.read_text().splitlines())
+    assert n <= MAX_CONFIG_LINES, f"{config.relative_to(ROOT)} has {n} lines: move what is not TrainConfig's out"
+
+
+def test_the_label_tree_has_one_home_free_of_torch_and_pydantic() -> None:
+    """No module defines a function of ``freespace.data.label_tree`` again (one that delegates to it, as
+    ``datagen.autolabel.write_label_files`` does for a labeller's result, aside), and it imports neither torch nor
+    pydantic (``generate`` of the base install reads label trees)."""
+    tree = PACKAGE / "data" / "label_tree.py"
+    imported = {alias.name.split(".")[0] for node in ast.walk(ast.parse(tree.read_text()))
+                if isinstance(node, (ast.Import, ast.ImportFrom))
+                for alias in (node.names if isinstance(node, ast.Import) else [ast.alias(node.module or "")])}
+    assert not imported & {"torch", "pydantic", "lightning"}, imported
+    defined = {n.name for n in ast.parse(tree.read_text()).body if isinstance(n, ast.FunctionDef)}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path == tree:
+            continue
+        again = [n.name for n in ast.parse(path.read_text()).body if isinstance(n, ast.FunctionDef)
+                 and n.name in defined and f"label_tree.{n.name}" not in ast.unparse(n)]  # a wrapper delegates
+        assert not again, f"{path.relative_to(ROOT)} defines {again} again"
