@@ -214,8 +214,8 @@ def _splits(config: TrainConfig, ds: StereoRoadDataset, labelled: list[Any], spl
         splits = read_splits(lists, known=[f.name for f in ds.frames])
         missing = [n for k in ("train", "val", "test") for n in splits[k] if n not in names]
         if missing:
-            raise DatasetError(f"{len(missing)} frames of the subset lists {lists} have no label (first: {missing[0]}): "
-                               f"{_why_unlabelled(config, ds, missing[0])}")
+            raise DatasetError(f"{len(missing)} frames of the subset lists {lists} have no label (first: "
+                               f"{missing[0]}): {_why_unlabelled(config, ds, missing[0])}")
     if not all(splits.values()):
         counts = ", ".join(f"{k} {len(v)}" for k, v in splits.items())
         if lists is not None:
