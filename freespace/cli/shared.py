@@ -63,21 +63,13 @@ def flags_of(parser: argparse.ArgumentParser, argv: Sequence[str]) -> dict[str, 
     return flags
 
 
-def _layout_name(name: str) -> str:
-    """``--dataset``'s value as its layout's name; an unknown one is left for argparse's choices to refuse (one
-    line with the command's help to read)."""
-    from freespace.data.registry import canonical_dataset, list_datasets
-
-    return canonical_dataset(name) if name in list_datasets() else name
-
-
 def add_dataset_root(p: argparse.ArgumentParser | argparse._ArgumentGroup, required: bool = True,
                      split: bool = True) -> None:
     """``--dataset``, ``--root`` and (optionally) ``--split``, shared by every command that reads a dataset. A
     layout's earlier name (``synth``, ``kitti_road``, ``kitti_raw``, ``syn-stereo``) is read as its name."""
-    from freespace.data.registry import list_datasets
+    from freespace.data.registry import layout_name, list_datasets
 
-    p.add_argument("--dataset", choices=list_datasets(aliases=False), required=required, type=_layout_name,
+    p.add_argument("--dataset", choices=list_datasets(aliases=False), required=required, type=layout_name,
                    help="layout: kitti (KITTI road, and the renderer's output: `freespace synth` writes a KITTI road "
                         "tree), kitti-raw (KITTI raw drives), synthia, carla (CARLA exports, e.g. SYN-Stereo), generic")
     p.add_argument("--root", metavar="DIR", required=required, help="dataset folder")

@@ -21,7 +21,8 @@ from freespace.data.base import StereoRoadDataset
 from freespace.errors import InvalidOptionError, param
 from freespace.io.files import PathLike
 
-__all__ = ["register_dataset", "list_datasets", "canonical_dataset", "get_dataset_class", "get_dataset"]
+__all__ = ["register_dataset", "list_datasets", "canonical_dataset", "layout_name", "get_dataset_class",
+           "get_dataset"]
 
 #: every name a layout answers to (its own and its aliases) → the layout
 _REGISTRY: dict[str, type[StereoRoadDataset]] = {}
@@ -53,6 +54,12 @@ def canonical_dataset(name: str) -> str:
         InvalidOptionError: no layout answers to ``name`` (the message lists the layouts' names).
     """
     return get_dataset_class(name).name
+
+
+def layout_name(name: Any) -> Any:
+    """:func:`canonical_dataset` of a name some layout answers to; any other value as it is, for a caller's own
+    choices to refuse (argparse, TrainConfig)."""
+    return _REGISTRY[name].name if isinstance(name, str) and name in _REGISTRY else name
 
 
 def get_dataset_class(name: str) -> type[StereoRoadDataset]:

@@ -113,7 +113,7 @@ PHOTOMETRIC = ("off", "mild", "strong")
 
 def photometric_strength(value: bool | str) -> str:
     """``photometric`` as one of :data:`PHOTOMETRIC` (``False`` = off, ``True`` = mild)."""
-    strength = {False: "off", True: "mild"}.get(value, value) if isinstance(value, bool) else value
+    strength = ("mild" if value else "off") if isinstance(value, bool) else value
     if strength not in PHOTOMETRIC:
         raise ValueError(f"photometric must be one of {PHOTOMETRIC} or a bool, got {value!r}")
     return strength

@@ -65,22 +65,18 @@ PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir", "labels", "encoder_wei
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_source", "disparity_mode": "disparity_source"}
 
 
+def _layout_name(value: Any) -> Any:
+    """A dataset name as its layout's own (``synth`` → ``kitti``): configs written with an alias load as the same
+    configuration."""
+    from freespace.data.registry import layout_name
+
+    return layout_name(value)
+
+
 def _datasets() -> tuple[str, ...]:
     from freespace.data.registry import list_datasets
 
     return tuple(list_datasets(aliases=False))
-
-
-def _layout_name(value: Any) -> Any:
-    """A dataset name as its layout's own (``synth`` → ``kitti``): configs written with an alias load as the same
-    configuration; a name no layout answers to is left for the choices to refuse."""
-    from freespace.data.registry import list_datasets
-
-    if isinstance(value, str) and value in list_datasets():
-        from freespace.data.registry import canonical_dataset
-
-        return canonical_dataset(value)
-    return value
 
 
 def _models() -> tuple[str, ...]:
