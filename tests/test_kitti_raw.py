@@ -401,3 +401,24 @@ def test_datasets_info_lists_every_problem_of_the_tree(tmp_path: Path, capsys: p
     assert "5 problems" in out  # the four above and the by-scenario split that leaves val or test empty
     with pytest.raises(DatasetError, match=r"\(3 more problems: `freespace datasets info"):
         get_dataset("kitti-raw", root, disparity_source="lidar")
+
+
+def test_a_drive_without_image_03_gets_virtual_views_from_its_scan_when_asked(tmp_path: Path,
+                                                                               capsys: pytest.CaptureFixture) -> None:
+    """The road planes of the virtual views: a frame with no right image has no disparity under ``auto`` (a scan is
+    never taken unasked), and the reason it gets no views says which source would fit one."""
+    from freespace.data.label_tree import apply_label_tree
+    from freespace.engine.data import _road_planes
+
+    root, out = tmp_path / "raw", tmp_path / "labels"
+    make_drive(root, number=7, frames=2, right=False, velodyne=True)
+    assert main(["autolabel", "--dataset", "kitti-raw", "--root", str(root), "--disparity-source", "lidar",
+                 "--out", str(out)]) == 0
+    names = [f"{DATE}_drive_0007_sync/000000000{i}" for i in range(2)]
+    shift = ((-0.5, 0.5), (-0.2, 0.2), (0.0, 0.0))
+    auto = apply_label_tree(get_dataset("kitti-raw", root), out, names)
+    with pytest.raises(DatasetError, match=r"no disparity .*LiDAR scan: (--)?disparity.source lidar or fused fits one"):
+        _road_planes(auto, [0, 1], shift)
+    lidar = apply_label_tree(get_dataset("kitti-raw", root, disparity_source="lidar"), out, names)
+    planes = _road_planes(lidar, [0, 1], shift)
+    assert sorted(planes) == [0, 1] and all(1.4 < plane.height < 1.9 for _, plane in planes.values())

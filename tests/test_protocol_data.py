@@ -17,7 +17,7 @@ from freespace.data.synthetic import SynthConfig, write_dataset
 from freespace.engine.config import TrainConfig
 from freespace.errors import InvalidOptionError
 from freespace.experiments import VARIANTS, Protocol, parse_variants
-from freespace.experiments.variants import run_name, run_of
+from freespace.experiments.variants import parse_cell, run_name, run_of
 
 #: two training sources: ``first`` (a rendered set as it is) and ``second`` (another rendered set, with its own
 #: label tree and split lists, both given relative to the protocol file's folder; its root through ${FS_SECOND})
@@ -139,6 +139,11 @@ def test_the_protocol_reads_its_data_and_variants(study: Path) -> None:
     assert p.gains == (("B+A", "A"), ("A-dup", "A")) and p.data["second"].base == study
     assert p.declared["B+A"].label("unet") == "B+A" and VARIANTS["HA-X"].label("unet") == "HA-unet"
     assert parse_variants("A-dup", p.vocabulary) == ("A-dup",)  # nothing added in front
+    # a name as a run folder spells it (lower case) is the declared variant; the cell too
+    assert parse_variants("a-dup,b+a", p.vocabulary) == ("A-dup", "B+A")
+    assert parse_cell("unet,a-dup,1", 2, p.declared) == ("unet", "A-dup", 1)
+    with pytest.raises(InvalidOptionError, match="unknown variant 'c-dup'"):
+        parse_cell("unet,c-dup,1", 2, p.declared)
     with pytest.raises(InvalidOptionError, match="unknown variants"):
         parse_variants("X", p.vocabulary)
     # a run folder's tag may hold -: the longest tag that leaves a network wins

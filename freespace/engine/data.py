@@ -301,7 +301,10 @@ def _road_planes(ds: StereoRoadDataset, indices: list[int], shift: Any) -> dict[
             else:
                 sample = ds.load(i)
                 if sample.disparity is None or sample.label is None or not calib.baseline > 0:
-                    raise DatasetError("no road plane in the calibration and no disparity (and baseline) to fit one")
+                    scan = (f" (it has a LiDAR scan: {param('disparity_source')} lidar or fused fits one to it)"
+                            if frame.velodyne is not None and ds.disparity_source not in ("lidar", "fused") else "")
+                    raise DatasetError(f"no road plane in the calibration and no disparity (and baseline) to fit "
+                                       f"one{scan}")
                 model = fit_road_model(sample.disparity, sample.label.road & sample.label.valid)
                 plane = RoadPlane.from_road_model(model, calib.fx, calib.baseline, calib.cx, calib.cy, fy=calib.fy)
                 model.check_plausible(plane.height)

@@ -5,6 +5,7 @@ choice among them is a :class:`~freespace.experiments.protocol.Protocol`."""
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -157,12 +158,22 @@ def parse_models(text: str | list[str] | tuple[str, ...] | None) -> list[str]:
     return names
 
 
+def _variant_name(name: str, vocabulary: Iterable[str]) -> str:
+    """``name`` as the vocabulary spells it when it differs only in case from exactly one entry (run folders
+    are lower case: ``contextnet-ha-r-auto-s0`` is variant ``HA-R-auto``); else ``name`` unchanged."""
+    if name in vocabulary:
+        return name
+    same = [v for v in vocabulary if v.lower() == name.lower()]
+    return same[0] if len(same) == 1 else name
+
+
 def parse_variants(text: str | list[str] | tuple[str, ...],
                    variants: dict[str, Variant] | None = None) -> tuple[str, ...]:
     """``"HA-X,X-dup"`` → the variants' table names, in the given order; ``X`` always comes first. Among a
     protocol's declared ``variants`` (:attr:`Protocol.vocabulary`): the names given, in their order."""
     vocabulary = variants or VARIANTS
-    names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
+    names = [_variant_name(n.strip(), vocabulary) for n in (text.split(",") if isinstance(text, str) else text)
+             if n.strip()]
     bad = [n for n in names if n not in vocabulary]
     if bad or not names:
         raise InvalidOptionError(f"unknown variants {bad}; choose from {', '.join(vocabulary)} (comma-separated)")
@@ -188,6 +199,7 @@ def parse_cell(text: str, seeds: int, variants: dict[str, Variant] | None = None
     if model not in list_models():
         raise InvalidOptionError(f"{param('only')}: unknown network {model!r}; choose from {', '.join(list_models())}")
     vocabulary = variants or VARIANTS
+    name = _variant_name(name, vocabulary)
     if name not in vocabulary:
         raise InvalidOptionError(f"{param('only')}: unknown variant {name!r}; choose from {', '.join(vocabulary)}")
     if not seed_text.isdigit() or not 0 <= int(seed_text) < seeds:
