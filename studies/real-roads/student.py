@@ -9,19 +9,24 @@ unlabelled frames of another city and camera, as one generic ``freespace`` datas
   ``freespace adapt``'s teacher sees them (light normalised: :func:`freespace.engine.adapt.normalise_light`),
   the probabilities averaged over models and mirrors, brought to the frame's size; road where p > THRESHOLD,
   not road where p < 1 - THRESHOLD, don't care between. They join the training list only.
+- Optionally (``--drive-teacher``), models trained on the drives fill the don't care of the drives' training
+  frames with their confident labels in the same way (the far road and the road beyond cars that the
+  autolabels leave open); the autolabel stays wherever it labels.
 
 Labels are KITTI colours everywhere (road magenta, non-road red, don't care black). Frame names:
 ``<drive>-<frame>`` and ``<prefix>-<stem>``. ``report.json`` gives each teacher, the threshold and the labels'
 confident and road shares.
 
     python studies/real-roads/student.py --raw RAW --autolabels AL --splits SPLITS \\
-        --frames CAMVID/train --teacher MODEL [--teacher MODEL ...] [--drive-copies N] --out MIX
+        --frames CAMVID/train --teacher MODEL [--teacher MODEL ...] [--drive-copies N] \\
+        [--drive-teacher MODEL ...] --out MIX
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -50,33 +55,67 @@ def _sessions(teachers: list[Path]) -> list[tuple[object, tuple[int, int]]]:
     return out
 
 
-def teacher_labels(image: np.ndarray, sessions: list[tuple[object, tuple[int, int]]],
-                   threshold: float = THRESHOLD) -> np.ndarray:
-    """A KITTI-colour label (``H×W×3 uint8`` BGR) of an ``H×W×3 uint8`` RGB frame from the teachers' mean road
-    probability (each on the frame and its mirror, light normalised), at the frame's size."""
+def teacher_probability(image: np.ndarray, sessions: list[tuple[object, tuple[int, int]]],
+                        normalise: bool = True) -> np.ndarray:
+    """The teachers' mean road probability (``H×W float32``) of an ``H×W×3 uint8`` RGB frame, each teacher on the
+    frame and its mirror (light normalised with ``normalise``), brought to the frame's size."""
     h0, w0 = image.shape[:2]
     prob = np.zeros((h0, w0), np.float32)
     for session, (h, w) in sessions:
         small = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)[None]
-        p = road_probabilities(session, small, normalise=True)[0].astype(np.float32)
+        p = road_probabilities(session, small, normalise=normalise)[0].astype(np.float32)
         prob += cv2.resize(p, (w0, h0), interpolation=cv2.INTER_LINEAR)
-    prob /= len(sessions)
-    label = np.zeros((h0, w0, 3), np.uint8)
-    label[prob > threshold] = ROAD_BGR
-    label[prob < 1 - threshold] = NON_ROAD_BGR
+    return prob / len(sessions)
+
+
+def teacher_labels(image: np.ndarray, sessions: list[tuple[object, tuple[int, int]]],
+                   threshold: float = THRESHOLD, under: np.ndarray | None = None, normalise: bool = True) -> np.ndarray:
+    """A KITTI-colour label (``H×W×3 uint8`` BGR) of an ``H×W×3 uint8`` RGB frame from the teachers' mean road
+    probability: road above ``threshold``, not road below ``1 - threshold``, don't care between. ``under``: a
+    KITTI-colour label of the frame whose labelled pixels stay as they are (the teacher fills its don't care).
+    ``normalise``: the teachers see the frames light normalised, as ``freespace adapt``'s teachers were trained."""
+    prob = teacher_probability(image, sessions, normalise)
+    label = np.zeros((*prob.shape, 3), np.uint8) if under is None else under.copy()
+    free = ~label.any(2)
+    label[free & (prob > threshold)] = ROAD_BGR
+    label[free & (prob < 1 - threshold)] = NON_ROAD_BGR
     return label
 
 
+def fill_drives(out: Path, names: list[str], sessions: list[tuple[object, tuple[int, int]]],
+                threshold: float = THRESHOLD) -> dict[str, float]:
+    """Replace the label links of the drives' training frames ``names`` (``out/label/<name>.png``, copies
+    ``<name>-cN`` included) by files whose don't-care pixels hold the teachers' confident labels; return the
+    labelled share before and after, averaged over the frames. The teachers see the frames as they are (models
+    trained on the drives, not adapted)."""
+    before, after = [], []
+    for name in [n for n in names if not re.search(r"-c\d+$", n)]:
+        link = out / "label" / f"{name}.png"
+        under = cv2.imread(str(link), cv2.IMREAD_COLOR)
+        image = cv2.cvtColor(cv2.imread(str(out / "left" / f"{name}.png"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        label = teacher_labels(image, sessions, threshold, under=under, normalise=False)
+        before.append(float(under.any(2).mean()))
+        after.append(float(label.any(2).mean()))
+        for copy in [name] + [n for n in names if n.startswith(f"{name}-c")]:
+            (out / "label" / f"{copy}.png").unlink()
+            cv2.imwrite(str(out / "label" / f"{copy}.png"), label)
+    return {"frames": len(before), "labelled_before": float(np.mean(before)) if before else 0.0,
+            "labelled_after": float(np.mean(after)) if after else 0.0}
+
+
 def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
-          prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1) -> dict[str, object]:
+          prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
+          drive_teachers: list[Path] | None = None) -> dict[str, object]:
     """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
     (a new folder); return the report. ``drive_copies``: each training frame of the drives is listed this many
     times (``<name>-c1``, ...: each copy draws its own augmentation), to weigh the drives against the other
-    frames."""
+    frames. ``drive_teachers``: model folders whose confident labels fill the don't care of the drives' training
+    frames (:func:`fill_drives`); their validation and test frames keep their autolabels."""
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
     lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}
     link_drives(raw, autolabels, splits, out, lists, drive_copies)
+    filled = fill_drives(out, list(lists["train"]), _sessions(drive_teachers), threshold) if drive_teachers else None
     sessions = _sessions(teachers)
     confident, road = [], []
     for path in sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png"):
@@ -94,7 +133,8 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
         (out / "splits" / f"{part}.txt").write_text("".join(f"{n}\n" for n in names))
     report = {"teachers": [str(t) for t in teachers], "threshold": threshold, "frames": str(frames),
               "counts": {k: len(v) for k, v in lists.items()}, "teacher_frames": len(road),
-              "drive_copies": drive_copies,
+              "drive_copies": drive_copies, "drive_teachers": [str(t) for t in drive_teachers or []],
+              "drives_filled": filled,
               "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road))}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
@@ -108,9 +148,11 @@ def main() -> None:
     ap.add_argument("--prefix", default="camvid")
     ap.add_argument("--threshold", type=float, default=THRESHOLD)
     ap.add_argument("--drive-copies", type=int, default=1, help="list each training frame of the drives N times")
+    ap.add_argument("--drive-teacher", type=Path, action="append", default=[],
+                    help="a model folder whose confident labels fill the drives' training frames' don't care")
     a = ap.parse_args()
     print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold,
-                           a.drive_copies)))
+                           a.drive_copies, a.drive_teacher)))
 
 
 if __name__ == "__main__":

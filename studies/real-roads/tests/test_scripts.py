@@ -276,3 +276,49 @@ def test_student_labels_the_teacher_s_confident_road_beside_the_drives(tmp_path:
     assert twice["counts"] == {"train": 3, "val": 1, "test": 0}
     assert (tmp_path / "mix2" / "splits" / "train.txt").read_text().split() == [
         "2011_09_26_drive_0001_sync-0000000000", "2011_09_26_drive_0001_sync-0000000000-c1", "camvid-a"]
+
+
+def test_student_fills_the_drives_don_t_care_with_the_drive_teacher_s_confident_labels(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import cv2
+    import numpy as np
+
+    student = _load("student")
+    drive = tmp_path / "raw" / "2011_09_26" / "2011_09_26_drive_0001_sync" / "image_02" / "data"
+    labels = tmp_path / "al" / "2011_09_26_drive_0001_sync"
+    drive.mkdir(parents=True)
+    labels.mkdir(parents=True)
+    image = np.zeros((36, 48, 3), np.uint8)
+    image[18:] = (40, 40, 240)  # BGR: red below (road to the teacher), dark above
+    label = np.zeros((36, 48, 3), np.uint8)  # don't care but for the autolabel's rows 30… (road) and 0…5 (not)
+    label[30:] = student.ROAD_BGR
+    label[:6] = student.NON_ROAD_BGR
+    label[30:, :4] = student.NON_ROAD_BGR  # the autolabel wins where it labels, against the teacher
+    for frame in ("0000000000", "0000000001"):
+        cv2.imwrite(str(drive / f"{frame}.png"), image)
+        cv2.imwrite(str(labels / f"{frame}.png"), label)
+    splits = tmp_path / "splits"
+    splits.mkdir()
+    for part, frame in (("train", "0000000000"), ("val", "0000000001"), ("test", "")):
+        (splits / f"{part}.txt").write_text(f"2011_09_26_drive_0001_sync/{frame}\n" if frame else "")
+    frames = tmp_path / "other"
+    frames.mkdir()
+    cv2.imwrite(str(frames / "a.png"), image)
+    seen = []
+    monkeypatch.setattr(student, "_sessions", lambda teachers: seen.append(teachers) or [(_RedIsRoad(), (16, 24))])
+    out = tmp_path / "mix"
+    report = student.build(tmp_path / "raw", tmp_path / "al", splits, frames, [tmp_path / "t"], out, drive_copies=2,
+                           drive_teachers=[tmp_path / "d"])
+    assert seen[0] == [tmp_path / "d"] and report["drive_teachers"] == [str(tmp_path / "d")]
+    name = "2011_09_26_drive_0001_sync-0000000000"
+    for copy in (name, f"{name}-c1"):  # each copy is a file with the filled label, no longer a link
+        path = out / "label" / f"{copy}.png"
+        filled = cv2.imread(str(path))
+        assert not path.is_symlink()
+        assert (filled[20:30] == student.ROAD_BGR).all() and (filled[6:12] == student.NON_ROAD_BGR).all()
+        assert (filled[30:, :4] == student.NON_ROAD_BGR).all() and (filled[:6] == student.NON_ROAD_BGR).all()
+    val = out / "label" / "2011_09_26_drive_0001_sync-0000000001.png"
+    assert val.is_symlink() and (cv2.imread(str(val)) == label).all()  # validation keeps its autolabel
+    assert report["drives_filled"]["frames"] == 1
+    assert report["drives_filled"]["labelled_before"] < 0.5 < report["drives_filled"]["labelled_after"]
+    assert (cv2.imread(str(labels / "0000000000.png")) == label).all()  # the autolabel tree is untouched
