@@ -377,3 +377,45 @@ def test_gains_averaged_over_networks_and_the_primary_endpoint() -> None:
         100 * np.mean([e["metrics"]["f_score"] for e in entries if e["model"] == "unet" and e["variant"] == "X-dup"])
         - 100 * np.mean([e["metrics"]["f_score"] for e in entries
                          if e["model"] == "unet" and e["variant"] == "X-long"]))
+
+
+def test_the_frames_figure_measures_on_the_runs_label_tree(tmp_path: Path) -> None:
+    """Runs trained on frames that have no labels of their own (KITTI raw drives) were measured on a label tree
+    (``labels``): the figure shows each prediction's errors against it, and the prediction alone where the tree
+    is gone (once this crashed on the frames' missing labels)."""
+    import cv2
+    import yaml
+
+    from freespace.experiments.figures import frames_figure
+    from freespace.testing import road_frame, tiny_road_checkpoint
+
+    root, tree, out = tmp_path / "frames", tmp_path / "labels", tmp_path / "out"
+    (root / "left").mkdir(parents=True)
+    tree.mkdir()
+    (root / "freespace.yaml").write_text("left: left\n")  # images only: no label of its own
+    for i in range(2):
+        image, road = road_frame((48, 96), seed=i)
+        cv2.imwrite(str(root / "left" / f"f{i}.png"), image[..., ::-1])
+        label = np.zeros((48, 96, 3), np.uint8)
+        label[..., 2] = 255
+        label[road] = (255, 0, 255)  # KITTI colours, BGR: road magenta, not road red
+        cv2.imwrite(str(tree / f"f{i}.png"), label)
+    checkpoint = tiny_road_checkpoint(tmp_path / "tiny.ckpt", (48, 96), 0.25)
+    entries = []
+    for variant in ("X", "HA-X"):
+        run = out / "runs" / f"fastscnn-{variant.lower()}-s0"
+        (run / "checkpoints").mkdir(parents=True)
+        (run / "splits").mkdir()
+        shutil.copy(checkpoint, run / "checkpoints" / "best.ckpt")
+        for part, names in (("train", ""), ("val", ""), ("test", "f0\nf1\n")):
+            (run / "splits" / f"{part}.txt").write_text(names)
+        (run / "config.yaml").write_text(yaml.safe_dump({"dataset": "generic", "root": str(root),
+                                                         "labels": str(tree)}))
+        entries.append({"model": "fastscnn", "seed": 0, "variant": variant, "run": str(run.relative_to(out)),
+                        "metrics": {}})
+    frames_figure(out, "fastscnn", entries, 2)
+    measured = read_image(out / "figures" / "fastscnn.png")
+    shutil.rmtree(tree)
+    frames_figure(out, "fastscnn", entries, 2)
+    alone = read_image(out / "figures" / "fastscnn.png")
+    assert measured.shape == alone.shape and not np.array_equal(measured, alone)

@@ -56,13 +56,16 @@ def gain_figure(out: Path, model: str, gains: list[dict[str, Any]]) -> None:
 def frames_figure(out: Path, model: str, entries: list[dict[str, Any]], frames: int,
                   variants: dict[str, Variant] | None = None) -> None:
     """``figures/<model>.png``: test frames of seed 0 — image, then each finished variant's prediction
-    (TP/FN/FP), X first: the test frames of the first of ``variants`` (by default :data:`VARIANTS`, whose
-    first is X; a protocol's :attr:`~freespace.experiments.protocol.Protocol.vocabulary`)."""
+    (TP/FN/FP against the labels the runs were measured on: the dataset's, or the label tree of the runs'
+    ``labels``; the prediction alone, magenta, where a frame has neither), X first: the test frames of the first
+    of ``variants`` (by default :data:`VARIANTS`, whose first is X; a protocol's
+    :attr:`~freespace.experiments.protocol.Protocol.vocabulary`)."""
     vocabulary = variants or VARIANTS
     first = next(iter(vocabulary))
+    from freespace.data.label_tree import apply_label_tree
     from freespace.data.registry import get_dataset
     from freespace.data.splits import read_splits
-    from freespace.evaluation.viz import caption, grid, overlay_errors
+    from freespace.evaluation.viz import caption, grid, overlay_errors, overlay_road
     from freespace.inference.predictor import Predictor
 
     runs = {e["variant"]: out / e["run"] for e in entries
@@ -73,6 +76,10 @@ def frames_figure(out: Path, model: str, entries: list[dict[str, Any]], frames: 
     config = read_config_yaml(runs[first] / "config.yaml")
     ds = get_dataset(config["dataset"], config["root"], config.get("split"), disparity_source="none")
     names = read_splits(runs[first] / "splits")["test"][:frames]
+    tree = config.get("labels")
+    if tree and Path(tree).is_dir():  # the runs were measured on a label tree (e.g. autolabels of raw drives)
+        labelled = [n for n in names if (Path(tree) / f"{n}.png").is_file()]
+        ds = apply_label_tree(ds, tree, labelled)
     predictors = {v: Predictor(checkpoint=r / "checkpoints" / "best.ckpt") for v, r in runs.items()}
     rows = []
     for name in names:
@@ -80,6 +87,8 @@ def frames_figure(out: Path, model: str, entries: list[dict[str, Any]], frames: 
         row = [caption(s.left, name)]
         for v, predictor in predictors.items():
             pred = predictor.predict([s.left])[0] >= 0.5
-            row.append(caption(overlay_errors(s.left, pred, s.label.road, s.label.valid), vocabulary[v].label(model)))
+            shown = overlay_road(s.left, pred) if s.label is None else overlay_errors(s.left, pred, s.label.road,
+                                                                                      s.label.valid)
+            row.append(caption(shown, vocabulary[v].label(model)))
         rows.append(row)
     write_image(out / "figures" / f"{model}.png", grid(rows, width=min(480, rows[0][0].shape[1])))
