@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
+import shutil
 import sys
 from pathlib import Path
 
@@ -87,18 +87,24 @@ def fill_drives(out: Path, names: list[str], sessions: list[tuple[object, tuple[
     """Replace the label links of the drives' training frames ``names`` (``out/label/<name>.png``, copies
     ``<name>-cN`` included) by files whose don't-care pixels hold the teachers' confident labels; return the
     labelled share before and after, averaged over the frames. The teachers see the frames as they are (models
-    trained on the drives, not adapted)."""
+    trained on the drives, not adapted); a frame's copies, links to the same autolabel, get a copy of its file."""
+    written: dict[Path, Path] = {}  # autolabel → the filled file written for it
     before, after = [], []
-    for name in [n for n in names if not re.search(r"-c\d+$", n)]:
+    for name in names:
         link = out / "label" / f"{name}.png"
-        under = cv2.imread(str(link), cv2.IMREAD_COLOR)
-        image = cv2.cvtColor(cv2.imread(str(out / "left" / f"{name}.png"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-        label = teacher_labels(image, sessions, threshold, under=under, normalise=False)
-        before.append(float(under.any(2).mean()))
-        after.append(float(label.any(2).mean()))
-        for copy in [name] + [n for n in names if n.startswith(f"{name}-c")]:
-            (out / "label" / f"{copy}.png").unlink()
-            cv2.imwrite(str(out / "label" / f"{copy}.png"), label)
+        source = link.resolve()
+        if source not in written:
+            under = cv2.imread(str(link), cv2.IMREAD_COLOR)
+            image = cv2.cvtColor(cv2.imread(str(out / "left" / f"{name}.png"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+            label = teacher_labels(image, sessions, threshold, under=under, normalise=False)
+            before.append(float(under.any(2).mean()))
+            after.append(float(label.any(2).mean()))
+            link.unlink()
+            cv2.imwrite(str(link), label)
+            written[source] = link
+        else:
+            link.unlink()
+            shutil.copyfile(written[source], link)
     return {"frames": len(before), "labelled_before": float(np.mean(before)) if before else 0.0,
             "labelled_after": float(np.mean(after)) if after else 0.0}
 

@@ -238,6 +238,15 @@ class _RedIsRoad:
         return [np.stack([-road, road], 1)]
 
 
+def _one_train_one_val(tmp_path: Path) -> Path:
+    """``tmp_path/splits``: drive 0001's frame 0 to train, frame 1 to validate, no test frame."""
+    splits = tmp_path / "splits"
+    splits.mkdir()
+    for part, frame in (("train", "0000000000"), ("val", "0000000001"), ("test", "")):
+        (splits / f"{part}.txt").write_text(f"2011_09_26_drive_0001_sync/{frame}\n" if frame else "")
+    return splits
+
+
 def test_student_labels_the_teacher_s_confident_road_beside_the_drives(tmp_path: Path,
                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     import cv2
@@ -251,10 +260,7 @@ def test_student_labels_the_teacher_s_confident_road_beside_the_drives(tmp_path:
     for frame in ("0000000000", "0000000001"):
         (drive / f"{frame}.png").write_bytes(b"png")
         (labels / f"{frame}.png").write_bytes(b"label")
-    splits = tmp_path / "splits"
-    splits.mkdir()
-    for part, frame in (("train", "0000000000"), ("val", "0000000001"), ("test", "")):
-        (splits / f"{part}.txt").write_text(f"2011_09_26_drive_0001_sync/{frame}\n" if frame else "")
+    splits = _one_train_one_val(tmp_path)
     frames = tmp_path / "other"
     frames.mkdir()
     image = np.zeros((36, 48, 3), np.uint8)
@@ -297,10 +303,7 @@ def test_student_fills_the_drives_don_t_care_with_the_drive_teacher_s_confident_
     for frame in ("0000000000", "0000000001"):
         cv2.imwrite(str(drive / f"{frame}.png"), image)
         cv2.imwrite(str(labels / f"{frame}.png"), label)
-    splits = tmp_path / "splits"
-    splits.mkdir()
-    for part, frame in (("train", "0000000000"), ("val", "0000000001"), ("test", "")):
-        (splits / f"{part}.txt").write_text(f"2011_09_26_drive_0001_sync/{frame}\n" if frame else "")
+    splits = _one_train_one_val(tmp_path)
     frames = tmp_path / "other"
     frames.mkdir()
     cv2.imwrite(str(frames / "a.png"), image)
