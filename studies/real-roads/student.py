@@ -11,7 +11,9 @@ unlabelled frames of another city and camera, as one generic ``freespace`` datas
   not road where p < 1 - THRESHOLD, don't care between. They join the training list only.
 - Optionally (``--drive-teacher``), models trained on the drives fill the don't care of the drives' training
   frames with their confident labels in the same way (the far road and the road beyond cars that the
-  autolabels leave open); the autolabel stays wherever it labels.
+  autolabels leave open); the autolabel stays wherever it labels. With ``--drive-teacher-first`` the teacher's
+  confident labels win over the autolabel instead (its labels on the whole frame; the autolabel only where the
+  teacher is unsure).
 
 Labels are KITTI colours everywhere (road magenta, non-road red, don't care black). Frame names:
 ``<drive>-<frame>`` and ``<prefix>-<stem>``. ``report.json`` gives each teacher, the threshold and the labels'
@@ -19,7 +21,7 @@ confident and road shares.
 
     python studies/real-roads/student.py --raw RAW --autolabels AL --splits SPLITS \\
         --frames CAMVID/train --teacher MODEL [--teacher MODEL ...] [--drive-copies N] \\
-        [--drive-teacher MODEL ...] --out MIX
+        [--drive-teacher MODEL ... [--drive-teacher-first]] --out MIX
 """
 
 from __future__ import annotations
@@ -69,35 +71,41 @@ def teacher_probability(image: np.ndarray, sessions: list[tuple[object, tuple[in
 
 
 def teacher_labels(image: np.ndarray, sessions: list[tuple[object, tuple[int, int]]],
-                   threshold: float = THRESHOLD, under: np.ndarray | None = None, normalise: bool = True) -> np.ndarray:
+                   threshold: float = THRESHOLD, under: np.ndarray | None = None, normalise: bool = True,
+                   teacher_first: bool = False) -> np.ndarray:
     """A KITTI-colour label (``H×W×3 uint8`` BGR) of an ``H×W×3 uint8`` RGB frame from the teachers' mean road
     probability: road above ``threshold``, not road below ``1 - threshold``, don't care between. ``under``: a
-    KITTI-colour label of the frame whose labelled pixels stay as they are (the teacher fills its don't care).
-    ``normalise``: the teachers see the frames light normalised, as ``freespace adapt``'s teachers were trained."""
+    KITTI-colour label of the frame whose labelled pixels stay as they are (the teacher fills its don't care), or,
+    with ``teacher_first``, stay only where the teacher is unsure. ``normalise``: the teachers see the frames light
+    normalised, as ``freespace adapt``'s teachers were trained."""
     prob = teacher_probability(image, sessions, normalise)
     label = np.zeros((*prob.shape, 3), np.uint8) if under is None else under.copy()
-    free = ~label.any(2)
+    free = np.ones(prob.shape, bool) if teacher_first else ~label.any(2)
     label[free & (prob > threshold)] = ROAD_BGR
     label[free & (prob < 1 - threshold)] = NON_ROAD_BGR
     return label
 
 
 def fill_drives(out: Path, names: list[str], sessions: list[tuple[object, tuple[int, int]]],
-                threshold: float = THRESHOLD) -> dict[str, float]:
+                threshold: float = THRESHOLD, teacher_first: bool = False) -> dict[str, float | bool]:
     """Replace the label links of the drives' training frames ``names`` (``out/label/<name>.png``, copies
-    ``<name>-cN`` included) by files whose don't-care pixels hold the teachers' confident labels; return the
-    labelled share before and after, averaged over the frames. The teachers see the frames as they are (models
-    trained on the drives, not adapted); a frame's copies, links to the same autolabel, get a copy of its file."""
+    ``<name>-cN`` included) by files whose don't-care pixels (every pixel with ``teacher_first``) hold the
+    teachers' confident labels; return the labelled share before and after, averaged over the frames, and the
+    share of the pixels whose label the teacher changed (road to not road or back). The teachers see the frames
+    as they are (models trained on the drives, not adapted); a frame's copies, links to the same autolabel, get
+    a copy of its file."""
     written: dict[Path, Path] = {}  # autolabel → the filled file written for it
-    before, after = [], []
+    before, after, changed = [], [], []
     for name in names:
         link = out / "label" / f"{name}.png"
         source = link.resolve()
         if source not in written:
             under = cv2.imread(str(link), cv2.IMREAD_COLOR)
             image = cv2.cvtColor(cv2.imread(str(out / "left" / f"{name}.png"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-            label = teacher_labels(image, sessions, threshold, under=under, normalise=False)
+            label = teacher_labels(image, sessions, threshold, under=under, normalise=False,
+                                   teacher_first=teacher_first)
             before.append(float(under.any(2).mean()))
+            changed.append(float((under.any(2) & (label != under).any(2)).mean()))
             after.append(float(label.any(2).mean()))
             link.unlink()
             cv2.imwrite(str(link), label)
@@ -106,22 +114,25 @@ def fill_drives(out: Path, names: list[str], sessions: list[tuple[object, tuple[
             link.unlink()
             shutil.copyfile(written[source], link)
     return {"frames": len(before), "labelled_before": float(np.mean(before)) if before else 0.0,
-            "labelled_after": float(np.mean(after)) if after else 0.0}
+            "labelled_after": float(np.mean(after)) if after else 0.0,
+            "changed": float(np.mean(changed)) if changed else 0.0, "teacher_first": teacher_first}
 
 
 def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
           prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
-          drive_teachers: list[Path] | None = None) -> dict[str, object]:
+          drive_teachers: list[Path] | None = None, drive_teacher_first: bool = False) -> dict[str, object]:
     """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
     (a new folder); return the report. ``drive_copies``: each training frame of the drives is listed this many
     times (``<name>-c1``, ...: each copy draws its own augmentation), to weigh the drives against the other
     frames. ``drive_teachers``: model folders whose confident labels fill the don't care of the drives' training
-    frames (:func:`fill_drives`); their validation and test frames keep their autolabels."""
+    frames (:func:`fill_drives`; ``drive_teacher_first``: their confident labels win over the autolabels); the
+    validation and test frames keep their autolabels."""
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
     lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}
     link_drives(raw, autolabels, splits, out, lists, drive_copies)
-    filled = fill_drives(out, list(lists["train"]), _sessions(drive_teachers), threshold) if drive_teachers else None
+    filled = fill_drives(out, list(lists["train"]), _sessions(drive_teachers), threshold,
+                         drive_teacher_first) if drive_teachers else None
     sessions = _sessions(teachers)
     confident, road = [], []
     for path in sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png"):
@@ -156,9 +167,13 @@ def main() -> None:
     ap.add_argument("--drive-copies", type=int, default=1, help="list each training frame of the drives N times")
     ap.add_argument("--drive-teacher", type=Path, action="append", default=[],
                     help="a model folder whose confident labels fill the drives' training frames' don't care")
+    ap.add_argument("--drive-teacher-first", action="store_true",
+                    help="the drive teachers' confident labels win over the autolabels (the whole frame)")
     a = ap.parse_args()
+    if a.drive_teacher_first and not a.drive_teacher:
+        ap.error("--drive-teacher-first needs --drive-teacher MODEL")
     print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold,
-                           a.drive_copies, a.drive_teacher)))
+                           a.drive_copies, a.drive_teacher, a.drive_teacher_first)))
 
 
 if __name__ == "__main__":

@@ -325,3 +325,10 @@ def test_student_fills_the_drives_don_t_care_with_the_drive_teacher_s_confident_
     assert report["drives_filled"]["frames"] == 1
     assert report["drives_filled"]["labelled_before"] < 0.5 < report["drives_filled"]["labelled_after"]
     assert (cv2.imread(str(labels / "0000000000.png")) == label).all()  # the autolabel tree is untouched
+    assert report["drives_filled"]["changed"] == 0.0
+    first = student.build(tmp_path / "raw", tmp_path / "al", splits, frames, [tmp_path / "t"], tmp_path / "mix2",
+                          drive_teachers=[tmp_path / "d"], drive_teacher_first=True)
+    won = cv2.imread(str(tmp_path / "mix2" / "label" / f"{name}.png"))
+    assert (won[30:, :4] == student.ROAD_BGR).all()  # the teacher's confident road wins over the autolabel
+    assert (won[20:30] == student.ROAD_BGR).all() and (won[:6] == student.NON_ROAD_BGR).all()
+    assert first["drives_filled"]["teacher_first"] and first["drives_filled"]["changed"] > 0
