@@ -431,6 +431,34 @@ def test_torch_dataset_flip_and_photometric(tmp_path: Path) -> None:
     assert _augmenter(False, False, False) is None
 
 
+def test_torch_dataset_zoom_scales_image_and_label_together(tmp_path: Path) -> None:
+    """``zoom`` adds a scale in 1 ± zoom to the conventional augmentation: image and label move together (the
+    label keeps its classes, zoomed-out borders are don't care), the road's share spreads wider over the draws
+    than with translation and rotation alone, the draws repeat for (seed, epoch, i); zoom 0 keeps the paper's
+    draws, and a zoom outside [0, 0.5] is refused."""
+    torch = pytest.importorskip("torch")
+    from freespace.data.torch_dataset import RoadSegmentationDataset
+    from freespace.labels import IGNORE_INDEX
+
+    names = kitti_tree(tmp_path, 1)
+    kitti = KittiRoad(tmp_path, disparity_source="none")
+    spread, ignored = {}, {}
+    for zoom in (0.0, 0.4):
+        ds = RoadSegmentationDataset(kitti, names, affine=True, zoom=zoom, seed=5)
+        draws = [ds[(e, 0)] for e in range(40)]
+        labels = torch.stack([d["label"] for d in draws])
+        assert set(torch.unique(labels).tolist()) <= {0, 1, IGNORE_INDEX}
+        assert all(torch.equal(d["image"], ds[(e, 0)]["image"]) for e, d in enumerate(draws))
+        road = (labels == 1).float().mean((1, 2))
+        spread[zoom], ignored[zoom] = float(road.max() - road.min()), float((labels == IGNORE_INDEX).float().mean())
+    plain = RoadSegmentationDataset(kitti, names, affine=True, seed=5)
+    zero = RoadSegmentationDataset(kitti, names, affine=True, seed=5, zoom=0.0)
+    assert all(torch.equal(plain[(e, 0)]["label"], zero[(e, 0)]["label"]) for e in range(5))
+    assert spread[0.4] > 1.2 * spread[0.0] and ignored[0.4] > ignored[0.0]
+    with pytest.raises(ValueError, match="zoom must be in"):
+        RoadSegmentationDataset(kitti, names, zoom=0.8)
+
+
 def test_torch_dataset_strong_photometric(tmp_path: Path) -> None:
     """``photometric="strong"`` darkens, blurs and adds noise besides the jitter: its draws spread the image's mean
     brightness wider than the mild ones, never touch the label, and repeat for (seed, epoch, i); a strength that

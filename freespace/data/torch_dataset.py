@@ -16,6 +16,9 @@ Samples are dicts: ``image`` float32 ``3×H×W`` in [0, 1] (normalisation belong
   hue ±0.04 turn; strong: :func:`freespace.data.photometry.strong_photometry`, wider ranges, a dusk-like gamma,
   blur and noise), drawn with the conventional augmentation (before it, in this order); not in the paper, for
   training on few real drives;
+* ``zoom=z`` (> 0, with ``affine``): the conventional augmentation also scales image and label by a factor drawn
+  in 1 ± z (zoomed out, the new borders are don't care): the road at other distances than the drives show it;
+  not in the paper;
 * ``virtual=VirtualAugment(...)``: road-plane virtual views (a training run's ``augment="virtual"``),
   drawn from (``seed``, epoch, i) like the conventional augmentation and applied before it (when both are
   on), with the torch-free :func:`freespace.geometry.virtual_view`;
@@ -119,18 +122,20 @@ def photometric_strength(value: bool | str) -> str:
     return strength
 
 
-def _augmenter(affine: bool, flip: bool, photometric: bool | str) -> Any:
+def _augmenter(affine: bool, flip: bool, photometric: bool | str, zoom: float = 0.0) -> Any:
     """The per-sample augmentations that are on, as one albumentations pipeline (None when none is): the mild
     colour jitter (``photometric`` mild; the strong one is drawn apart, :func:`strong_photometry`), the mirror,
-    then the paper's conventional augmentation (random translation and rotation of image and label together).
-    With ``affine`` alone it is the paper's pipeline as it always was (the same draws)."""
+    then the paper's conventional augmentation (random translation and rotation of image and label together,
+    and a scale in 1 ± ``zoom`` when ``zoom`` > 0). With ``affine`` alone it is the paper's pipeline as it always
+    was (the same draws)."""
     import albumentations as A
 
     steps = [A.ColorJitter(brightness=(0.75, 1.25), contrast=(0.75, 1.25), saturation=(0.75, 1.25),
                            hue=(-0.04, 0.04), p=0.8)] if photometric_strength(photometric) == "mild" else []
     steps += [A.HorizontalFlip(p=0.5)] if flip else []
+    scale = {"scale": (1 - zoom, 1 + zoom)} if zoom > 0 else {}
     steps += [A.Affine(translate_percent=(-0.1, 0.1), rotate=(-10, 10), p=0.8, border_mode=cv2.BORDER_CONSTANT,
-                       fill=0, fill_mask=IGNORE_INDEX)] if affine else []
+                       fill=0, fill_mask=IGNORE_INDEX, **scale)] if affine else []
     return A.Compose(steps, seed=0) if steps else None
 
 
@@ -151,6 +156,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         cache: keep decoded frames in memory.
         virtual: road-plane virtual views, drawn from (``seed``, epoch, i); before the conventional
             augmentation when both are on.
+        zoom: with ``affine``, also scale by a factor in 1 ± ``zoom`` (0: off; at most 0.5).
 
     Raises:
         DatasetError: a requested frame is unknown or has no label.
@@ -160,7 +166,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
                  transform: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None, *,
                  size: tuple[int, int] | None = None, affine: bool = False, seed: int = 0,
                  cache: bool = False, virtual: VirtualAugment | None = None, flip: bool = False,
-                 photometric: bool | str = False) -> None:
+                 photometric: bool | str = False, zoom: float = 0.0) -> None:
         self.dataset = dataset
         wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
         self.items = [n if isinstance(n, Item) else Item(dataset.index(n), n) for n in wanted]
@@ -170,7 +176,9 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
                                f"train on a labelled split")
         self.transform, self.size, self.affine, self.seed, self.cache = transform, size, affine, seed, cache
         self._cache: dict[tuple[int, str | None], tuple[np.ndarray, np.ndarray]] = {}
-        self._aug = _augmenter(affine, flip, photometric)
+        if not 0 <= zoom <= 0.5:
+            raise ValueError(f"zoom must be in [0, 0.5], got {zoom}")
+        self._aug = _augmenter(affine, flip, photometric, zoom)
         self._strong = photometric_strength(photometric) == "strong"
         self.virtual = virtual
         self._K: dict[tuple[int, str | None], np.ndarray] = {}  # intrinsics at the decoded size, by frame and image

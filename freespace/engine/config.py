@@ -141,6 +141,9 @@ class TrainConfig:
                                        f"0.7–2 that darkens like dusk, blur and noise: for cameras and light the "
                                        f"training frames never showed)", "mild", choices=("mild", "strong"),
                                        metavar="NAME")
+    zoom: Annotated[float, Field(ge=0, le=0.5)] = option("also scale each training sample (image and label) by a "
+                                                          "factor drawn in 1 ± this, with the conventional "
+                                                          "augmentation (new borders don't care); 0: off", 0.0)
     epochs: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = option("most epochs", 50)
     batch_size: Annotated[int, Field(ge=1, le=MAX_BATCH_SIZE)] = option("training batch size", 4)
     lr: Annotated[float, Field(gt=0, lt=10)] = option("SGD learning rate", 0.001)
