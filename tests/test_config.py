@@ -131,8 +131,8 @@ def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) 
     assert (tmp_path / "again.yaml").read_text() == \
         CAMPAIGN_YAML.format(**where).replace("disparity_mode:", "disparity_source:").replace(
             "augment: homography\n", "augment: homography\nflip: false\nphotometric: false\n"
-            "photometric_strength: mild\n").replace("dataset: synth", "dataset: kitti")  # options added since; the
-    # layout's own name for an alias
+            "photometric_strength: mild\nzoom: 0.0\n").replace("dataset: synth", "dataset: kitti")
+    # the options added since; the layout's own name for an alias
 
 
 def test_diff_lets_only_the_cap_and_patience_grow(tmp_path: Path) -> None:
@@ -166,8 +166,8 @@ def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:
     written, before = yaml.safe_load((tmp_path / "new.yaml").read_text()), yaml.safe_load(OLDER_YAML.format(**where))
     assert written == {**{k if k != "disparity_mode" else "disparity_source": v for k, v in before.items()},
                        "virtual_shift": "0.5,0.2,0", "flip": False, "photometric": False,
-                       "photometric_strength": "mild", "dataset": "kitti"}  # one spelling per value (the layout's
-    # own name for the alias synth); the options added since, at their defaults
+                       "photometric_strength": "mild", "zoom": 0.0, "dataset": "kitti"}
+    # one spelling per value (the layout's own name for the alias synth); the options added since, at their defaults
     assert TrainConfig.load(tmp_path / "new.yaml") == old
     assert read_config_yaml(tmp_path / "old.yaml")["augment"] == ("homography", "virtual")
 
