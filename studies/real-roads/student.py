@@ -78,7 +78,14 @@ def teacher_labels(image: np.ndarray, sessions: list[tuple[object, tuple[int, in
     KITTI-colour label of the frame whose labelled pixels stay as they are (the teacher fills its don't care), or,
     with ``teacher_first``, stay only where the teacher is unsure. ``normalise``: the teachers see the frames light
     normalised, as ``freespace adapt``'s teachers were trained."""
-    prob = teacher_probability(image, sessions, normalise)
+    return label_from(teacher_probability(image, sessions, normalise), threshold, under, teacher_first)
+
+
+def label_from(prob: np.ndarray, threshold: float = THRESHOLD, under: np.ndarray | None = None,
+               teacher_first: bool = False) -> np.ndarray:
+    """A KITTI-colour label (``H×W×3 uint8`` BGR) from a road probability (``H×W`` in [0, 1]): road above
+    ``threshold``, not road below ``1 - threshold``, don't care between; ``under`` and ``teacher_first`` as
+    :func:`teacher_labels`'s."""
     label = np.zeros((*prob.shape, 3), np.uint8) if under is None else under.copy()
     free = np.ones(prob.shape, bool) if teacher_first else ~label.any(2)
     label[free & (prob > threshold)] = ROAD_BGR

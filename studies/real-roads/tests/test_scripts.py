@@ -332,3 +332,54 @@ def test_student_fills_the_drives_don_t_care_with_the_drive_teacher_s_confident_
     assert (won[30:, :4] == student.ROAD_BGR).all()  # the teacher's confident road wins over the autolabel
     assert (won[20:30] == student.ROAD_BGR).all() and (won[:6] == student.NON_ROAD_BGR).all()
     assert first["drives_filled"]["teacher_first"] and first["drives_filled"]["changed"] > 0
+
+
+def test_labelcheck_scores_the_teacher_s_labels_against_human_road(tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    import cv2
+    import numpy as np
+
+    labelcheck = _load("labelcheck")
+    image = np.zeros((36, 48, 3), np.uint8)
+    image[18:] = (40, 40, 240)  # BGR: red below (road to the stand-in teacher), dark above
+    human = np.zeros((36, 48), np.uint8)
+    human[24:] = 255  # the human road: the lower third; the teacher also takes rows 18-23
+    k15 = tmp_path / "k15"
+    for sub in ("image_2", "road_mask"):
+        (k15 / sub).mkdir(parents=True)
+    autolabels = tmp_path / "al"
+    autolabels.mkdir()
+    under = np.zeros((36, 48, 3), np.uint8)
+    under[30:] = labelcheck.student.ROAD_BGR
+    under[18:24] = labelcheck.student.NON_ROAD_BGR  # the autolabel is right where the teacher is wrong
+    for frame in labelcheck.KITTI2015_FRAMES:
+        cv2.imwrite(str(k15 / "image_2" / f"{frame}.png"), image)
+        cv2.imwrite(str(k15 / "road_mask" / f"{frame}.png"), human)
+        cv2.imwrite(str(autolabels / f"{frame}.png"), under)
+    monkeypatch.setattr(labelcheck.student, "_sessions", lambda teachers: [(_RedIsRoad(), (12, 16))] * len(teachers))
+    result = labelcheck.check_kitti2015([tmp_path / "t"], autolabels, k15)
+    assert result["autolabel"] == {"labelled": 33.3, "road_as_road": 50.0, "road_as_not": 0.0, "precision": 100.0}
+    # filled: every row labelled but the one where the teacher's upsampled probability crosses ½ (don't care)
+    assert result["filled"] == {"labelled": 97.2, "road_as_road": 100.0, "road_as_not": 0.0, "precision": 100.0}
+    # the teacher first: its road wins in rows 19-23 (false road: 5 of the 17 rows labelled road); in rows 17-18,
+    # where its upsampled probability crosses ½, it is unsure and the autolabel stays
+    assert result["teacher first"]["precision"] == pytest.approx(100 * 12 / 17, abs=0.1)
+    cv2.imwrite(str(autolabels / "000001_10.png"), under[:10])
+    with pytest.raises(SystemExit, match="frame's size"):
+        labelcheck.check_kitti2015([tmp_path / "t"], autolabels, k15)
+
+    camvid = tmp_path / "camvid"
+    for sub in ("val", "valannot", "train", "duskannot"):
+        (camvid / sub).mkdir(parents=True)
+    classes = np.full((36, 48), 1, np.uint8)
+    classes[24:] = labelcheck.CAMVID_ROAD
+    classes[:6] = labelcheck.CAMVID_VOID  # left out of every count
+    for images, masks in (("val", "valannot"), ("train", "duskannot")):
+        cv2.imwrite(str(camvid / images / "a.png"), image)
+        cv2.imwrite(str(camvid / masks / "a.png"), classes)
+    result = labelcheck.check_camvid([tmp_path / "t"], [tmp_path / "r"], camvid)
+    assert sorted(result) == sorted(f"{part}, {name}" for part in ("val", "dusk")
+                                    for name in ("teachers", "raw teachers", "all"))
+    # rows 6-35 counted (0-5 void); rows 17-18 don't care, 19-35 road (12 of them the human road)
+    assert result["val, all"] == {"labelled": pytest.approx(100 * 28 / 30, abs=0.1), "road_as_road": 100.0,
+                                  "road_as_not": 0.0, "precision": pytest.approx(100 * 12 / 17, abs=0.1)}

@@ -1,0 +1,128 @@
+"""How good are a teacher's labels? Issue 61's label checks, against human road masks that are only measured:
+
+- ``kitti2015``: the drive teacher's fill (``student.py --drive-teacher``) of single-frame autolabels, on the
+  two KITTI stereo 2015 frames: the autolabel alone, filled where it leaves don't care, and with the teacher's
+  confident labels first (``--drive-teacher-first``). ``--autolabels`` holds ``<frame>.png`` KITTI-colour
+  labels of ``000000_10`` and ``000001_10`` (``freespace autolabel`` on those pairs).
+- ``camvid``: the CamVid labellers of ``student.py`` on CamVid ``val`` (101 frames, ``valannot``) and the dusk
+  frames (62 of ``train``, ``duskannot``): the ``--teacher`` models (light normalised, as ``freespace adapt``'s
+  teachers), the ``--raw-teacher`` models (frames as they are, e.g. a teacher trained on the drives), and the
+  mean over all of them.
+
+A label is road where the models' mean probability is above 0.9 and not road below 0.1 (``student.py``'s
+threshold), don't care between. Reported, pooled over each set's pixels (CamVid's void, class 11, left out):
+the labelled share, the human road labelled road and labelled not road, and the precision of the road label.
+
+    python studies/real-roads/labelcheck.py kitti2015 --teacher MODEL --autolabels DIR [--kitti2015 DIR]
+    python studies/real-roads/labelcheck.py camvid --camvid DIR --teacher MODEL ... [--raw-teacher MODEL ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import student  # noqa: E402  (the study's own script: the teachers' labels)
+
+KITTI2015_FRAMES = ("000000_10", "000001_10")
+CAMVID_ROAD, CAMVID_VOID = 3, 11
+
+
+def count(label: np.ndarray, human_road: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Pixel counts of a KITTI-colour ``label`` (``H×W×3`` BGR) against ``human_road`` (``H×W bool``) over
+    ``valid`` (``H×W bool``): valid, labelled, road labelled road, road labelled not road, labelled road."""
+    road = (label == student.ROAD_BGR).all(2) & valid
+    non = (label == student.NON_ROAD_BGR).all(2) & valid
+    human = human_road & valid
+    return np.array([valid.sum(), (road | non).sum(), (road & human).sum(), (non & human).sum(), road.sum(),
+                     human.sum()], np.float64)
+
+
+def summary(counts: np.ndarray) -> dict[str, float]:
+    """Shares in % from :func:`count`'s sums: ``labelled``, ``road_as_road``, ``road_as_not``, ``precision``."""
+    valid, labelled, hit, lost, road, human = counts
+    def share(part: float, whole: float) -> float:
+        return round(100 * float(part) / max(float(whole), 1.0), 1)
+
+    return {"labelled": share(labelled, valid), "road_as_road": share(hit, human), "road_as_not": share(lost, human),
+            "precision": share(hit, road)}
+
+
+def _rgb(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise SystemExit(f"cannot read {path}: give the folders the module's docstring describes")
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def check_kitti2015(teachers: list[Path], autolabels: Path, kitti2015: Path) -> dict[str, dict[str, float]]:
+    """The fill of ``autolabels`` by ``teachers`` (frames as they are) on the two KITTI 2015 frames under
+    ``kitti2015`` (``image_2/``, ``road_mask/``)."""
+    sessions = student._sessions(teachers)
+    sums: dict[str, np.ndarray] = {}
+    for frame in KITTI2015_FRAMES:
+        image = _rgb(kitti2015 / "image_2" / f"{frame}.png")
+        human = cv2.imread(str(kitti2015 / "road_mask" / f"{frame}.png"), cv2.IMREAD_GRAYSCALE) > 0
+        under = cv2.imread(str(autolabels / f"{frame}.png"), cv2.IMREAD_COLOR)
+        if under is None or under.shape[:2] != human.shape:
+            raise SystemExit(f"{autolabels / f'{frame}.png'}: missing or not at the frame's size")
+        prob = student.teacher_probability(image, sessions, normalise=False)
+        labels = {"autolabel": under, "filled": student.label_from(prob, under=under),
+                  "teacher first": student.label_from(prob, under=under, teacher_first=True)}
+        for name, label in labels.items():
+            sums[name] = sums.get(name, 0) + count(label, human, np.ones_like(human))
+    return {name: summary(s) for name, s in sums.items()}
+
+
+def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path) -> dict[str, dict[str, float]]:
+    """The CamVid labels of ``teachers`` (light normalised), ``raw_teachers`` (as they are) and the mean of all
+    models, on ``val`` and the dusk frames under ``camvid`` (``make.sh``'s layout)."""
+    groups = [(student._sessions(teachers), True), (student._sessions(raw_teachers), False)]
+    sums: dict[str, np.ndarray] = {}
+    for part, images, masks in (("val", "val", "valannot"), ("dusk", "train", "duskannot")):
+        for path in sorted((camvid / masks).glob("*.png")):
+            classes = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+            image = _rgb(camvid / images / path.name)
+            probs = [(student.teacher_probability(image, s, normalise), len(s)) for s, normalise in groups if s]
+            named = {"teachers": probs[0][0]} if teachers else {}
+            if raw_teachers:
+                named["raw teachers"] = probs[-1][0]
+            if len(probs) == 2:
+                named["all"] = sum(p * n for p, n in probs) / sum(n for _, n in probs)
+            for name, prob in named.items():
+                key = f"{part}, {name}"
+                sums[key] = sums.get(key, 0) + count(student.label_from(prob), classes == CAMVID_ROAD,
+                                                     classes != CAMVID_VOID)
+    return {name: summary(s) for name, s in sums.items()}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="check", required=True)
+    k = sub.add_parser("kitti2015", help="the drive teacher's fill of the KITTI 2015 frames' autolabels")
+    k.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder (model.onnx)")
+    k.add_argument("--autolabels", type=Path, required=True)
+    k.add_argument("--kitti2015", type=Path, default=Path(__file__).resolve().parents[3] / "shared" / "data"
+                   / "kitti_stereo_2015")
+    c = sub.add_parser("camvid", help="the CamVid labellers on val and the dusk frames")
+    c.add_argument("--camvid", type=Path, required=True, help="make.sh's camvid folder")
+    c.add_argument("--teacher", type=Path, action="append", default=[], help="a model folder, light normalised")
+    c.add_argument("--raw-teacher", type=Path, action="append", default=[], help="a model folder, frames as they are")
+    a = ap.parse_args()
+    if a.check == "kitti2015":
+        result = check_kitti2015(a.teacher, a.autolabels, a.kitti2015)
+    else:
+        if not a.teacher and not a.raw_teacher:
+            ap.error("give --teacher MODEL or --raw-teacher MODEL")
+        result = check_camvid(a.teacher, a.raw_teacher, a.camvid)
+    print(json.dumps(result, indent=1))
+
+
+if __name__ == "__main__":
+    main()
