@@ -27,16 +27,18 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from freespace.evaluation.real_frames import FULL_MASK_FRAMES as KITTI2015_FRAMES
+from freespace.evaluation.real_frames import SHARED
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import student  # noqa: E402  (the study's own script: the teachers' labels)
 
-KITTI2015_FRAMES = ("000000_10", "000001_10")
 CAMVID_ROAD, CAMVID_VOID = 3, 11
 
 
 def count(label: np.ndarray, human_road: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Pixel counts of a KITTI-colour ``label`` (``H×W×3`` BGR) against ``human_road`` (``H×W bool``) over
-    ``valid`` (``H×W bool``): valid, labelled, road labelled road, road labelled not road, labelled road."""
+    ``valid`` (``H×W bool``): valid, labelled, road labelled road, road labelled not road, labelled road, road."""
     road = (label == student.ROAD_BGR).all(2) & valid
     non = (label == student.NON_ROAD_BGR).all(2) & valid
     human = human_road & valid
@@ -47,11 +49,12 @@ def count(label: np.ndarray, human_road: np.ndarray, valid: np.ndarray) -> np.nd
 def summary(counts: np.ndarray) -> dict[str, float]:
     """Shares in % from :func:`count`'s sums: ``labelled``, ``road_as_road``, ``road_as_not``, ``precision``."""
     valid, labelled, hit, lost, road, human = counts
-    def share(part: float, whole: float) -> float:
-        return round(100 * float(part) / max(float(whole), 1.0), 1)
+    return {"labelled": _percent(labelled, valid), "road_as_road": _percent(hit, human),
+            "road_as_not": _percent(lost, human), "precision": _percent(hit, road)}
 
-    return {"labelled": share(labelled, valid), "road_as_road": share(hit, human), "road_as_not": share(lost, human),
-            "precision": share(hit, road)}
+
+def _percent(part: float, whole: float) -> float:
+    return round(100 * float(part) / max(float(whole), 1.0), 1)
 
 
 def _rgb(path: Path) -> np.ndarray:
@@ -83,18 +86,20 @@ def check_kitti2015(teachers: list[Path], autolabels: Path, kitti2015: Path) -> 
 def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path) -> dict[str, dict[str, float]]:
     """The CamVid labels of ``teachers`` (light normalised), ``raw_teachers`` (as they are) and the mean of all
     models, on ``val`` and the dusk frames under ``camvid`` (``make.sh``'s layout)."""
-    groups = [(student._sessions(teachers), True), (student._sessions(raw_teachers), False)]
+    normalised, raw = student._sessions(teachers), student._sessions(raw_teachers)
     sums: dict[str, np.ndarray] = {}
     for part, images, masks in (("val", "val", "valannot"), ("dusk", "train", "duskannot")):
         for path in sorted((camvid / masks).glob("*.png")):
             classes = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
             image = _rgb(camvid / images / path.name)
-            probs = [(student.teacher_probability(image, s, normalise), len(s)) for s, normalise in groups if s]
-            named = {"teachers": probs[0][0]} if teachers else {}
+            named = {}
+            if teachers:
+                named["teachers"] = student.teacher_probability(image, normalised, normalise=True)
             if raw_teachers:
-                named["raw teachers"] = probs[-1][0]
-            if len(probs) == 2:
-                named["all"] = sum(p * n for p, n in probs) / sum(n for _, n in probs)
+                named["raw teachers"] = student.teacher_probability(image, raw, normalise=False)
+            if teachers and raw_teachers:  # the mean over every model
+                named["all"] = ((len(normalised) * named["teachers"] + len(raw) * named["raw teachers"])
+                                / (len(normalised) + len(raw)))
             for name, prob in named.items():
                 key = f"{part}, {name}"
                 sums[key] = sums.get(key, 0) + count(student.label_from(prob), classes == CAMVID_ROAD,
@@ -108,8 +113,7 @@ def main() -> None:
     k = sub.add_parser("kitti2015", help="the drive teacher's fill of the KITTI 2015 frames' autolabels")
     k.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder (model.onnx)")
     k.add_argument("--autolabels", type=Path, required=True)
-    k.add_argument("--kitti2015", type=Path, default=Path(__file__).resolve().parents[3] / "shared" / "data"
-                   / "kitti_stereo_2015")
+    k.add_argument("--kitti2015", type=Path, default=SHARED / "kitti_stereo_2015")
     c = sub.add_parser("camvid", help="the CamVid labellers on val and the dusk frames")
     c.add_argument("--camvid", type=Path, required=True, help="make.sh's camvid folder")
     c.add_argument("--teacher", type=Path, action="append", default=[], help="a model folder, light normalised")
