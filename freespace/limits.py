@@ -25,7 +25,7 @@ from typing import Callable
 from freespace.errors import InvalidOptionError, param
 
 __all__ = ["Bounded", "bounded_int", "bounded_float", "usable_cores", "max_workers", "check_workers",
-           "WORKERS_PER_CORE", "MAX_WORKERS", "MAX_BATCH_SIZE", "MAX_EPOCHS", "MAX_WEIGHT_DECAY", "MAX_DEVICES",
+           "WORKERS_PER_CORE", "MAX_WORKERS", "check_threads", "MAX_BATCH_SIZE", "MAX_EPOCHS", "MAX_WEIGHT_DECAY", "MAX_DEVICES",
            "MAX_NODES", "MAX_DISPARITY_PX", "MAX_CURB_HEIGHT_M", "MAX_BASELINE_M", "MAX_NOISE_PX", "MAX_LIDAR_FILL_PX",
            "MAX_INLIER_THRESHOLD_PX", "MAX_FRAME_COUNT", "MAX_POSE", "bounded_triple", "MAX_IMAGE_PIXELS",
            "MAX_IMAGE_FILE_BYTES", "MAX_SCAN_POINTS", "MIN_BASELINE_M", "MAX_FOCAL_PX"]
@@ -99,6 +99,21 @@ def check_workers(workers: int, name: str = "workers") -> int:
                                  f"{most} ({WORKERS_PER_CORE} per CPU core, {usable_cores()} core"
                                  f"{'s' if usable_cores() > 1 else ''} here)")
     return workers
+
+
+def check_threads(threads: int | None, name: str = "threads") -> int | None:
+    """``threads`` (CPU threads a library call may use) when it is None (the default: the usable cores) or an int in
+    ``1…``:func:`max_workers`; else an :class:`InvalidOptionError` naming the parameter ``name``, as the command
+    line's ``--threads`` refuses it (0 is refused, not read as "all cores"; a million would allocate for a million
+    threads)."""
+    if threads is None:
+        return None
+    if isinstance(threads, bool) or not isinstance(threads, int):
+        raise InvalidOptionError(f"{param(name)} must be a whole number of CPU threads (or None: the usable cores), "
+                                 f"got {threads!r}")
+    if threads < 1:
+        raise InvalidOptionError(f"{param(name)} must be ≥ 1 (None: the usable cores), got {threads}")
+    return check_workers(threads, name)
 
 
 def _number(x: float) -> str:
