@@ -181,10 +181,10 @@ def markdown(res: dict[str, Any]) -> str:
             if name == "polygons":
                 lines.append(f"| polygons | {r['frames']} | {model} | — | — | {100 * r['recall']:.1f} (inside) | — |")
                 continue
-            lo, hi = r["intervals"]["f_score"]
-            lines.append(f"| {name} | {r['frames']} | {model} | **{100 * r['f_score']:.1f}** [{100 * lo:.1f}, "
-                         f"{100 * hi:.1f}] | {100 * r['precision']:.1f} | {100 * r['recall']:.1f} | "
-                         f"{100 * r['iou']:.1f} |")
+            ci = r["intervals"] and r["intervals"]["f_score"]  # None below two scored frames: no interval
+            interval = f"[{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]" if ci else "[no interval: 1 frame]"
+            lines.append(f"| {name} | {r['frames']} | {model} | **{100 * r['f_score']:.1f}** {interval} | "
+                         f"{100 * r['precision']:.1f} | {100 * r['recall']:.1f} | {100 * r['iou']:.1f} |")
     return "\n".join(lines)
 
 

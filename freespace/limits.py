@@ -25,10 +25,10 @@ from typing import Callable
 from freespace.errors import InvalidOptionError, param
 
 __all__ = ["Bounded", "bounded_int", "bounded_float", "usable_cores", "max_workers", "check_workers",
-           "WORKERS_PER_CORE", "MAX_WORKERS", "check_threads", "MAX_BATCH_SIZE", "MAX_EPOCHS", "MAX_WEIGHT_DECAY", "MAX_DEVICES",
-           "MAX_NODES", "MAX_DISPARITY_PX", "MAX_CURB_HEIGHT_M", "MAX_BASELINE_M", "MAX_NOISE_PX", "MAX_LIDAR_FILL_PX",
-           "MAX_INLIER_THRESHOLD_PX", "MAX_FRAME_COUNT", "MAX_POSE", "bounded_triple", "MAX_IMAGE_PIXELS",
-           "MAX_IMAGE_FILE_BYTES", "MAX_SCAN_POINTS", "MIN_BASELINE_M", "MAX_FOCAL_PX"]
+           "WORKERS_PER_CORE", "MAX_WORKERS", "check_threads", "MAX_BATCH_SIZE", "MAX_EPOCHS", "MAX_WEIGHT_DECAY",
+           "MAX_DEVICES", "MAX_NODES", "MAX_DISPARITY_PX", "MAX_CURB_HEIGHT_M", "MAX_BASELINE_M", "MAX_NOISE_PX",
+           "MAX_LIDAR_FILL_PX", "MAX_INLIER_THRESHOLD_PX", "MAX_FRAME_COUNT", "MAX_POSE", "bounded_triple",
+           "MAX_IMAGE_PIXELS",           "MAX_IMAGE_FILE_BYTES", "MAX_SCAN_POINTS", "MIN_BASELINE_M", "MAX_FOCAL_PX"]
 
 #: worker processes per CPU core at most (frame processing and data loading are CPU-bound)
 WORKERS_PER_CORE = 4
@@ -104,7 +104,7 @@ def check_workers(workers: int, name: str = "workers") -> int:
 def check_threads(threads: int | None, name: str = "threads") -> int | None:
     """``threads`` (CPU threads a library call may use) when it is None (the default: the usable cores) or an int in
     ``1…``:func:`max_workers`; else an :class:`InvalidOptionError` naming the parameter ``name``, as the command
-    line's ``--threads`` refuses it (0 is refused, not read as "all cores"; a million would allocate for a million
+    line's threads option refuses it (0 is refused, not read as "all cores"; a million would allocate for a million
     threads)."""
     if threads is None:
         return None

@@ -131,7 +131,10 @@ def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) 
     assert (tmp_path / "again.yaml").read_text() == \
         CAMPAIGN_YAML.format(**where).replace("disparity_mode:", "disparity_source:").replace(
             "augment: homography\n", "augment: homography\nflip: false\nphotometric: false\n"
-            "photometric_strength: mild\nzoom: 0.0\n").replace("dataset: synth", "dataset: kitti")
+            "photometric_strength: mild\nzoom: 0.0\n").replace("dataset: synth", "dataset: kitti").replace(
+            "human_share: 0.0\n", "human_share: 0.0\nimages: null\nlabel_format: null\nlabels_like: null\n"
+            "road: null\nignore: null\ntolerance: null\nval_images: null\nval_labels: null\nval_share: 0.2\n"
+            "init: null\nfreeze: auto\n")
     # the options added since; the layout's own name for an alias
 
 
@@ -166,7 +169,9 @@ def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:
     written, before = yaml.safe_load((tmp_path / "new.yaml").read_text()), yaml.safe_load(OLDER_YAML.format(**where))
     assert written == {**{k if k != "disparity_mode" else "disparity_source": v for k, v in before.items()},
                        "virtual_shift": "0.5,0.2,0", "flip": False, "photometric": False,
-                       "photometric_strength": "mild", "zoom": 0.0, "dataset": "kitti"}
+                       "photometric_strength": "mild", "zoom": 0.0, "dataset": "kitti", "images": None,
+                       "label_format": None, "labels_like": None, "road": None, "ignore": None, "tolerance": None,
+                       "val_images": None, "val_labels": None, "val_share": 0.2, "init": None, "freeze": "auto"}
     # one spelling per value (the layout's own name for the alias synth); the options added since, at their defaults
     assert TrainConfig.load(tmp_path / "new.yaml") == old
     assert read_config_yaml(tmp_path / "old.yaml")["augment"] == ("homography", "virtual")
@@ -271,7 +276,8 @@ def test_options_spell_defaults_as_config_yaml_does() -> None:
     found = {k: (getattr(kind, "kind", kind), *rest) for k, (kind, *rest) in found.items()}  # numbers: Bounded
     assert found["image_size"] == (str, None, False) and found["epochs"] == (int, 50, False)
     assert found["lr"] == (float, 0.001, False) and found["tensorboard"] == (bool, False, False)
-    assert found["max_frames"] == (int, None, False) and found["root"] == (str, None, True)
+    assert found["max_frames"] == (int, None, False) and found["out"] == (str, None, True)
+    assert found["root"] == (str, None, False)  # a dataset's, or none: a labelled folder (images) instead
     assert {o.name: o.default for o in options(["augment"], {"augment": ("homography", "virtual")})} == \
         {"augment": "homography,virtual"}
 

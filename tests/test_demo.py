@@ -33,6 +33,7 @@ def test_demo_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["demo", "--out", str(tmp_path), "--num", "24", "--epochs", "2"]) == 0
     out = capsys.readouterr().out
     assert "generated view differs" in out and "| unet | HA-X | test |" in out and "figures:" in out
+    assert "HA-X − X above is one seed" in out and "X-dup" in out  # the gain printed is said to be the steps'
     summary = json.loads((tmp_path / "demo_summary.json").read_text())
     # the DS-Generator part: the exact-disparity fit recovers the rendered roll, the generated view is
     # closer to the left image on the road than the raw right image

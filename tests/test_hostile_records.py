@@ -223,7 +223,7 @@ def test_tables_warn_of_runs_from_other_contents(tiny: Path, tmp_path: Path) -> 
 
 def test_weights_file_hash_and_a_changed_file_refused_for_reproduce_cells(tiny: Path, tmp_path: Path) -> None:
     from freespace.data.label_tree import changed_inputs
-    from freespace.engine.config import content_hashes
+    from freespace.engine.record import content_hashes
     from freespace.experiments.cells import cell_config as _config
     from freespace.experiments.cells import check_inputs as _check_inputs
 

@@ -117,7 +117,7 @@ def test_session_uses_every_allowed_core_and_all_optimisations(files: dict[str, 
     assert options.intra_op_num_threads == machine_threads() == len(os.sched_getaffinity(0))
     assert options.graph_optimization_level == ort.GraphOptimizationLevel.ORT_ENABLE_ALL
     assert session_options(1).intra_op_num_threads == 1
-    with pytest.raises(InvalidOptionError, match="threads must be ≥ 1, got 0"):
+    with pytest.raises(InvalidOptionError, match=r"threads must be ≥ 1 .*got 0"):
         session_options(0)
     # one thread or all: the same probabilities
     one, every = Predictor(onnx=files["onnx"], threads=1), Predictor(onnx=files["onnx"])

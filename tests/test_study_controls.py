@@ -1,5 +1,7 @@
 """Study controls declared by the study (issue 60): a value a built-in variant needs that the paper does not fix
-(X-mix's share of the drives that keep people's labels) comes from the study's protocol file, not the library."""
+(X-mix's share of the drives that keep people's labels) comes from the study's protocol file, not the library.
+The studies' own declarations are tested with the studies (studies/converged/tests/test_converged_controls.py,
+studies/test_study_protocols.py), so that these tests pass in a checkout without ``studies/``."""
 
 from __future__ import annotations
 
@@ -12,8 +14,6 @@ from freespace.experiments import variants
 from freespace.experiments.protocol import Protocol
 from freespace.experiments.variants import CONTROLS, VARIANTS
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 def _load(tmp_path: Path, text: str) -> Protocol:
     path = tmp_path / "protocol.yaml"
@@ -25,15 +25,6 @@ def test_the_library_holds_the_mechanism_and_no_study_value() -> None:
     assert not hasattr(variants, "MIX_HUMAN_SHARE")
     assert VARIANTS["X-mix"].controls == ("mix_human_share",) and CONTROLS["mix_human_share"].field == "human_share"
     assert Protocol().controls == {}  # the method's defaults declare none
-
-
-def test_the_converged_study_declares_its_mix_share() -> None:
-    protocol = Protocol.load(ROOT / "studies" / "converged" / "protocol.yaml")
-    assert protocol.controls == {"mix_human_share": 0.2}
-    assert protocol.control_values("X-mix") == {"human_share": 0.2}
-    assert protocol.control_values("X") == {}
-    for study in ("evidence", "gpu", "virtual-views-unet", "real-roads"):  # they run no X-mix
-        assert Protocol.load(ROOT / "studies" / study / "protocol.yaml").controls == {}
 
 
 def test_x_mix_without_the_control_is_refused_naming_it(tmp_path: Path) -> None:

@@ -138,7 +138,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     Ctrl-C ends a command with "interrupted" and exit code 130, ``SIGTERM`` (SLURM's time limit, ``kill``)
     with "terminated" and 143; both after the command's clean-ups (``finally`` blocks) have run.
     """
-    from freespace.io.files import writing_as
+    from freespace.io.files import shown_path, writing_as
     from freespace.runtime.log import setup_logging
     from freespace.runtime.signals import missing_extra, sigterm_raises
 
@@ -157,7 +157,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return int(args.func(args))
         except FreespaceError as exc:  # one line, even where a file name holds a newline (shown escaped)
             flags = _flags(parser or build_parser({command} if command else ()), argv)
-            text = exc.render(lambda name: flags.get(name, name))
+            text = shown_path(exc.render(lambda name: flags.get(name, name)))  # a name of any bytes: \xNN
             message = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
             print(f"freespace: error: {message}", file=sys.stderr)
             return exc.exit_code

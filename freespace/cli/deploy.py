@@ -43,8 +43,15 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
 def export_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--checkpoint", required=True, help="a training checkpoint (.ckpt) to export")
-    p.add_argument("--format", dest="fmt", choices=("onnx", "torchscript"), required=True,
-                   help="onnx (ONNX Runtime, `predict --onnx`) or torchscript")
+    p.add_argument("--format", dest="fmt", choices=("onnx", "torchscript", "folder"), required=True,
+                   help="onnx (ONNX Runtime, `predict --onnx`), torchscript, or folder: a model folder like the "
+                        "published ones (model.onnx in float16, model.ckpt, a card, metrics.json) for predict, adapt "
+                        "and train --init")
+    p.add_argument("--licence", help="folder: the model's licence, one line (the training data's terms, e.g. "
+                                     "'CC BY-NC-SA 3.0 (KITTI)')")
+    p.add_argument("--measured", action="append", metavar="EVAL_DIR", default=[],
+                   help="folder: an output folder of `freespace evaluate` with this model, whose figures go into the "
+                        "card (repeat for several sets)")
     p.add_argument("--int8", action="store_true", help="onnx: int8 static quantisation (QDQ, per channel), "
                                                        "calibrated on --calibration's frames")
     p.add_argument("--calibration", metavar="DIR", help="with --int8: a folder (or glob, or video) of real frames "
@@ -57,8 +64,26 @@ def export_parser(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    """``freespace export``: ONNX or TorchScript, validated against PyTorch."""
+    """``freespace export``: ONNX or TorchScript, validated against PyTorch; or a whole model folder."""
     from freespace.inference.export import export_model, export_report
+
+    if args.fmt == "folder":
+        from freespace.engine.model_folder import export_model_folder, model_folder_report
+
+        extra = [f for f, v in (("--int8", args.int8), ("--calibration", args.calibration), ("--fp16", args.fp16))
+                 if v]
+        if extra:
+            raise InvalidOptionError(f"{extra[0]} is not for --format folder, whose model.onnx is float16 (as the "
+                                     f"published folders'); leave it out")
+        if args.licence is None:
+            raise InvalidOptionError("--format folder needs --licence: the model's licence, from its training "
+                                     "data's terms (a card names it)")
+        print(model_folder_report(export_model_folder(args.checkpoint, args.out, licence=args.licence,
+                                                      measured=args.measured)))
+        return 0
+    if args.licence is not None or args.measured:
+        raise InvalidOptionError(f"{'--licence' if args.licence is not None else '--measured'} is for --format "
+                                 f"folder (a model folder's card)")
 
     if args.fp16 and args.int8:
         raise InvalidOptionError("--fp16 and --int8 exclude each other: a model is exported in float16 or in int8; "

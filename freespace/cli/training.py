@@ -43,6 +43,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def evaluate_parser(p: argparse.ArgumentParser) -> None:
+    from freespace.evaluation.label_presets import LABEL_PRESETS
     from freespace.evaluation.labelled import LABEL_FORMATS
 
     src = p.add_mutually_exclusive_group(required=True)
@@ -53,17 +54,22 @@ def evaluate_parser(p: argparse.ArgumentParser) -> None:
     d.add_argument("--subset", default="test", help="the subset to score: train, val or test (as the subset lists "
                                                     "say) or all labelled frames of the split (default test)")
     d.add_argument("--splits", dest="splits_dir", metavar="DIR",
-                   help="subset lists train.txt/val.txt/test.txt (default: the checkpoint's run folder's splits/)")
+                   help="subset lists train.txt/val.txt/test.txt (default: RUN/splits/ when the checkpoint is in "
+                        "RUN/checkpoints/ beside RUN/config.yaml, a training run's folder)")
     f = p.add_argument_group("a labelled folder (real sets' label images, paired with the images by name)")
     f.add_argument("--images", metavar="DIR", help="the images")
     f.add_argument("--labels", metavar="DIR", help="the label images (frames without one are not scored)")
     f.add_argument("--label-format", choices=LABEL_FORMATS,
                    help="kitti: KITTI road ground truth (<cat>_road_<id>.png); binary: non-zero = road; class-id: "
                         "class ids (--road IDS); palette: class colours (--road R,G,B)")
-    f.add_argument("--road", metavar="VALUES", help="class-id: the road's ids (CamVid: 3); palette: the road's "
-                                                    "colours R,G,B[;R,G,B] (Cityscapes: 128,64,128)")
+    f.add_argument("--road", metavar="VALUES", help="class-id: the road's ids (CamVid: 3; 16-bit labels: up to "
+                                                    "65535); palette: the road's colours R,G,B[;R,G,B] (Cityscapes: "
+                                                    "128,64,128); each must occur in the labels")
     f.add_argument("--ignore", metavar="VALUES", help="don't-care ids, grey values or colours, as --road "
                                                       "(CamVid: 11)")
+    f.add_argument("--labels-like", metavar="SET", choices=tuple(LABEL_PRESETS),
+                   help=f"instead of --label-format/--road/--ignore: the labels are a public set's "
+                        f"({', '.join(LABEL_PRESETS)}; docs/own-data.md gives each one's source)")
     f.add_argument("--tolerance", type=bounded_int(0, 64), metavar="LEVELS",
                    help="palette: a pixel within LEVELS of a colour on every channel has it (default 8)")
     p.add_argument("--threads", type=WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
@@ -80,7 +86,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     m = evaluate(args.out, checkpoint=args.checkpoint, onnx=args.onnx, dataset=args.dataset, root=args.root,
                  split=args.split, subset=args.subset, splits_dir=args.splits_dir, images=args.images,
                  labels=args.labels, label_format=args.label_format, road=args.road, ignore=args.ignore,
-                 tolerance=args.tolerance, threads=args.threads, overlays=not args.no_overlays,
+                 tolerance=args.tolerance, labels_like=args.labels_like, threads=args.threads,
+                 overlays=not args.no_overlays,
                  progress=not args.no_progress)
     print(evaluate_report(m, args.out))
     return 0
@@ -107,6 +114,7 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
 
 
 def adapt_parser(p: argparse.ArgumentParser) -> None:
+    from freespace.engine import adapt as A
     from freespace.engine.adapt import BOUNDS as B
     from freespace.engine.adapt import AdaptSettings as D
 
@@ -125,12 +133,17 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lr", type=B["lr"], default=D.lr,
                    help=f"AdamW learning rate (default {D.lr:g})")
     p.add_argument("--batch-size", type=B["batch_size"], default=D.batch_size,
-                   help=f"frames per step (default {D.batch_size})")
+                   help=f"frames per step, 2…{A.MAX_ADAPT_BATCH} and at most {A.MAX_STEP_PIXELS} pixels of the "
+                        f"student's views (the model's height × half its width each); with --source a quarter of them "
+                        f"are source frames (default {D.batch_size})")
     p.add_argument("--ema", type=B["ema"], default=D.ema,
                    help=f"the teacher's moving-average decay per step (default {D.ema})")
     p.add_argument("--max-drift", type=B["max_drift"], default=D.max_drift,
-                   help=f"the collapse guard: the most the held-out frames' road share may move (default "
-                        f"{D.max_drift})")
+                   help=f"the collapse guard: the most the held-out frames' road share may move, a fraction of their "
+                        f"pixels (default {D.max_drift}); whatever it is, the run also ends (exit 1, nothing written) "
+                        f"when that share falls below {A.MIN_ROAD_RATIO:g}× or rises above {A.MAX_ROAD_RATIO:g}× the "
+                        f"published model's, or when the loss is not finite or its mean over {A.LOSS_WINDOW} steps "
+                        f"exceeds {A.LOSS_GROWTH:g}× its first step's (and ln 2)")
     p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=WORKERS, help="CPU threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
@@ -140,14 +153,16 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
 def cmd_adapt(args: argparse.Namespace) -> int:
     """``freespace adapt``: self-train a published model on unlabelled frames; write a new model folder."""
     from freespace.engine.adapt import adapt
+    from freespace.io.files import shown_path
 
     s = adapt(args.model, args.input, args.out, source=args.source, epochs=args.epochs, minutes=args.minutes,
               threshold=args.threshold, lr=args.lr, batch_size=args.batch_size, ema=args.ema,
               max_drift=args.max_drift, seed=args.seed, progress=not args.no_progress, threads=args.threads)
     b, a = s["before"], s["after"]
-    print(f"adapted {s['model']} on {s['frames']} frames ({s['skipped']} unreadable skipped) in {s['seconds'] / 60:.1f}"
-          f" min, {s['rounds']} rounds; held-out road share {100 * b['road_share']:.1f} % → {100 * a['road_share']:.1f}"
-          f" %, mean confidence {100 * b['confidence']:.1f} % → {100 * a['confidence']:.1f} % → {args.out}")
+    print(f"adapted {shown_path(s['model'])} on {s['frames']} frames ({s['skipped']} unreadable skipped) in "
+          f"{s['seconds'] / 60:.1f} min, {s['rounds']} rounds; held-out road share {100 * b['road_share']:.1f} % → "
+          f"{100 * a['road_share']:.1f} %, mean confidence {100 * b['confidence']:.1f} % → "
+          f"{100 * a['confidence']:.1f} % → {shown_path(args.out)}")
     return 0
 
 

@@ -25,7 +25,6 @@ in :meth:`freespace.geometry.RoadPlane.from_camera`. With ``height`` the ``basel
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -37,9 +36,10 @@ from freespace.data.registry import register_dataset
 from freespace.errors import CorruptFileError, DatasetError, InputFileError, InvalidOptionError
 from freespace.geometry import RoadPlane, StereoCalibration
 from freespace.io.codecs import DISPARITY_SUFFIXES, IMAGE_SUFFIXES, read_disparity, read_raw, read_road_label
-from freespace.io.files import PathLike
+from freespace.io.files import PathLike, missing_input
 from freespace.labels import RoadLabel
 from freespace.limits import MAX_BASELINE_M, MAX_FOCAL_PX, MIN_BASELINE_M
+from freespace.runtime.patterns import check_pattern, search_names
 
 __all__ = ["FolderSpec", "GenericStereo", "SynthiaStereo", "CarlaStereo", "CONFIG_NAME"]
 
@@ -113,10 +113,7 @@ class FolderSpec:
         if self.depth_encoding not in DEPTH_ENCODINGS:
             raise InvalidOptionError(f"{where}: depth_encoding must be one of {DEPTH_ENCODINGS}")
         if self.scenario_pattern is not None:
-            try:
-                re.compile(self.scenario_pattern)
-            except re.error as exc:
-                raise InvalidOptionError(f"{where}: scenario_pattern is not a regular expression ({exc})") from None
+            check_pattern(self.scenario_pattern, f"{where}: scenario_pattern")  # bounded: no nested quantifiers
         if self.camera is not None:
             if not isinstance(self.camera, dict):
                 raise InvalidOptionError(f"{where}: camera must be a mapping (fx, fy, cx, cy, baseline, height, "
@@ -266,6 +263,8 @@ class GenericStereo(FolderDataset):
     def __init__(self, root: PathLike, split: str | None = None, **options) -> None:
         config = Path(root) / CONFIG_NAME
         if Path(root).is_dir() and not config.is_file():
+            if config.exists():
+                raise missing_input(config, "the generic layout's description", "file")
             raise InputFileError(f"{config} not found; the generic layout is described by a YAML file there naming "
                                  f"its folders, at least `left: <folder of left images>` (every key: docs/datasets.md)")
         super().__init__(root, split, **options)
@@ -274,6 +273,8 @@ class GenericStereo(FolderDataset):
         folders: dict[str, Path | None] = {k: None for k in ("left", "right", "label", "disparity", "depth")}
         for kind, name in self.spec.folders.items():
             folders[kind] = self.root / name
+        if folders["left"] is not None and folders["left"].exists() and not folders["left"].is_dir():
+            raise missing_input(folders["left"], "left image folder", "folder")
         if folders["left"] is None or not folders["left"].is_dir():  # type: ignore[union-attr]
             raise InputFileError(f"left image folder {folders['left']} not found; "
                                  f"set `left:` in {self.root / CONFIG_NAME}")
@@ -281,18 +282,21 @@ class GenericStereo(FolderDataset):
 
     def _list(self) -> list[FrameRef]:
         folders = self._folders()
-        pattern = re.compile(self.spec.scenario_pattern) if self.spec.scenario_pattern else None
-        frames = []
-        for left in _left_files(folders["left"]):  # type: ignore[arg-type]
-            scenario = left.stem
-            if pattern is not None:
-                m = pattern.search(left.stem)
-                if m is None or "scenario" not in m.groupdict():
-                    raise DatasetError(f"scenario_pattern does not match frame {left.stem!r} (it needs a "
-                                       f"(?P<scenario>...) group)")
-                scenario = m.group("scenario")
-            frames.append(self._pair(left.stem, "all", scenario, left, folders, left.stem))
-        return frames
+        lefts = _left_files(folders["left"])  # type: ignore[arg-type]
+        scenarios: list[str | None] = [left.stem for left in lefts]
+        pattern = self.spec.scenario_pattern
+        if pattern:
+            where = f"{self.root / CONFIG_NAME}: scenario_pattern"
+            if "scenario" not in check_pattern(pattern, where).groupindex:
+                raise DatasetError(f"{where} has no (?P<scenario>...) group, which names a frame's scenario; add one")
+            found = search_names(pattern, [left.stem for left in lefts], where, "scenario")  # in bounded time
+            miss = next((left.stem for left, (_, group) in zip(lefts, found) if group is None), None)
+            if miss is not None:
+                raise DatasetError(f"{where} does not match frame {miss!r} (or its scenario group matches nothing "
+                                   f"there); write one that matches every frame name")
+            scenarios = [scenario for _, scenario in found]
+        return [self._pair(left.stem, "all", scenario, left, folders, left.stem)
+                for left, scenario in zip(lefts, scenarios)]
 
     def orphans(self) -> list[Problem]:
         return self._orphans_in(self._folders(), {f.name for f in self.frames}, "")

@@ -40,8 +40,8 @@ from freespace.labels import RoadLabel
 log = logging.getLogger(__name__)
 
 __all__ = ["resolved_path", "file_signature", "file_sha256", "CONFIDENCE", "LABELS_RECORD", "confidence_path",
-           "write_label_files", "label_files", "label_tree_sha256", "tree_record", "file_record", "changed_inputs",
-           "tree_text", "label_tree_pixels", "check_label_tree", "tree_labels", "apply_label_tree",
+           "write_label_files", "label_files", "label_tree_sha256", "tree_record", "files_record", "file_record",
+           "changed_inputs", "tree_text", "label_tree_pixels", "check_label_tree", "tree_labels", "apply_label_tree",
            "labelled_from_tree", "hold_labels_record"]
 
 #: the folder of a label tree that holds each label's confidence (``confidence/<frame>.png``)
@@ -153,6 +153,13 @@ def tree_record(folder: PathLike) -> dict[str, Any]:
     return {"path": resolved_path(os.fspath(folder)), "sha256": digest, "files": count}
 
 
+def files_record(folder: PathLike, paths: list[Path]) -> dict[str, Any]:
+    """What a run records of the files ``paths`` it read from ``folder`` (a labelled folder's images or labels):
+    ``{"path": resolved folder, "sha256": content hash over the files' names and bytes, "files": count}``."""
+    files = tuple((p.name, Path(resolved_path(os.fspath(p))), file_signature(p)) for p in sorted(paths))
+    return {"path": resolved_path(os.fspath(folder)), "sha256": _tree_sha256(files), "files": len(files)}
+
+
 def file_record(path: PathLike) -> dict[str, Any]:
     """What a run records of an input file ``path`` (e.g. encoder weights): ``{"path": resolved, "sha256"}``."""
     return {"path": resolved_path(os.fspath(path)), "sha256": file_sha256(path)}
@@ -220,7 +227,8 @@ def check_label_tree(folder: PathLike, dataset: str, root: PathLike, split: str 
 
     folder = Path(folder)
     if not folder.is_dir():
-        raise InputFileError(f"{param(option)} {folder} not found; give the folder that `freespace autolabel` wrote "
+        what = "is a file" if folder.exists() else "not found"  # a file where a folder is wanted: said so
+        raise InputFileError(f"{param(option)} {folder} {what}; give the folder that `freespace autolabel` wrote "
                              f"for the dataset")
     settings_path = folder / "settings.json"
     if settings_path.is_file():

@@ -33,7 +33,7 @@ from freespace.geometry import (
     generate_view,
 )
 from freespace.io.codecs import (
-    IMAGE_SUFFIXES,
+    OUTPUT_IMAGE_SUFFIXES,
     describe_image,
     encode_image,
     read_disparity,
@@ -93,8 +93,8 @@ def check_output_image_path(path: PathLike, name: str = "out") -> Path:
     """Reject output names whose suffix is not an image format, before any work is done (``name``: the
     parameter that gave it, for the message)."""
     path = Path(path)
-    if path.suffix.lower() not in IMAGE_SUFFIXES:
-        raise InvalidOptionError(f"{param(name)} {path} must end in one of {', '.join(IMAGE_SUFFIXES)} (PNG is "
+    if path.suffix.lower() not in OUTPUT_IMAGE_SUFFIXES:
+        raise InvalidOptionError(f"{param(name)} {path} must end in one of {', '.join(OUTPUT_IMAGE_SUFFIXES)} (PNG is "
                                  f"lossless)")
     if path.is_dir():
         raise InvalidOptionError(f"{param(name)} {path} is a folder; give an image file name")

@@ -27,7 +27,7 @@ from freespace.geometry import (
     virtual_view,
 )
 from freespace.io.codecs import (
-    IMAGE_SUFFIXES,
+    OUTPUT_IMAGE_SUFFIXES,
     encode_image,
     read_disparity,
     read_image,
@@ -99,7 +99,7 @@ def generate_virtual_pair(reference: PathLike, road_mask: PathLike, calib: PathL
     """
     options.check()
     pose = VirtualPose.parse(shift, rotate)
-    lossless = tuple(x for x in IMAGE_SUFFIXES if x not in (".jpg", ".jpeg"))
+    lossless = tuple(x for x in OUTPUT_IMAGE_SUFFIXES if x not in (".jpg", ".jpeg"))
     if Path(label_out).suffix.lower() not in lossless or Path(label_out).is_dir():
         raise InvalidOptionError(f"{param('label_out')} {label_out} must be a lossless image file name ending in "
                                  f"one of "

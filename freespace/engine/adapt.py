@@ -20,12 +20,22 @@ label, by **mean-teacher self-training in rounds**:
   comes from those frames, labelled once by the published model: what the model knew is rehearsed, not
   forgotten.
 
-**Collapse guard.** Without a label a self-trained model can drift to all road or no road. A few of the user's
-frames are held out of training; after every round, and before anything is written, the teacher's road share
-on them is compared with the published model's: below :data:`MIN_ROAD_SHARE`, above :data:`MAX_ROAD_SHARE`,
-or more than ``max_drift`` from the start, and (with ``source``) a mask agreement with the published model
-on the source frames below :data:`MIN_SOURCE_AGREEMENT`, end the run with one line (:class:`CollapseError`)
-and nothing written.
+**Before training** the published model labels the frames: outputs that are not finite (a damaged checkpoint),
+a confident pixel on less than :data:`MIN_CONFIDENT_SHARE` of them (nothing to learn from), no road or nothing
+but road (a road share of the held-out frames outside :data:`MIN_ROAD_SHARE`…:data:`MAX_ROAD_SHARE`, or no
+confident road or non-road pixel) are refused in one line, naming what is wrong with the frames or the checkpoint.
+
+**Collapse guard.** Without a label a self-trained model can drift to all road or no road, or diverge. A few of
+the user's frames are held out of training; after every round, and before anything is written, the teacher's
+road share on them is compared with the published model's: below :data:`MIN_ROAD_SHARE`, above
+:data:`MAX_ROAD_SHARE`, more than ``max_drift`` from the start, below :data:`MIN_ROAD_RATIO` (half) or above
+:data:`MAX_ROAD_RATIO` (twice) the start (or the published model's share in the teacher's view, when larger)
+— a relative bound, which acts on frames with little road, where an absolute drift cannot —, and (with
+``source``) a mask agreement with the published model on the source frames below :data:`MIN_SOURCE_AGREEMENT`,
+end the run; so do a loss that is not finite, a loss that diverges (the mean of
+its last :data:`LOSS_WINDOW` steps above :data:`LOSS_GROWTH` times its first step's, and above
+:data:`LOSS_FLOOR`), and a round in which the teacher is sure of no pixel. Each ends the run with one line
+(:class:`CollapseError`, a :class:`~freespace.errors.TrainingError`: exit code 1) and nothing written.
 
 The written folder is a model folder like the published ones (:func:`freespace.engine.adapt_io.write_model_folder`):
 the float16 ``model.onnx`` (exported as ``freespace export`` does in float16: the same input size and speed),
@@ -39,9 +49,11 @@ import copy
 import io as _io
 import logging
 import math
+import os
+import reprlib
 import time
 import warnings
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -49,15 +61,26 @@ import cv2
 import numpy as np
 
 from freespace.data.photometry import strong_photometry
-from freespace.engine.adapt_io import CHECKPOINT, Frames, frame_paths, read_frames, write_model_folder
-from freespace.errors import FreespaceError, InputFileError, InvalidOptionError, check_seed, param
+from freespace.engine.adapt_io import (
+    CHECKPOINT,
+    MAX_FRAMES,
+    MIN_FRAME_SIDE,
+    Frames,
+    frame_paths,
+    read_frames,
+    write_model_folder,
+)
+from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, TrainingError, check_seed, param
+from freespace.io.codecs import MAX_IMAGE_SIDE
 from freespace.io.files import PathLike, check_outputs, check_writable, missing_input
-from freespace.limits import MAX_BATCH_SIZE, MAX_EPOCHS, bounded_float, bounded_int
+from freespace.limits import MAX_EPOCHS, bounded_float, bounded_int, check_threads
 
 log = logging.getLogger(__name__)
 
 __all__ = ["adapt", "AdaptSettings", "BOUNDS", "CollapseError", "strong_views", "road_probabilities", "pseudo_labels",
-           "normalise_light", "MIN_FRAMES", "MIN_ROAD_SHARE", "MAX_ROAD_SHARE", "MIN_SOURCE_AGREEMENT"]
+           "normalise_light", "MIN_FRAMES", "MIN_ROAD_SHARE", "MAX_ROAD_SHARE", "MIN_SOURCE_AGREEMENT",
+           "MIN_ROAD_RATIO", "MAX_ROAD_RATIO", "LOSS_GROWTH", "LOSS_WINDOW", "LOSS_FLOOR", "MIN_CONFIDENT_SHARE",
+           "MAX_ADAPT_BATCH", "MAX_STEP_PIXELS", "MAX_FRAME_BYTES"]
 
 #: frames adapt needs at least (after unreadable ones are skipped): fewer teach a camera nothing
 MIN_FRAMES = 20
@@ -65,6 +88,24 @@ MIN_FRAMES = 20
 MIN_ROAD_SHARE, MAX_ROAD_SHARE = 0.01, 0.95
 #: the collapse guard's least share of source pixels whose mask still agrees with the published model's
 MIN_SOURCE_AGREEMENT = 0.9
+#: the collapse guard's bounds on the held-out road share relative to the published model's: below half or above
+#: twice it ends the run whatever ``max_drift`` (an absolute drift of 0.3 never acts on frames with less road)
+MIN_ROAD_RATIO, MAX_ROAD_RATIO = 0.5, 2.0
+#: the loss diverged when the mean of its last LOSS_WINDOW steps is more than LOSS_GROWTH times its first step's
+#: (an order of magnitude) and above LOSS_FLOOR (ln 2: the loss of a student that says 50 % everywhere)
+LOSS_GROWTH, LOSS_WINDOW, LOSS_FLOOR = 10.0, 8, math.log(2)
+#: the share of the frames' pixels the published model must be sure of at least (the labels): less leaves nothing
+#: to learn from
+MIN_CONFIDENT_SHARE = 0.001
+#: frames per step at most (the user's and the source's together: a quarter of them source frames)
+MAX_ADAPT_BATCH = 64
+#: pixels of the student's views per step at most (the batch times the model's height times half its width): 2²²,
+#: 64 views of a 192×640 model's (models/real-road-fast), 17 of a 384×1248 one's; a model of more pixels than
+#: this is refused (two views of it would be more)
+MAX_STEP_PIXELS = 2**22
+#: the bytes the frames of one set (input, source) may hold at most, as adapt keeps them (RGB and a float16 road
+#: probability, 5 bytes a pixel at the model's size): fewer than MAX_FRAMES are kept of a model of many pixels
+MAX_FRAME_BYTES = 2 * 2**30
 #: ignored pixels of a pseudo-label
 IGNORE = 255
 #: the student's views are crops of this share of the frame's width, at the frame's scale: half the cost of a
@@ -78,15 +119,16 @@ CROP_WIDTH = 0.5
 LABEL_BRIGHTNESS = 0.40
 
 
-#: the bounds of adapt's numeric options (the command line's types too)
+#: the bounds of adapt's numeric options (the command line's types too); of them only ``minutes`` may be None
 BOUNDS = {"epochs": bounded_int(1, MAX_EPOCHS), "minutes": bounded_float(0, 10_000, low_open=True),
           "threshold": bounded_float(0.5, 0.999), "lr": bounded_float(0, 1, low_open=True),
-          "batch_size": bounded_int(2, MAX_BATCH_SIZE), "ema": bounded_float(0, 0.9999),
+          "batch_size": bounded_int(2, MAX_ADAPT_BATCH), "ema": bounded_float(0, 0.9999),
           "max_drift": bounded_float(0, 1, low_open=True)}
 
 
-class CollapseError(FreespaceError):
-    """The student drifted to all road, no road, or far from the published model: nothing was written."""
+class CollapseError(TrainingError):
+    """The student drifted to all road, no road, or far from the published model, or its loss diverged: nothing
+    was written (exit code 1, a run that failed)."""
 
 
 @dataclass(frozen=True)
@@ -106,13 +148,14 @@ class AdaptSettings:
         """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``).
 
         Raises:
-            InvalidOptionError: an option out of bounds (named, with its bounds).
+            InvalidOptionError: an option out of bounds, of another type, or None where a value is needed (named,
+            with its bounds).
         """
         check_seed(self.seed)
         values = {}
         for name, bound in BOUNDS.items():
             value = getattr(self, name)
-            if value is None:
+            if value is None and name == "minutes":  # no time limit
                 continue
             try:
                 values[name] = bound.kind(bound.check(value))
@@ -175,7 +218,8 @@ def road_probabilities(session: Any, images: np.ndarray, batch: int = 8, normali
         x = chunk.transpose(0, 3, 1, 2).astype(np.float32) / 255.0
         n = len(x)
         logits = session.run(None, {"image": np.ascontiguousarray(np.concatenate([x, x[..., ::-1]]))})[0]
-        prob = 1.0 / (1.0 + np.exp(np.clip(logits[:, 0] - logits[:, 1], -60, 60)))  # softmax of two classes
+        with np.errstate(over="ignore", invalid="ignore"):  # a damaged model's inf/NaN: refused by the caller
+            prob = 1.0 / (1.0 + np.exp(np.clip(logits[:, 0] - logits[:, 1], -60, 60)))  # softmax of two classes
         out[i:i + n] = (prob[:n] + prob[n:, :, ::-1]) / 2
     return out
 
@@ -251,21 +295,23 @@ class _Data:
     held: np.ndarray
     source: np.ndarray | None = None
     source_labels: np.ndarray | None = None
+    #: the loss of every step so far, over all rounds (the divergence check's record)
+    losses: list[float] = field(default_factory=list)
 
 
 def _train_round(student: Any, teacher: Any, opt: Any, data: _Data, settings: AdaptSettings,
-                 rng: np.random.Generator, deadline: float, bar: Any) -> dict[str, float]:
+                 rng: np.random.Generator, deadline: float, bar: Any, when: str = "") -> dict[str, float]:
     """One pass of the student over the training frames (the teacher following it); stops early at
     ``deadline`` (``time.monotonic()``). Returns the mean loss, the share of confident pixels, the steps
     and whether the deadline stopped it (1.0) or not (0.0).
 
     Raises:
-        TrainingError: the loss became NaN or infinite.
+        TrainingError: the loss became NaN or infinite. CollapseError: the loss diverged (:func:`_check_loss`), or
+        no view of the round held a confident pixel.
     """
     import torch
     import torch.nn.functional as F
 
-    from freespace.errors import TrainingError
     from freespace.models import main_logits
 
     per_step, n_src = _batch_split(settings.batch_size, data.source is not None)
@@ -284,18 +330,43 @@ def _train_round(student: Any, teacher: Any, opt: Any, data: _Data, settings: Ad
             loss = F.cross_entropy(main_logits(student(torch.from_numpy(x).contiguous(
                 memory_format=torch.channels_last))), torch.from_numpy(y), ignore_index=IGNORE)
             if not torch.isfinite(loss):
-                raise TrainingError(f"the loss became {loss.item()}; lower {param('lr')}")
+                raise TrainingError(f"adapt diverged {when}: the loss became {loss.item()}; nothing was written; "
+                                    f"lower {param('lr')}")
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
             _ema(teacher, student, settings.ema)
             losses.append(float(loss.detach()))
+            data.losses.append(losses[-1])
+            if len(data.losses) > LOSS_WINDOW:
+                _check_loss(data.losses, when)
         bar.update(1)
         if time.monotonic() > deadline:
             stopped = 1.0
             break
-    return {"loss": float(np.mean(losses)) if losses else float("nan"), "confident": float(np.mean(confident)),
+    if not losses:
+        raise CollapseError(f"adapt stopped {when}: the teacher was sure of no pixel of the round's views (its road "
+                            f"probability never above {param('threshold')} {settings.threshold:g} nor below "
+                            f"{1 - settings.threshold:g}): nothing to learn from; nothing was written; lower "
+                            f"{param('threshold')} or give frames more like the model's own")
+    _check_loss(data.losses, when)
+    return {"loss": float(np.mean(losses)), "confident": float(np.mean(confident)),
             "steps": float(len(confident)), "stopped": stopped}
+
+
+def _check_loss(losses: list[float], when: str) -> None:
+    """Refuse a loss that diverged: the mean of its last :data:`LOSS_WINDOW` steps more than :data:`LOSS_GROWTH`
+    times its first step's (``losses[0]``, before any update) and above :data:`LOSS_FLOOR`.
+
+    Raises:
+        CollapseError: one line with both losses.
+    """
+    recent = losses[-LOSS_WINDOW:]
+    mean = float(np.mean(recent))
+    if mean > max(LOSS_GROWTH * losses[0], LOSS_FLOOR):
+        raise CollapseError(f"adapt diverged {when}: the loss rose from {losses[0]:.3g} (its first step) to "
+                            f"{mean:.3g} (the mean of its last {len(recent)} steps), more than {LOSS_GROWTH:g} times "
+                            f"its first value; nothing was written; lower {param('lr')}")
 
 
 def _batch_split(batch_size: int, source: bool) -> tuple[int, int]:
@@ -305,13 +376,19 @@ def _batch_split(batch_size: int, source: bool) -> tuple[int, int]:
     return batch_size - n_src, n_src
 
 
-def _guard(before: dict[str, float], now: dict[str, float], settings: AdaptSettings, when: str) -> None:
+def _guard(before: dict[str, float], now: dict[str, float], settings: AdaptSettings, when: str,
+           view_share: float | None = None) -> None:
     """Refuse a model that drifted to all road, no road or far from the published one (see the module).
+
+    ``view_share``: the published model's road share of the held-out frames in the teacher's view
+    (:func:`normalise_light`), which the student learns: the share may rise to twice the larger of it and the
+    share before (dusk frames, where the light normalisation finds the road the published model misses).
 
     Raises:
         CollapseError: one line that says what drifted, by how much, and what to change.
     """
     share, start = now["road_share"], before["road_share"]
+    top = max(start, view_share or 0.0)
     fix = f"nothing was written; lower {param('lr')} or {param('epochs')}, or raise {param('threshold')}"
     if share < MIN_ROAD_SHARE or share > MAX_ROAD_SHARE:
         raise CollapseError(f"adapt collapsed {when}: the model marks {share:.1%} of the held-out frames as road "
@@ -319,6 +396,11 @@ def _guard(before: dict[str, float], now: dict[str, float], settings: AdaptSetti
     if abs(share - start) > settings.max_drift:
         raise CollapseError(f"adapt drifted {when}: the road share of the held-out frames went from {start:.1%} to "
                             f"{share:.1%}, more than {param('max_drift')} {settings.max_drift:g}; {fix}")
+    if not MIN_ROAD_RATIO * start <= share <= MAX_ROAD_RATIO * top:
+        raise CollapseError(f"adapt drifted {when}: the road share of the held-out frames went from {start:.1%} to "
+                            f"{share:.1%}, {'less than half' if share < start else 'more than twice'} the published "
+                            f"model's{'' if share < start or top == start else f' ({top:.1%} in the teacher view)'}; "
+                            f"{fix}")
     agree = now.get("source_agreement")
     if agree is not None and agree < MIN_SOURCE_AGREEMENT:
         raise CollapseError(f"adapt drifted {when}: on the source frames its masks agree with the published model's "
@@ -338,6 +420,12 @@ def _measure(session: Any, data: _Data, source_masks: np.ndarray | None) -> tupl
     return out, held
 
 
+def _view_share(data: _Data) -> float:
+    """The road share (p ≥ 0.5) of the held-out frames in the teacher's view (``data.probs``, the light
+    normalised)."""
+    return float((data.probs[data.held] >= 0.5).mean())
+
+
 def _held_out(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Indices of the training and held-out frames: 1 in 20 held out (4 to 16), spread over the sequence."""
     k = int(np.clip(n // 20, 4, 16))
@@ -355,22 +443,28 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
     """Adapt the published model in the folder ``model`` to the unlabelled frames ``inputs``; write the
     adapted model folder ``out`` (see the module's docstring for the method and what is written).
 
+    Every argument is checked before any work (type and bounds, :data:`BOUNDS`; None only where it says so).
+
     Args:
         model: a model folder holding :data:`CHECKPOINT` (``models/real-road-fast``).
-        inputs: the user's frames: a folder, a glob or a video (any size: each is resized to the network's,
-            as ``predict`` does). At least :data:`MIN_FRAMES` readable ones; unreadable ones are skipped
-            and counted; more than :data:`~freespace.engine.adapt_io.MAX_FRAMES` are thinned evenly.
-        out: the new model folder (not inside ``model`` nor equal to it), written all or nothing.
+        inputs: the user's frames: a folder, a glob or a video (any size from :data:`MIN_FRAME_SIDE` pixels a side:
+            each is resized to the network's, as ``predict`` does). At least :data:`MIN_FRAMES` readable ones;
+            unreadable ones are skipped and counted; more than :data:`~freespace.engine.adapt_io.MAX_FRAMES` (fewer
+            for a model of many pixels, :data:`MAX_FRAME_BYTES`) are thinned to that many, evenly spread.
+        out: the new model folder (not inside ``model`` nor equal to it, holding no input), written all or nothing.
         source: frames of the model's own training data to rehearse (its card names them), or None.
         epochs: rounds (passes over the frames; the teacher relabels them after each).
         minutes: a time limit for the training (None: none); the round it ends in is the last.
         threshold: a pixel is a label where the teacher's road probability is above it (road) or below
             1 − it (not road); in [0.5, 0.999].
-        lr: the student's AdamW learning rate. batch_size: frames per step (≥ 2).
+        lr: the student's AdamW learning rate. batch_size: frames per step, 2…:data:`MAX_ADAPT_BATCH` and at most
+            :data:`MAX_STEP_PIXELS` pixels of views (a quarter of them source frames with ``source``).
         ema: the teacher's decay per step (0: the teacher is the student). max_drift: the most the held-out
-            frames' road share (a fraction) may move before the collapse guard stops the run.
-        seed: the frame order, hold-out and augmentation draws. threads: CPU threads (None: the cores this
-            process may use). progress: a progress bar on a terminal (one line per round otherwise).
+            frames' road share (a fraction) may move before the collapse guard stops the run; whatever it is, a
+            share below half or above twice the published model's stops it too.
+        seed: the frame order, hold-out and augmentation draws. threads: CPU threads, 1…
+            :func:`~freespace.limits.max_workers` (None: the cores this process may use). progress: a progress bar
+            on a terminal (one line per round otherwise).
 
     Returns:
         The summary written to ``out/summary.json``: frames, settings, seconds, the road share and mean
@@ -378,46 +472,120 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
 
     Raises:
         InputFileError: no model folder or checkpoint; no frames or none readable. InvalidOptionError: an
-        option out of bounds, too few frames, ``out`` inside or equal to ``model`` or among the inputs.
-        CorruptFileError: a damaged checkpoint or video. CollapseError: the collapse guard stopped the run.
+        argument of another type or out of bounds, too few frames, frames too small, frames on which the published
+        model is sure of nothing or finds no road, ``out`` inside or equal to ``model`` or among the inputs.
+        CorruptFileError: a damaged checkpoint (a bad image size, non-finite outputs) or video. CollapseError (a
+        TrainingError, exit code 1): the collapse guard stopped the run; TrainingError: the loss became NaN.
     """
     from freespace.inference.predictor import load_checkpoint
     from freespace.io.outdir import claim_folder
 
+    _check_arguments(model=model, input=inputs, out=out, source=source, progress=progress)
+    threads = check_threads(threads)
     settings = AdaptSettings(epochs, minutes, threshold, lr, batch_size, ema, max_drift, seed).check()
     folder, ckpt = _model_folder(model)
     check_writable(out, folder=True)
-    inputs_of: dict[str, PathLike | None] = {"model": folder}
-    for name, spec in (("input", inputs), ("source", source)):
-        if spec is not None:
-            kind, paths = frame_paths(spec)
-            for i, p in enumerate(sorted({p.parent for p in paths}) if kind == "images" else paths):
-                inputs_of[f"{name}[{i}]" if i else name] = p
-    check_outputs({"out": out}, inputs_of)
+    _check_overlap(folder, inputs, source, out)
     net, hp = load_checkpoint(ckpt)
-    size = tuple(hp.get("image_size") or ())
-    if len(size) != 2:
-        raise InvalidOptionError(f"{ckpt} states no training image size; adapt needs the size the model runs at")
-    frames = read_frames(inputs, size)
+    size = _checkpoint_size(hp, ckpt)
+    most = _check_memory(size, settings, folder)
+    frames = read_frames(inputs, size, "input", most)
     if len(frames.names) < MIN_FRAMES:
         raise InvalidOptionError(f"{param('input')} {inputs}: {len(frames.names)} readable frames ({frames.skipped} "
                                  f"unreadable); adapt needs at least {MIN_FRAMES}: give more frames of the camera")
-    src = read_frames(source, size, "source") if source is not None else None
+    src = read_frames(source, size, "source", most) if source is not None else None
     t0 = time.monotonic()
     with claim_folder(out, "adapt") as owned, owned.staged() as stage:
-        run = _self_train(net, frames, src, settings, progress, threads)
+        run = _self_train(net, frames, src, settings, progress, threads, ckpt)
         return write_model_folder(stage, run, hp, folder, frames, src, asdict(settings), time.monotonic() - t0,
                                   Path(out))
 
 
-def _self_train(net: Any, frames: Frames, src: Frames | None, settings: AdaptSettings, progress: bool,
-                threads: int | None) -> dict[str, Any]:
-    """The self-training loop (module docstring). Returns the adapted network (the teacher), one row per
-    round, the held-out measures before and after, the held-out indices and their road probabilities before
-    and after (``N×h×w float32``, the frames as they are).
+def _check_arguments(**paths: Any) -> None:
+    """Refuse, naming the parameter, a path argument that is no path (None where one is needed, a number, an empty
+    string; ``source`` may be None) and a ``progress`` that is no bool. ``inputs`` is named ``input``, as adapt's
+    other messages name it.
 
     Raises:
-        CollapseError: the guard stopped it. TrainingError: the loss became NaN.
+        InvalidOptionError: one line naming the parameter and what it got.
+    """
+    progress = paths.pop("progress")
+    if not isinstance(progress, bool):
+        raise InvalidOptionError(f"{param('progress')} must be True or False, got {reprlib.repr(progress)}")
+    for name, value in paths.items():
+        if value is None and name == "source":
+            continue
+        path = os.fspath(value) if isinstance(value, (str, os.PathLike)) else None
+        if not isinstance(path, str) or not path:
+            got = "an empty path" if path == "" else reprlib.repr(value)
+            raise InvalidOptionError(f"{param(name)} must be a path (str or pathlib.Path), got {got}")
+
+
+def _check_overlap(folder: Path, inputs: PathLike, source: PathLike | None, out: PathLike) -> None:
+    """Refuse an ``out`` that is, holds or lies inside an input: the model folder, the folders of the frames and
+    each frame file itself (resolved: a frame that is a link into ``out`` is an input inside it), the video.
+
+    Raises:
+        InputFileError: no frames there (named by its parameter). InvalidOptionError: an overlap.
+    """
+    inputs_of: dict[str, PathLike | None] = {"model": folder}
+    for name, spec in (("input", inputs), ("source", source)):
+        if spec is not None:
+            kind, paths = frame_paths(spec, name)
+            places = [*sorted({p.parent for p in paths}), *paths] if kind == "images" else paths
+            for i, p in enumerate(places):
+                inputs_of[f"{name}[{i}]" if i else name] = p
+    check_outputs({"out": out}, inputs_of)
+
+
+def _checkpoint_size(hp: dict[str, Any], ckpt: Path) -> tuple[int, int]:
+    """The image size ``(h, w)`` the checkpoint ``ckpt`` states (its ``hyper_parameters``' ``image_size``),
+    checked: two integers in :data:`~freespace.engine.adapt_io.MIN_FRAME_SIDE`…``MAX_IMAGE_SIDE``.
+
+    Raises:
+        CorruptFileError: none, or not such a pair (one line naming the file).
+    """
+    size = hp.get("image_size")
+    if size is None:
+        raise CorruptFileError(f"{ckpt} states no training image size; adapt needs the size the model runs at")
+    if not (isinstance(size, (list, tuple)) and len(size) == 2
+            and all(isinstance(x, int) and not isinstance(x, bool) and MIN_FRAME_SIDE <= x <= MAX_IMAGE_SIDE
+                    for x in size)):
+        raise CorruptFileError(f"{ckpt} states an image size of {reprlib.repr(size)}; a freespace model's is [H, W] "
+                               f"with {MIN_FRAME_SIDE}…{MAX_IMAGE_SIDE} pixels a side")
+    return int(size[0]), int(size[1])
+
+
+def _check_memory(size: tuple[int, int], settings: AdaptSettings, folder: Path) -> int:
+    """The frames adapt keeps at most of each set for a model of ``size`` (:data:`MAX_FRAMES`, fewer when they
+    would hold more than :data:`MAX_FRAME_BYTES`), after refusing a model or a batch whose views are more than
+    :data:`MAX_STEP_PIXELS` pixels a step.
+
+    Raises:
+        InvalidOptionError: the model's size (naming ``model``) or ``batch_size`` is too large.
+    """
+    h, w = size
+    if h * w > MAX_STEP_PIXELS:
+        raise InvalidOptionError(f"{param('model')} {folder} runs at {h}×{w} pixels, more than adapt trains on a CPU "
+                                 f"(at most {MAX_STEP_PIXELS} pixels: two views of half its width a step)")
+    view = h * int(round(w * CROP_WIDTH))
+    if settings.batch_size * view > MAX_STEP_PIXELS:
+        raise InvalidOptionError(f"{param('batch_size')} {settings.batch_size}: views of {h}×{view // h} pixels are "
+                                 f"at most {MAX_STEP_PIXELS // view} a step for this model (at most {MAX_STEP_PIXELS} "
+                                 f"pixels a step)")
+    return int(min(MAX_FRAMES, MAX_FRAME_BYTES // (5 * h * w)))
+
+
+def _self_train(net: Any, frames: Frames, src: Frames | None, settings: AdaptSettings, progress: bool,
+                threads: int | None, checkpoint: Path) -> dict[str, Any]:
+    """The self-training loop (module docstring). Returns the adapted network (the teacher), one row per
+    round, the held-out measures before and after, the held-out indices and their road probabilities before
+    and after (``N×h×w float32``, the frames as they are). ``checkpoint``: the file ``net`` came from (named when
+    it gives non-finite outputs).
+
+    Raises:
+        InvalidOptionError, CorruptFileError: the frames or the checkpoint are refused before training
+        (:func:`_check_teacher`). CollapseError: the guard stopped it. TrainingError: the loss became NaN.
     """
     import torch
 
@@ -427,13 +595,49 @@ def _self_train(net: Any, frames: Frames, src: Frames | None, settings: AdaptSet
     previous = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
-        return {**_rounds(net, frames, src, settings, progress, threads), "threads": threads}
+        return {**_rounds(net, frames, src, settings, progress, threads, checkpoint), "threads": threads}
     finally:  # the caller's own setting back
         torch.set_num_threads(previous)
 
 
+def _check_teacher(data: _Data, before: dict[str, float], held: np.ndarray, source: np.ndarray | None,
+                   settings: AdaptSettings, checkpoint: Path) -> None:
+    """Refuse, before training, what the published model's first labels say cannot be learnt: outputs that are not
+    finite (the checkpoint), confident pixels on less than :data:`MIN_CONFIDENT_SHARE` of the frames' pixels, no
+    road or nothing but road (the held-out share outside :data:`MIN_ROAD_SHARE`…:data:`MAX_ROAD_SHARE`, or no
+    confident pixel of either class; "no road" in the frames as they are and in the teacher's view). ``held``,
+    ``source``: its probabilities on the held-out and source frames.
+
+    Raises:
+        CorruptFileError: non-finite outputs. InvalidOptionError: what is wrong with the frames (``input``).
+    """
+    probs = data.probs
+    if not (np.isfinite(probs).all() and np.isfinite(held).all()
+            and (source is None or np.isfinite(source).all())):
+        raise CorruptFileError(f"{checkpoint} gives non-finite outputs (NaN or infinity) on the frames: its weights "
+                               f"are damaged or overflow; adapt a model that predicts (check it with freespace "
+                               f"predict)")
+    t = settings.threshold
+    road, other = float((probs > t).mean()), float((probs < 1 - t).mean())
+    raw, view = before["road_share"], _view_share(data)
+    frames = f"the frames of {param('input')}"
+    if road + other < MIN_CONFIDENT_SHARE:
+        raise InvalidOptionError(f"the model is sure of no pixel of {frames} ({road + other:.2%} of them have a road "
+                                 f"probability above {param('threshold')} {t:g} or below {1 - t:g}): nothing to "
+                                 f"learn from; give frames of a road seen from a vehicle, like the model's own, or "
+                                 f"lower {param('threshold')}")
+    if max(raw, view) < MIN_ROAD_SHARE or road == 0:
+        raise InvalidOptionError(f"the model finds no road on {frames} (road share {max(raw, view):.1%} of the "
+                                 f"held-out frames, a confident road label on {road:.2%} of the pixels): adapt needs "
+                                 f"frames in which it finds some road; give frames of a road seen from a vehicle")
+    if raw > MAX_ROAD_SHARE or other == 0:
+        raise InvalidOptionError(f"the model finds road nearly everywhere on {frames} (road share {raw:.1%} of the "
+                                 f"held-out frames, a confident non-road label on {other:.2%} of the pixels): adapt "
+                                 f"needs frames with road and more; give frames of a road seen from a vehicle")
+
+
 def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSettings, progress: bool,
-            threads: int) -> dict[str, Any]:
+            threads: int, checkpoint: Path) -> dict[str, Any]:
     """:func:`_self_train`'s loop, on ``threads`` torch and ONNX Runtime threads."""
     import torch
 
@@ -446,11 +650,13 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     data = _Data(frames.images, np.empty(0, np.float16), train, held, src.images if src is not None else None)
     teacher = net.eval()
     session = _teacher_session(teacher, size, threads)
-    source_masks = None
+    source_masks, p = None, None
     if data.source is not None:
         p = road_probabilities(session, data.source).astype(np.float32)
         data.source_labels, source_masks = pseudo_labels(p, settings.threshold), p >= 0.5
     before, held_before = _measure(session, data, source_masks)
+    _check_teacher(data, before, held_before, p, settings, checkpoint)
+    view_share = _view_share(data)
     student = _student(teacher)
     opt = torch.optim.AdamW(student.parameters(), lr=settings.lr, weight_decay=0.0)
     per_step = _batch_split(settings.batch_size, src is not None)[0]
@@ -460,13 +666,16 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     deadline = start + settings.minutes * 60 if settings.minutes else math.inf
     rows, now, held_now = [], before, held_before
     for r in range(1, settings.epochs + 1):
-        stats = _train_round(student, teacher, opt, data, settings, rng, deadline, bar)
+        stats = _train_round(student, teacher, opt, data, settings, rng, deadline, bar, f"in round {r}")
         now, held_now = _measure(_teacher_session(teacher, size, threads), data, source_masks)
         rows.append({"round": r, **stats, **now, "seconds": round(time.monotonic() - start, 1)})
         log.info("adapt round %d/%d: loss %.4f, confident pixels %.1f%%, held-out road share %.1f%% (%.1f%% before)%s",
                  r, settings.epochs, stats["loss"], 100 * stats["confident"], 100 * now["road_share"],
                  100 * before["road_share"], ", time limit reached" if stats["stopped"] else "")
-        _guard(before, now, settings, f"in round {r}")
+        if not (np.isfinite(held_now).all() and np.isfinite(data.probs).all()):
+            raise CollapseError(f"adapt diverged in round {r}: the adapted model gives non-finite outputs (NaN or "
+                                f"infinity); nothing was written; lower {param('lr')}")
+        _guard(before, now, settings, f"in round {r}", view_share)
         if stats["stopped"]:
             break
     bar.close()

@@ -13,8 +13,12 @@ the road before and after, side by side), and the run's record: ``config.json`` 
 from __future__ import annotations
 
 import hashlib
+import html
 import io as _io
 import math
+import os
+import re
+import stat
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,16 +27,20 @@ from typing import Any
 import cv2
 import numpy as np
 
-from freespace.errors import FreespaceError, InputFileError, param
+from freespace.errors import FreespaceError, InputFileError, InvalidOptionError, param
 from freespace.io.files import PathLike, atomic_write_bytes
 
 __all__ = ["Frames", "read_frames", "frame_paths", "save_checkpoint", "checkpoint_from_onnx", "write_model_folder",
-           "before_after", "CHECKPOINT", "MAX_FRAMES"]
+           "before_after", "thin", "CHECKPOINT", "MAX_FRAMES", "MIN_FRAME_SIDE", "MAX_CARD_BYTES", "MAX_TITLE_CHARS"]
 
 #: the checkpoint a model folder carries for adapt (weights only: ``torch.load(weights_only=True)``)
 CHECKPOINT = "model.ckpt"
 #: frames adapt uses at most (evenly spaced among more): 1000 frames at 192×640 hold 370 MB in memory
 MAX_FRAMES = 1000
+#: a frame's side at least (pixels): the smallest size a network trains at; a smaller image (a 1×1 icon) shows no road
+MIN_FRAME_SIDE = 32
+#: the bytes of the published model's card read at most for its title, and the title's characters at most
+MAX_CARD_BYTES, MAX_TITLE_CHARS = 64 * 1024, 200
 
 #: the width (pixels) of each panel of ``before_after.jpg``, and how many held-out frames it shows
 PANEL_WIDTH, PICTURE_FRAMES = 480, 4
@@ -60,9 +68,10 @@ class Frames:
     sha256: str = ""
 
 
-def frame_paths(spec: PathLike) -> tuple[str, list[Path]]:
+def frame_paths(spec: PathLike, what: str = "input") -> tuple[str, list[Path]]:
     """``("images", paths)`` for a folder, a glob or an image (natural order, as ``predict`` reads them), or
-    ``("video", [path])``; the images are not opened here (unreadable ones are skipped later).
+    ``("video", [path])``; the images are not opened here (unreadable ones are skipped later). ``what``: the
+    parameter that named ``spec`` (``"input"``, ``"source"``), which the messages name.
 
     Raises:
         InputFileError: nothing there, or no image in it. CorruptFileError: a file that is no video.
@@ -83,11 +92,19 @@ def frame_paths(spec: PathLike) -> tuple[str, list[Path]]:
         paths = [Path(p) for p in glob.glob(str(spec))
                  if Path(p).is_file() and Path(p).suffix.lower() in IMAGE_SUFFIXES]
         if not paths and not any(c in str(spec) for c in "*?["):
-            raise InputFileError(f"input not found: {spec} (name a folder of frames, a glob or a video)")
+            raise InputFileError(f"{param(what)} not found: {spec} (name a folder of frames, a glob or a video)")
     if not paths:
-        raise InputFileError(f"{spec} holds no frames ({', '.join(IMAGE_SUFFIXES)} images, or a video); name a "
-                             f"folder of frames, a glob such as 'frames/*.png' or a video")
+        raise InputFileError(f"{param(what)} {spec} holds no frames ({', '.join(IMAGE_SUFFIXES)} images, or a "
+                             f"video); name a folder of frames, a glob such as 'frames/*.png' or a video")
     return "images", sorted(paths, key=_natural_key)
+
+
+def thin(total: int, most: int) -> np.ndarray:
+    """The indices kept of ``total`` frames when at most ``most`` may be: all of them when they are not more,
+    else exactly ``most``, evenly spread from the first to the last (1050 frames at most 1000: 1000, not 525)."""
+    if total <= most:
+        return np.arange(total)
+    return np.unique(np.linspace(0, total - 1, most).round().astype(int))
 
 
 def read_frames(spec: PathLike, size: tuple[int, int], what: str = "input",
@@ -95,15 +112,16 @@ def read_frames(spec: PathLike, size: tuple[int, int], what: str = "input",
     """The frames of a folder, glob, image or video (what ``predict`` reads), resized to ``size`` = (h, w).
 
     Unreadable images among readable ones are skipped and counted; more than ``max_frames`` frames are
-    thinned to ``max_frames`` evenly spaced ones.
+    thinned to ``max_frames`` evenly spaced ones (:func:`thin`). ``what``: the parameter that named ``spec``.
 
     Raises:
         InputFileError: nothing found, or no readable frame. CorruptFileError: an undecodable video.
+        InvalidOptionError: a frame smaller than :data:`MIN_FRAME_SIDE` pixels a side (no camera frame).
     """
-    from freespace.io.codecs import read_image
+    from freespace.io.codecs import MultiFrameImageError, read_image
     from freespace.io.video import open_frames
 
-    kind, paths = frame_paths(spec)
+    kind, paths = frame_paths(spec, what)
     digest = hashlib.sha256()
     images: list[np.ndarray] = []
     names: list[str] = []
@@ -113,6 +131,11 @@ def read_frames(spec: PathLike, size: tuple[int, int], what: str = "input",
     def keep(name: str, image: np.ndarray) -> None:
         if image.ndim == 2:
             image = np.repeat(image[:, :, None], 3, axis=2)
+        if min(image.shape[:2]) < MIN_FRAME_SIDE:
+            raise InvalidOptionError(
+                f"{param(what)} {spec}: frame {name} is {image.shape[1]}×{image.shape[0]} pixels, too small to show a "
+                f"road (adapt needs camera frames of at least {MIN_FRAME_SIDE}×{MIN_FRAME_SIDE}; the model runs at "
+                f"{size[1]}×{size[0]}): remove it or give the camera's frames")
         sizes.add(image.shape[:2])
         names.append(name)
         images.append(cv2.resize(image, (size[1], size[0]), interpolation=cv2.INTER_AREA))
@@ -122,22 +145,29 @@ def read_frames(spec: PathLike, size: tuple[int, int], what: str = "input",
             for chunk in iter(lambda: f.read(1 << 20), b""):
                 digest.update(chunk)
         source = open_frames(paths[0])
-        step = max(1, math.ceil(len(source) / max_frames))
+        chosen = set(thin(len(source), max_frames).tolist())
+        stride = max(1, len(source) // max_frames)  # past the container's count, which may be an estimate
         total = 0
         for frame in source:
             total += 1
-            if frame.index % step == 0:
+            if frame.index in chosen or (frame.index >= len(source) and frame.index % stride == 0):
                 keep(frame.name, frame.image)
+            if len(images) > max_frames:  # more frames than the count said: evenly thinned again, bounded
+                kept = thin(len(images), max_frames)
+                images[:], names[:] = [images[i] for i in kept], [names[i] for i in kept]
+                stride *= 2
     else:
-        step = max(1, math.ceil(len(paths) / max_frames))
         total = len(paths)
-        for path in paths[::step]:
+        for i in thin(total, max_frames):
+            path = paths[i]
             try:
                 image = read_image(path, what="frame")
+            except MultiFrameImageError:  # no damaged frame to skip: a sequence to split (as predict says)
+                raise
             except FreespaceError:
                 skipped += 1
                 continue
-            digest.update(path.name.encode() + b"\0" + path.read_bytes())
+            digest.update(os.fsencode(path.name) + b"\0" + path.read_bytes())  # a name of any bytes
             keep(path.stem, image)
     if not images:
         raise InputFileError(f"{param(what)} {spec}: none of its {total} frames could be read ({skipped} unreadable); "
@@ -246,14 +276,51 @@ def _picture(stage: Path, run: dict[str, Any], frames: Frames) -> None:
     atomic_write_bytes(stage / "before_after.jpg", data.tobytes())
 
 
-def _title(folder: Path) -> str:
-    """The published model's name and the first line of its card, when it has one."""
-    card = folder / "README.md"
+def _card_line(folder: Path) -> str:
+    """The first line of the model folder's ``README.md``, read only when it is a regular file of the folder itself
+    (no symbolic link, which could lead anywhere; no pipe, which would block) and only its first
+    :data:`MAX_CARD_BYTES` bytes (bytes that are no UTF-8 shown as U+FFFD); "" when there is none."""
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
     try:
-        first = card.read_text(encoding="utf-8").splitlines()[0].lstrip("# ").strip() if card.is_file() else ""
-    except (OSError, UnicodeDecodeError, IndexError):
-        first = ""
-    return first or folder.name
+        fd = os.open(folder / "README.md", flags)
+    except OSError:  # none, a link (O_NOFOLLOW), unreadable
+        return ""
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return ""
+        head = os.read(fd, MAX_CARD_BYTES)
+    except OSError:
+        return ""
+    finally:
+        os.close(fd)
+    return head.split(b"\n", 1)[0].decode("utf-8", errors="replace")
+
+
+def _markdown_text(text: str) -> str:
+    """``text`` as literal Markdown inside a line: one line (control characters as spaces), HTML's ``& < >`` as
+    entities and the marks of emphasis, code, links, strike-through and tables (``\\ ` * _ [ ] ~ |``) escaped,
+    so that it renders as the text it is."""
+    line = "".join(c if c.isprintable() else " " for c in text)
+    return re.sub(r"([\\`*_\[\]~|])", r"\\\1", html.escape(line, quote=False))
+
+
+def _code_span(text: str) -> str:
+    """``text`` as an inline Markdown code span (a path, a folder name): control characters shown escaped,
+    fenced by more backticks than it holds in a row."""
+    line = "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
+    fence = "`" * (max((len(run) for run in re.findall("`+", line)), default=0) + 1)
+    pad = " " if line.startswith("`") or line.endswith("`") else ""
+    return f"{fence}{pad}{line}{pad}{fence}"
+
+
+def _title(folder: Path) -> str:
+    """The published model's title for the new card, as Markdown: the first line of its card (the regular file
+    ``README.md`` of the folder, :func:`_card_line`) without its heading marks, at most :data:`MAX_TITLE_CHARS`
+    characters, escaped (:func:`_markdown_text`); else the folder's name."""
+    first = _card_line(folder).lstrip("# ").strip()
+    if len(first) > MAX_TITLE_CHARS:
+        first = first[:MAX_TITLE_CHARS - 1].rstrip() + "…"
+    return _markdown_text(first or folder.name)
 
 
 def _frames_line(frames: Frames, what: str) -> str:
@@ -285,10 +352,10 @@ def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | N
                      f"batch {s['batch_size']}, teacher EMA {s['ema']:g}, max drift {s['max_drift']:g}, "
                      f"seed {s['seed']}"),
         ("took", f"{summary['seconds'] / 60:.1f} min, {summary['rounds']} rounds, {summary['threads']} CPU threads"),
-        ("licence", f"derived from `{folder.name}`: its card's licence applies, and that of the frames")))
-    return f"""# {summary['name']} — `{folder.name}` adapted to new frames without a label
+        ("licence", f"derived from {_code_span(folder.name)}: its card's licence applies, and that of the frames")))
+    return f"""# {_markdown_text(summary['name'])} — {_code_span(folder.name)} adapted to new frames without a label
 
-Made by `freespace adapt` from **{_title(folder)}** (`{folder}`): self-training on the user's unlabelled
+Made by `freespace adapt` from **{_title(folder)}** ({_code_span(str(folder))}): self-training on the user's unlabelled
 frames, a mean teacher relabelling them every round (module `freespace.engine.adapt`). No frame here was
 labelled by a person; nothing was measured against a label.
 

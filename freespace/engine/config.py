@@ -18,7 +18,6 @@ interface offers them (:mod:`freespace.engine.options`), and the label tree and 
 
 from __future__ import annotations
 
-import functools
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import MISSING, InitVar, dataclass, fields, replace
@@ -27,9 +26,11 @@ from typing import Annotated, Any
 
 from pydantic import BeforeValidator, Field
 
-from freespace.data.label_tree import check_label_tree, file_record, resolved_path, tree_record
+from freespace.data.label_tree import check_label_tree, resolved_path
 from freespace.engine import config_yaml
 from freespace.engine.config_yaml import option
+from freespace.engine.init import check_encoder
+from freespace.engine.labelled import check_source
 from freespace.engine.option_values import (
     AUGMENTS,
     FIRST_FRAME_SIZE,
@@ -52,14 +53,17 @@ from freespace.limits import (
     check_workers,
 )
 
-__all__ = ["TrainConfig", "read_config_yaml", "content_hashes", "PRESETS", "STRATEGIES", "PATH_OPTIONS"]
+__all__ = ["TrainConfig", "read_config_yaml", "PRESETS", "STRATEGIES", "PATH_OPTIONS", "FREEZE"]
 
 PRESETS = ("light", "paper")
+#: what ``freeze`` may keep at its starting values
+FREEZE = ("auto", "none", "norm", "encoder")
 STRATEGIES = ("auto", "ddp")
 
 #: the options that name files or folders (config.yaml keeps them resolved); ``encoder_weights`` is one when it
 #: is a path, not a name of weights (:func:`~freespace.engine.option_values.weights_path`)
-PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir", "labels", "encoder_weights")
+PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir", "labels", "encoder_weights", "images", "val_images",
+                "val_labels", "init")
 
 # config.yaml keys of runs made before the names said which split and which disparity source they mean
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_source", "disparity_mode": "disparity_source"}
@@ -85,6 +89,18 @@ def _models() -> tuple[str, ...]:
     return tuple(list_models())
 
 
+def _label_formats() -> tuple[str, ...]:
+    from freespace.evaluation.labelled import LABEL_FORMATS
+
+    return LABEL_FORMATS
+
+
+def _label_presets() -> tuple[str, ...]:
+    from freespace.evaluation.label_presets import LABEL_PRESETS
+
+    return tuple(LABEL_PRESETS)
+
+
 def _disparity_sources() -> tuple[str, ...]:
     from freespace.data.disparity import DISPARITY_SOURCES
 
@@ -94,7 +110,7 @@ def _disparity_sources() -> tuple[str, ...]:
 _VIRTUAL = f"virtual views ({param('augment')} virtual; reproduce's HV-X, HAV-X): "
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrainConfig:
     """Everything a training run depends on (written to ``RUN_DIR/config.yaml``), as typed values: made once,
     checked when made (see the module docstring), never changed (``dataclasses.replace`` makes another).
@@ -110,10 +126,11 @@ class TrainConfig:
             parameter), or ``human_share`` without ``labels``.
     """
 
-    dataset: Annotated[str, BeforeValidator(_layout_name)] = option(
-        "dataset layout (kitti: KITTI road, and the renderer's output, which `freespace synth` writes as a KITTI "
-        "road tree)", choices=_datasets)
-    root: PathText = option("dataset folder", metavar="DIR")
+    dataset: Annotated[str, BeforeValidator(_layout_name)] | None = option(
+        f"dataset layout (kitti: KITTI road, and the renderer's output, which `freespace synth` writes as a KITTI "
+        f"road tree); or train on a labelled folder instead: {param('images')} and {param('labels')}", None,
+        choices=_datasets)
+    root: PathText | None = option("dataset folder", None, metavar="DIR")
     out: PathText = option("run folder", metavar="RUN_DIR")
     model: str = option("network", "unet", choices=_models)
     preset: str = option("network size: light (CPU) or paper", "light", choices=PRESETS)
@@ -173,13 +190,41 @@ class TrainConfig:
                                                                                  "frames (quick runs; train, val and "
                                                                                  "test need one each)", None,
                                                                                  metavar="N")
-    labels: PathText | None = option("road labels of the training frames from this label tree (written by "
-                                      "`freespace autolabel` for the dataset: DIR/<frame>.png, KITTI colours) instead "
-                                      "of the dataset's own; validation and test keep the dataset's labels; training "
-                                      "frames without a label there are left out", None, metavar="DIR")
+    labels: PathText | None = option(f"with {param('dataset')}: road labels of the training frames from this label "
+                                      f"tree (written by `freespace autolabel` for the dataset: DIR/<frame>.png, "
+                                      f"KITTI colours) instead of the dataset's own; validation and test keep the "
+                                      f"dataset's labels; training frames without a label there are left out. With "
+                                      f"{param('images')}: the label images of those images, paired by name, in "
+                                      f"{param('label_format')} or {param('labels_like')}", None, metavar="DIR")
     human_share: Annotated[float, Field(ge=0, le=1)] = option(
         f"with {param('labels')}: the share of the training drives (scenarios, drawn from {param('seed')}) that "
         f"keep the dataset's own labels; the others take the label tree's", 0.0, metavar="P")
+    images: PathText | None = option(f"a labelled folder to train on instead of a dataset: its images, each with "
+                                      f"its label image of the same name in {param('labels')}", None, metavar="DIR")
+    label_format: str | None = option(f"how {param('images')}' labels are written (as evaluate reads them), or "
+                                      f"{param('labels_like')}", None, choices=_label_formats, metavar="NAME")
+    labels_like: str | None = option(f"the labels are a public set's (docs/own-data.md gives each one's source), "
+                                     f"instead of {param('label_format')}/{param('road')}/{param('ignore')}", None,
+                                     choices=_label_presets, metavar="SET")
+    road: str | None = option("class-id: the road's ids (CamVid: 3); palette: its colours R,G,B[;R,G,B]", None,
+                              metavar="VALUES")
+    ignore: str | None = option(f"don't-care ids, grey values or colours, as {param('road')}", None, metavar="VALUES")
+    tolerance: Annotated[int, Field(ge=0, le=64)] | None = option("palette: a pixel within this many levels of a "
+                                                                  "colour has it (default 8)", None, metavar="LEVELS")
+    val_images: PathText | None = option(f"a labelled folder's validation images, labelled in {param('val_labels')} "
+                                         f"(default: the last {param('val_share')} of {param('images')} by name)",
+                                         None, metavar="DIR")
+    val_labels: PathText | None = option(f"the label images of {param('val_images')}", None, metavar="DIR")
+    val_share: Annotated[float, Field(ge=0, le=0.5)] = option(
+        f"without {param('val_images')}: the share of {param('images')} held out to validate on, the last by name; "
+        f"0: none, the training frames validate and choose the checkpoint", 0.2, metavar="P")
+    init: PathText | None = option("start from a model folder's weights (models/real-road-fast) or a training "
+                                   "checkpoint's: its network, input size and every weight (the defaults fine-tune "
+                                   "20–200 frames in minutes: docs/own-data.md)", None, metavar="MODEL_DIR|CKPT")
+    freeze: str = option(f"what keeps its start: auto (norm with {param('init')}, else none), none, norm (the batch "
+                         f"norms' statistics: a published model's are folded into its convolutions, and batches of "
+                         f"few frames give noisy ones) or encoder (norm, and the encoder's weights)", "auto",
+                         choices=FREEZE, metavar="PART")
     disparity_source: str = option("disparities for the DS-Generator: auto = file, else depth + camera, else cached "
                                     "SGBM", "auto", choices=_disparity_sources)
     cache_dir: PathText | None = option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
@@ -213,6 +258,7 @@ class TrainConfig:
         if self.photometric_strength != "mild" and not self.photometric:
             raise InvalidOptionError(f"{param('photometric_strength')} {self.photometric_strength} says how "
                                      f"{param('photometric')} recolours; give {param('photometric')} too")
+        check_source(self)
         if self.human_share > 0 and self.labels is None:
             raise InvalidOptionError(f"{param('human_share')} keeps the dataset's labels on a share of the training "
                                      f"drives and takes the label tree of {param('labels')} on the others; give "
@@ -240,19 +286,32 @@ class TrainConfig:
                                          f"tensorboard") from None
         check_workers(self.workers)  # this machine's bound: config.yaml may come from a larger one
         check_workers(self.devices, "devices")  # one process per device (on a CPU: per requested device)
-        _check_encoder(self.model, self.preset, self.encoder_name, self.encoder_weights)
-        check_dataset_root(self.root, get_dataset_class(self.dataset).name)
-        if self.labels is not None:  # (a missing folder is refused in the same words)
-            check_label_tree(self.labels, self.dataset, self.root, self.split)
+        if self.init is None:
+            check_encoder(self.model, self.preset, self.encoder_name, self.encoder_weights)
+        if self.images is None:
+            check_dataset_root(self.root, get_dataset_class(self.dataset).name)
+            if self.labels is not None:  # (a missing folder is refused in the same words)
+                check_label_tree(self.labels, self.dataset, self.root, self.split)
         check_writable(self.out, folder=True)
         weights_file = self.encoder_weights if self.encoder_weights and Path(self.encoder_weights).is_file() else None
         check_outputs({"out": self.out}, {"root": self.root, "splits_dir": self.splits_dir, "labels": self.labels,
-                                          "encoder_weights": weights_file})
+                                          "encoder_weights": weights_file, "images": self.images,
+                                          "val_images": self.val_images, "val_labels": self.val_labels,
+                                          "init": self.init})
+        if self.images is not None:  # every label read and checked now, before anything is written
+            from freespace.engine.labelled import labelled_frames
+
+            labelled_frames(self)
         object.__setattr__(self, "_checked", True)
 
     def model_options(self) -> dict[str, Any]:
         """The network's options (``create_model(model, **options)``), without its initial weights: a
-        checkpoint rebuilds the network from these and then loads all its tensors."""
+        checkpoint rebuilds the network from these and then loads all its tensors. With ``init``, the init's own
+        (a published model's network may have options no flag sets)."""
+        if self.init is not None:
+            from freespace.engine.init import read_init
+
+            return dict(read_init(self.init).hp["model_options"])
         return {"preset": self.preset, **({"encoder_name": self.encoder_name} if self.encoder_name else {})}
 
     def with_size(self, size: tuple[int, int] | str | Callable[[], tuple[int, int]]) -> TrainConfig:
@@ -322,44 +381,6 @@ class TrainConfig:
         return changed, grown
 
 
-def _check_encoder(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None) -> None:
-    """Refuse ``encoder_name``/``encoder_weights`` that the network does not take or that cannot be
-    built and loaded (unknown encoder, missing extra, weights not in the cache, a file that does not fit or
-    holds no weights), before any work: once per combination (and weight file version) in a process, on the
-    meta device (:func:`_build_once`)."""
-    from freespace.models import list_models, model_options
-
-    for name, value in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)):
-        if value is not None and name not in model_options(model):
-            takers = ", ".join(m for m in list_models() if name in model_options(m))
-            raise InvalidOptionError(f"{param(name)}: {model} takes none; the networks that do: {takers}")
-    if encoder_name is not None or encoder_weights is not None:
-        path = Path(encoder_weights or "")
-        stamp = (path.stat().st_mtime_ns, path.stat().st_size) if encoder_weights and path.is_file() else None
-        _build_once(model, preset, encoder_name, encoder_weights, stamp)
-
-
-@functools.lru_cache(maxsize=8)
-def _build_once(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None,
-                stamp: tuple[int, int] | None) -> None:
-    """Build the network on the meta device, ``encoder_weights`` loaded into it (``stamp``, the weight file's
-    mtime and size, only keys the cache). Its tensors have shapes but no memory and no initial values, so this
-    costs a fraction of a real build (none of a large network's allocation and random initialisation), while
-    the weights take the one path of training: the file is read (on the CPU) and its tensors' names, shapes
-    and values checked against the encoder the network builds (:func:`freespace.models.weights.apply_state`);
-    copying them into the meta tensors is a no-op."""
-    import warnings
-
-    import torch
-
-    from freespace.models import create_model
-
-    options = {k: v for k, v in (("encoder_name", encoder_name), ("encoder_weights", encoder_weights)) if v is not None}
-    with warnings.catch_warnings(), torch.device("meta"):
-        warnings.filterwarnings("ignore", message=".*meta parameter.*no-op")
-        create_model(model, preset=preset, **options)
-
-
 # --- what a run read ------------------------------------------------------------------------------------
 
 
@@ -375,17 +396,3 @@ def read_config_yaml(path: PathLike) -> dict[str, Any]:
         and ``disparity_source``; the message names the file and the keys).
     """
     return config_yaml.read_fields_yaml(TrainConfig, path, _RENAMED, what="training config")
-
-
-def content_hashes(config: TrainConfig) -> dict[str, Any]:
-    """What a run read, by content: ``{"encoder_weights": {"path", "sha256"}}`` when its weights are a file
-    (:func:`~freespace.data.label_tree.file_record`), ``{"labels": {"path", "sha256", "files"}}`` with a label
-    tree (:func:`~freespace.data.label_tree.tree_record`). A run records it (``RUN/inputs.json``); a resumed run
-    and the cells of one ``reproduce`` are refused when the files changed in between
-    (:func:`~freespace.data.label_tree.changed_inputs`)."""
-    found: dict[str, Any] = {}
-    if weights_path(config.encoder_weights) and Path(config.encoder_weights).is_file():  # type: ignore[arg-type]
-        found["encoder_weights"] = file_record(config.encoder_weights)  # type: ignore[arg-type]
-    if config.labels is not None and Path(config.labels).is_dir():
-        found["labels"] = tree_record(config.labels)
-    return found

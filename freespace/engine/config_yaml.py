@@ -110,7 +110,7 @@ def typed_value(cls: type, name: str, value: Any) -> Any:
             problem = error["msg"][0].lower() + error["msg"][1:]
         raise ValueError(f"{problem}, got {value!r}") from None
     allowed = choices(cls, name)
-    if allowed is not None and plain_value(cls, name, typed) not in allowed:
+    if allowed is not None and typed is not None and plain_value(cls, name, typed) not in allowed:
         raise ValueError(f"must be one of {', '.join(allowed)}, got {value!r}")
     return typed
 

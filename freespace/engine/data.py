@@ -22,6 +22,7 @@ from freespace.data.registry import get_dataset
 from freespace.data.splits import make_splits, read_splits, write_splits
 from freespace.data.torch_dataset import Item, VirtualAugment
 from freespace.engine.config import TrainConfig
+from freespace.engine.labelled import labelled_frames
 from freespace.engine.option_values import ranges_text
 from freespace.errors import DatasetError, InvalidOptionError, param
 
@@ -138,7 +139,8 @@ def prepare_data(config: TrainConfig, run_dir: Path) -> dict[str, Any]:
         items["train"] += [Item(it.index, it.name) for it in views]
     first = next(iter(index.values()))
     size = config.with_size(lambda: ds.load(first, right=False, disparity=False).left.shape[:2]).image_size
-    return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual}
+    return {"dataset": ds, **items, "frames": len(splits["train"]), "size": size, "virtual": virtual,
+            "labelled": plan.get("labelled")}
 
 
 def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str, Any]:
@@ -154,6 +156,8 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
             frames, no labelled pixel, no right image for ``augment`` homography or duplicate.
         InvalidOptionError: ``human_share`` on a dataset without labels of its own.
     """
+    if config.images is not None:
+        return _plan_folder(config)
     ds = get_dataset(config.dataset, config.root, config.split, disparity_source=config.disparity_source,
                      cache_dir=config.cache_dir)
     labelled = ds.labelled().frames
@@ -195,6 +199,18 @@ def plan_data(config: TrainConfig, run_dir: Path, warn: bool = True) -> dict[str
     for note in notes if warn else ():
         log.warning("%s", note)
     return {"dataset": ds, "splits": splits, "index": index, "stereo": stereo}
+
+
+def _plan_folder(config: TrainConfig) -> dict[str, Any]:
+    """:func:`plan_data` of a labelled folder (:func:`~freespace.engine.labelled.labelled_frames`): train on its
+    training frames, validate on the validation frames, and test on them too (a labelled folder has no test set
+    of its own: measure the model on frames apart with ``freespace evaluate``)."""
+    found = labelled_frames(config)
+    ds = found.dataset()
+    splits = {"train": [f.name for f in found.groups["train"]], "val": [f.name for f in found.groups["val"]]}
+    splits["test"] = splits["val"]
+    index = {f.name: i for i, f in enumerate(ds.frames)}
+    return {"dataset": ds, "splits": splits, "index": index, "stereo": [], "labelled": found}
 
 
 def _splits(config: TrainConfig, ds: StereoRoadDataset, labelled: list[Any], split_dir: Path) -> dict[str, list[str]]:

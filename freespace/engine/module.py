@@ -32,15 +32,23 @@ class RoadModule(pl.LightningModule):
 
     def __init__(self, model: str, model_options: dict[str, Any], lr: float, momentum: float,
                  weight_decay: float, image_size: tuple[int, int] | list[int] | None = None, seed: int = 0,
-                 val_window: int = 1, encoder_weights: str | None = None) -> None:
+                 val_window: int = 1, encoder_weights: str | None = None, freeze: str = "none") -> None:
         """``seed``: the run's seed, from which dropout draws (with the epoch); ``val_window``: the epochs
         over which ``val_f_window`` (the early-stopping and checkpoint criterion when > 1) averages the
         validation F-score; ``encoder_weights``: the encoder's initial weights ("imagenet" or a file; a
-        checkpoint rebuilds the network without them and loads its own tensors)."""
+        checkpoint rebuilds the network without them and loads its own tensors); ``freeze``: what keeps its
+        starting values while training: ``none``, ``norm`` (every batch norm stays in eval mode: its running
+        statistics are the start's, its scale and shift still learn) or ``encoder`` (``norm``, and the weights of
+        the network's ``encoder`` are fixed)."""
         super().__init__()
         self.save_hyperparameters()
         weights = {"encoder_weights": encoder_weights} if encoder_weights is not None else {}
         self.net = create_model(model, **model_options, **weights)
+        if freeze not in ("none", "norm", "encoder"):
+            raise ValueError(f"freeze must be none, norm or encoder, got {freeze!r}")
+        encoder = getattr(self.net, "encoder", None) if freeze == "encoder" else None
+        if encoder is not None:
+            encoder.requires_grad_(False)
         self._val_f: list[float] = []  # each epoch's validation F-score (kept in checkpoints)
         self._reset()
 
@@ -49,9 +57,20 @@ class RoadModule(pl.LightningModule):
         self._seconds = 0.0
         self._frames = 0
 
+    def _frozen_norms(self) -> list[torch.nn.Module]:
+        if self.hparams.get("freeze", "none") == "none":
+            return []
+        return [m for m in self.net.modules() if isinstance(m, torch.nn.modules.batchnorm._BatchNorm)]
+
+    def on_train_batch_start(self, batch: dict[str, Any], batch_idx: int) -> None:
+        # frozen batch norms (freeze) in eval mode at every step: Lightning switches modules to training mode
+        # submodule by submodule (and restores recorded modes after validation), past any train() override
+        for m in self._frozen_norms():
+            m.eval()
+
     def configure_optimizers(self):
-        return torch.optim.SGD(self.parameters(), lr=self.hparams.lr, momentum=self.hparams.momentum,
-                               weight_decay=self.hparams.weight_decay)
+        return torch.optim.SGD([p for p in self.parameters() if p.requires_grad], lr=self.hparams.lr,
+                               momentum=self.hparams.momentum, weight_decay=self.hparams.weight_decay)
 
     def on_fit_start(self) -> None:
         # channels-last (NHWC) tensors take the faster convolution kernels: an epoch costs less on a CPU (BENCHMARKS.md,

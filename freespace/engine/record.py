@@ -1,4 +1,5 @@
-"""What a training run records about where it ran: the package's commit, the data root and the torch version.
+"""What a training run records about where it ran (the package's commit, the data root and the torch version) and
+what it read, by content (:func:`content_hashes`).
 
 These go to the run's ``metrics.json`` (``"record"``), never to ``config.yaml``: they are not training options,
 so a resumed or extended run, or a ``reproduce`` cell, is never refused because the commit or the machine
@@ -13,7 +14,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-__all__ = ["package_commit", "run_record"]
+__all__ = ["package_commit", "run_record", "content_hashes"]
 
 #: the commit when the package's source is not a file of a git work tree (an installed wheel, no git)
 UNKNOWN = "unknown"
@@ -51,3 +52,31 @@ def run_record(root: str | os.PathLike) -> dict[str, Any]:
 
     return {"commit": package_commit(), "data_root": str(Path(root).expanduser().resolve()),
             "torch": torch.__version__}
+
+
+def content_hashes(config: Any) -> dict[str, Any]:
+    """What a run of ``config`` (a :class:`~freespace.engine.config.TrainConfig`) read, by content:
+    ``{"encoder_weights": {"path", "sha256"}}`` when its weights are a file
+    (:func:`~freespace.data.label_tree.file_record`); ``{"labels": {"path", "sha256", "files"}}`` with a label tree
+    (:func:`~freespace.data.label_tree.tree_record`); a labelled folder's ``images`` and ``labels`` (and
+    ``val_images``, ``val_labels``) as the files it pairs; an ``init`` checkpoint. A run records it
+    (``RUN/inputs.json``); a resumed run and the cells of one ``reproduce`` are refused when the files changed in
+    between (:func:`~freespace.data.label_tree.changed_inputs`)."""
+    from freespace.data.label_tree import file_record, files_record, tree_record
+    from freespace.engine.option_values import weights_path
+
+    found: dict[str, Any] = {}
+    if weights_path(config.encoder_weights) and Path(config.encoder_weights).is_file():  # type: ignore[arg-type]
+        found["encoder_weights"] = file_record(config.encoder_weights)  # type: ignore[arg-type]
+    if config.images is not None:  # a labelled folder: the images and labels it pairs, by content
+        from freespace.engine.labelled import labelled_frames
+
+        for key, paths in labelled_frames(config).files().items():
+            found[key] = files_record(getattr(config, key), paths)
+    elif config.labels is not None and Path(config.labels).is_dir():
+        found["labels"] = tree_record(config.labels)
+    if config.init is not None:
+        from freespace.engine.init import init_checkpoint
+
+        found["init"] = file_record(init_checkpoint(config.init))
+    return found

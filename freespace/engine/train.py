@@ -29,9 +29,10 @@ from lightning.pytorch.plugins.io import TorchCheckpointIO
 
 from freespace.data.label_tree import changed_inputs
 from freespace.data.torch_dataset import RoadSegmentationDataset
-from freespace.engine.config import TrainConfig, content_hashes
+from freespace.engine.config import TrainConfig
 from freespace.engine.data import EpochSampler, is_rank_zero, loader_context, prepare_data
-from freespace.engine.record import run_record
+from freespace.engine.init import read_init, resolve_init
+from freespace.engine.record import content_hashes, run_record
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, Terminated, TrainingError, param
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
 from freespace.io.files import atomic_write_bytes, write_csv, write_json
@@ -168,7 +169,7 @@ class _EarlyStopping(EarlyStopping):
 RUN_ENTRIES = ("config.yaml", "inputs.json", "splits/", "generated/", "metrics.csv", "metrics.json", "checkpoints/",
                "tensorboard/")
 
-#: the run's record of what it read, by content (:func:`freespace.engine.config.content_hashes`)
+#: the run's record of what it read, by content (:func:`freespace.engine.record.content_hashes`)
 INPUTS = "inputs.json"
 
 
@@ -265,10 +266,12 @@ def _confine_paths(state: dict[str, Any], folder: Path) -> None:
         state["best_k_models"] = {inside(k): v for k, v in state["best_k_models"].items() if inside(k)}
 
 
-def train(dataset: str, root: str | os.PathLike, out: str | os.PathLike, *, resume: bool = False,
-          progress: bool = True, **options: Any) -> dict[str, Any]:
+def train(dataset: str | None = None, root: str | os.PathLike | None = None, out: str | os.PathLike | None = None, *,
+          resume: bool = False, progress: bool = True, **options: Any) -> dict[str, Any]:
     """Train a network in one call (``freespace.train``): ``TrainConfig(dataset=…, root=…, out=…, **options)`` —
-    every option of ``freespace train`` by its parameter name, as typed values — then :func:`run_training`.
+    every option of ``freespace train`` by its parameter name, as typed values — then :func:`run_training`. A
+    labelled folder instead of a dataset: ``images=…, labels=…, label_format=…`` (or ``labels_like=…``), and
+    ``init=`` a model folder to fine-tune.
 
     Returns the test metrics (fractions; also in ``out/metrics.json``). Raises
     :class:`~freespace.errors.InvalidOptionError` for an unknown or bad option, before anything is written.
@@ -277,11 +280,16 @@ def train(dataset: str, root: str | os.PathLike, out: str | os.PathLike, *, resu
 
         metrics = freespace.train("kitti", "data/syn", "runs/unet-ha", model="unet", augment=("homography",),
                                   epochs=1, image_size=(96, 128))
+        metrics = freespace.train(out="runs/mine", images="frames", labels="masks", labels_like="cityscapes",
+                                  init="models/real-road-fast")
     """
+    if out is None:
+        raise InvalidOptionError(f"freespace.train needs {param('out')}, the run folder")
     unknown = sorted(set(options) - {f.name for f in dataclasses.fields(TrainConfig)})
     if unknown:
         raise InvalidOptionError(f"freespace.train takes TrainConfig's options; unknown: {', '.join(unknown)}")
-    config = TrainConfig(dataset=dataset, root=os.fspath(root), out=os.fspath(out), **options)
+    config = TrainConfig(dataset=dataset, root=os.fspath(root) if root is not None else None, out=os.fspath(out),
+                         **options)
     return run_training(config, resume=resume, progress=progress)
 
 
@@ -305,6 +313,7 @@ def run_training(config: TrainConfig, resume: bool = False, progress: bool = Tru
 
 
 def _run(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
+    config = resolve_init(config)  # the init's network and size, before a resumed run compares its options
     saved = Path(config.out) / "config.yaml"
     if resume and saved.is_file():  # before the checks: an option changed is named, not what it breaks (weights...)
         _refuse_changed(config, TrainConfig.load(saved))
@@ -432,8 +441,10 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
     module = RoadModule(config.model, config.model_options(), config.lr, config.momentum, config.weight_decay,
                         image_size=list(size), seed=config.seed, val_window=config.val_window,
-                        encoder_weights=config.encoder_weights)
-    if not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
+                        encoder_weights=config.encoder_weights, freeze=frozen_part(config))
+    if config.init is not None and not resume:  # every weight from the init (a resumed run has its own)
+        module.net.load_state_dict(read_init(config.init).state)
+    elif not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
         # from the training frames themselves (the first items; views and duplicates follow), so that every
         # variant of the protocol fits it from the same labels
         module.net.prepare(train[i]["label"] for i in range(data["frames"]))
@@ -455,10 +466,22 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                "first_epoch": FIRST_EPOCH, "epochs_run": trainer.current_epoch,
                "frames": {k: len(data[k]) for k in ("train", "val", "test")}, "image_size": list(size),
                "checkpoint": best.relative_to(run_dir).as_posix()}
-    metrics["record"] = run_record(config.root)  # the commit, data root and torch that finished the run
+    if data["labelled"] is not None:
+        metrics["labelled_folder"] = data["labelled"].record(config)
+    if config.init is not None:
+        metrics["init"] = {"path": str(read_init(config.init).path), "freeze": frozen_part(config)}
+    metrics["record"] = run_record(config.root or config.images)  # the commit, data root and torch of the run
     if trainer.is_global_zero:
         write_json(run_dir / "metrics.json", metrics)
     return metrics
+
+
+def frozen_part(config: TrainConfig) -> str:
+    """What keeps its starting values in ``config``'s run: its ``freeze``, with ``auto`` resolved (``norm`` when
+    the run starts from an ``init``, else ``none``)."""
+    if config.freeze != "auto":
+        return config.freeze
+    return "norm" if config.init is not None else "none"
 
 
 def deterministic_mode() -> bool | str:

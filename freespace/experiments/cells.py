@@ -114,10 +114,10 @@ def check_autolabels_used(autolabels: PathLike | None, variants: list[str] | tup
 
 def check_inputs(out: Path, configs: list[TrainConfig], variants: dict[str, Variant] | None = None) -> None:
     """Refuse, before any work, cells whose weights file or label tree (by content:
-    :func:`~freespace.engine.config.content_hashes`, computed once) differ from what the protocol's other cells
+    :func:`~freespace.engine.record.content_hashes`, computed once) differ from what the protocol's other cells
     in ``OUT/runs`` were trained from: their scores would be averaged as one setting. With a protocol's declared
     ``variants``, a cell is compared with the cells of the variants of its own training data only."""
-    from freespace.engine.config import content_hashes
+    from freespace.engine.record import content_hashes
     from freespace.engine.train import read_inputs
 
     def source(folder: str) -> str | None:  # the training data of a run folder's variant (None: reproduce's)

@@ -23,9 +23,10 @@ from freespace.errors import InvalidOptionError, param
 from freespace.evaluation.metrics import to_confidence
 from freespace.inference.predictor import Predictor
 from freespace.io.codecs import write_image
-from freespace.io.files import PathLike, check_outputs, check_suffix, check_writable, write_json
+from freespace.io.files import PathLike, check_outputs, check_suffix, check_writable, shown_path, write_json
 from freespace.io.outdir import OwnedFolder, claim_folder
 from freespace.io.video import FrameSource, VideoFrame, VideoWriter, is_video_path, open_frames
+from freespace.limits import MAX_BATCH_SIZE, check_threads
 from freespace.runtime.shard import parse_shard, select_shard
 
 __all__ = ["predict", "predict_folder", "predict_video", "predict_report", "run_frames", "fast_overlay"]
@@ -51,6 +52,13 @@ def _shard_source(source: FrameSource, shard: tuple[int, int]) -> FrameSource:
     keep = set(select_shard((p.stem for p in source.paths), *shard))
     paths = tuple(p for p in source.paths if p.stem in keep)
     return dataclasses.replace(source, paths=paths, count=len(paths))
+
+
+def _check_batch_size(batch_size: int) -> None:
+    """Refuse a ``batch_size`` that is no whole number in 1…:data:`~freespace.limits.MAX_BATCH_SIZE` (a batch is
+    held in memory whole)."""
+    if isinstance(batch_size, bool) or not isinstance(batch_size, int) or not 1 <= batch_size <= MAX_BATCH_SIZE:
+        raise InvalidOptionError(f"{param('batch_size')} must be an integer in 1…{MAX_BATCH_SIZE}, got {batch_size!r}")
 
 
 def _shard_marker(shard: tuple[int, int]) -> str:
@@ -277,8 +285,7 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
         first frame read to last file written), ``network_share`` (the network's part of that time),
         ``model``, ``image_size``, ``shard``.
     """
-    if batch_size < 1:
-        raise InvalidOptionError(f"{param('batch_size')} must be ≥ 1")
+    _check_batch_size(batch_size)
     check_writable(out, folder=True)
     check_outputs({"out": out}, {"input": inputs})
     source = open_frames(inputs)
@@ -306,10 +313,13 @@ def _run_record(predictor: Predictor, source: FrameSource, shard: tuple[int, int
 
     path = getattr(predictor, "path", None)
     spec = os.path.abspath(source.spec) if source.kind == "glob" else os.path.realpath(source.spec)
-    names = "\n".join(sorted(p.stem for p in source.paths)).encode("utf-8")
+    names = b"\n".join(sorted(os.fsencode(p.stem) for p in source.paths))  # any name, as its bytes
     size = getattr(predictor, "resize_to", None)
-    return {"model": getattr(predictor, "name", None), "model_sha256": file_sha256(path) if path else None,
-            "image_size": list(size) if size is not None else None, "input": spec, "frames": len(source.paths),
+    name = getattr(predictor, "name", None)
+    return {"model": shown_path(name) if isinstance(name, str) else name,  # as its JSON file holds them
+            "model_sha256": file_sha256(path) if path else None,
+            "image_size": list(size) if size is not None else None, "input": shown_path(spec),
+            "frames": len(source.paths),
             "frames_sha256": hashlib.sha256(names).hexdigest(), "shards": shard[1] if shard else None,
             "overlays": overlays}
 
@@ -411,8 +421,7 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
     """
     from freespace.runtime.log import progress_bar
 
-    if batch_size < 1:
-        raise InvalidOptionError(f"{param('batch_size')} must be ≥ 1")
+    _check_batch_size(batch_size)
     out = check_writable(out)
     check_outputs({"out": out}, {"input": inputs})
     check_suffix(out, (".mp4",))
@@ -438,15 +447,16 @@ def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = No
 
     ``out`` is checked before the model is loaded. ``shard`` (``"K/N"`` or ``(K, N)``, 1-based) and
     ``overlays=False`` are for a folder ``out`` only. ``threads``: the network's CPU threads (None: the cores
-    this process may use).
+    this process may use; else 1…:func:`~freespace.limits.max_workers`, checked first).
 
     Returns:
         The run's summary (:func:`predict_folder` or :func:`predict_video`).
 
     Raises:
-        InvalidOptionError: ``shard`` or ``overlays=False`` with a video ``out``, a bad ``shard``, an ``out``
-            that may not be written.
+        InvalidOptionError: ``shard`` or ``overlays=False`` with a video ``out``, a bad ``shard`` or ``threads``,
+            an ``out`` that may not be written.
     """
+    check_threads(threads)  # before anything else
     video = is_video_path(out)
     check_writable(out, folder=not video)  # before the model is loaded
     check_outputs({"out": out}, {"input": inputs, "checkpoint": checkpoint, "onnx": onnx})
@@ -470,6 +480,7 @@ def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = No
 def predict_report(summary: dict[str, Any], out: PathLike, shard: str | None = None) -> str:
     """One line on a :func:`predict` run (``summary``: its return value) into ``out``: frames, frames per second
     end to end, the network's time per frame and share; ``shard``: the run's ``"K/N"`` as given."""
+    out = shown_path(out)  # a name of any bytes: printable
     if not summary["frames"]:
         return f"0 frames in shard {shard} → {out}"
     return (f"{summary['frames']} frames in {summary['seconds']:.2f} s: {summary['frames_per_second']:.1f} frames per "

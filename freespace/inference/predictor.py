@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -19,6 +20,7 @@ import numpy as np
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
 from freespace.io.files import PathLike, missing_input
+from freespace.limits import MAX_BATCH_SIZE, check_threads, usable_cores
 
 if TYPE_CHECKING:
     import torch
@@ -146,11 +148,8 @@ _EXPORT_HINT = "export one with freespace export --format onnx"
 
 def machine_threads() -> int:
     """The CPU cores this process may run on (``os.sched_getaffinity``: a container's or ``taskset``'s share,
-    not the machine's count), at least 1."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # no affinity on this platform
-        return max(1, os.cpu_count() or 1)
+    not the machine's count), at least 1 (:func:`freespace.limits.usable_cores`)."""
+    return usable_cores()
 
 
 def session_options(threads: int | None = None) -> Any:
@@ -160,16 +159,16 @@ def session_options(threads: int | None = None) -> Any:
     pipeline's reader and writer threads get the cores while the network waits for its next batch.
 
     Raises:
-        InvalidOptionError: ``threads`` < 1.
+        InvalidOptionError: ``threads`` is not None or a whole number in 1…:func:`~freespace.limits.max_workers`
+            (:func:`~freespace.limits.check_threads`: 0 is refused, not read as "all cores"), checked first.
     """
+    check_threads(threads)
     import onnxruntime as ort
 
-    if threads is not None and threads < 1:
-        raise InvalidOptionError(f"{param('threads')} must be ≥ 1, got {threads}")
     options = ort.SessionOptions()
     options.log_severity_level = 4  # its failures become one-line errors here, not log lines
     options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    options.intra_op_num_threads = threads or machine_threads()
+    options.intra_op_num_threads = threads if threads is not None else machine_threads()
     options.inter_op_num_threads = 1
     options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
     options.add_session_config_entry("session.intra_op.allow_spinning", "0")
@@ -192,6 +191,15 @@ def _check_onnx_signature(session: Any, path: Path) -> None:
                                f"class scores with C ≥ 2 (non-road, road) ({_EXPORT_HINT})")
 
 
+def _unicode(name: str) -> bool:
+    """Whether ``name`` is valid Unicode: not a file name of bytes that are not UTF-8 (held as surrogates)."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
 def _fixed(dim: Any) -> int | None:
     """An ONNX input dimension as a number when the model fixes it, else None (a name or unknown)."""
     return dim if isinstance(dim, int) and not isinstance(dim, bool) and dim > 0 else None
@@ -211,13 +219,19 @@ class Predictor:
     upsampled bilinearly to the frame's size before any threshold (a mask at the input's size). The three
     steps of :meth:`predict` are also callable apart, so that a pipeline runs them in different threads:
     :meth:`prepare` (resize, scale to [0, 1], CHW), :meth:`infer` (the network) and :meth:`restore` (back to
-    the frame's size). ``threads``: the network's CPU threads (≥ 1; None: the cores this process may use):
-    ONNX Runtime's intra-op threads (:func:`session_options`), or with a checkpoint PyTorch's
+    the frame's size). ``threads``: the network's CPU threads (None: the cores this process may use; else a whole
+    number in 1…:func:`~freespace.limits.max_workers`, checked before anything else: 0 is refused, not read as
+    "all cores"): ONNX Runtime's intra-op threads (:func:`session_options`), or with a checkpoint PyTorch's
     (``torch.set_num_threads``, which holds for the whole process).
+
+    The images it takes (:meth:`predict`, :meth:`prepare`) are RGB, ``H×W×3`` (grey ``H×W`` ones are repeated to
+    three channels, as :mod:`freespace.io.video` does), of one of three pixel types: ``uint8`` (0…255), ``uint16``
+    (0…65535, scaled by 1/65535) or float (values in [0, 1]); see :meth:`predict`.
     """
 
     def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
                  threads: int | None = None) -> None:
+        check_threads(threads)
         if (checkpoint is None) == (onnx is None):
             raise InvalidOptionError(f"give exactly one of {param('checkpoint')} and {param('onnx')}")
         self.resize_to: tuple[int, int] | None = None
@@ -226,8 +240,6 @@ class Predictor:
             import torch
 
             if threads is not None:
-                if threads < 1:
-                    raise InvalidOptionError(f"{param('threads')} must be ≥ 1, got {threads}")
                 torch.set_num_threads(threads)
             self.model, hp = load_checkpoint(checkpoint)
             self.device = "cuda" if torch.cuda.is_available() else "cpu"
@@ -241,9 +253,9 @@ class Predictor:
             path = Path(onnx)  # type: ignore[arg-type]
             if not path.is_file():
                 raise missing_input(path, "ONNX model")
-            try:
-                self.session = ort.InferenceSession(str(path), session_options(threads),
-                                                    providers=["CPUExecutionProvider"])
+            try:  # a name that is no valid Unicode (bytes that are not UTF-8): its bytes, which onnxruntime takes
+                self.session = ort.InferenceSession(str(path) if _unicode(str(path)) else path.read_bytes(),
+                                                    session_options(threads), providers=["CPUExecutionProvider"])
             except Exception as exc:  # onnxruntime raises its own types for corrupt files
                 raise CorruptFileError(f"cannot load {path} as an ONNX model ({type(exc).__name__})") from None
             _check_onnx_signature(self.session, path)
@@ -304,17 +316,24 @@ class Predictor:
                                    f"probability; it is broken (e.g. an overflow): train or export it anew")
 
     def prepare(self, image: np.ndarray) -> np.ndarray:
-        """The network's input for one ``H×W×3 uint8`` RGB image: ``float32 3×h×w`` in [0, 1], resized to
-        :attr:`resize_to` (area interpolation) when the model states a size.
+        """The network's input for one RGB image (``H×W×3`` or grey ``H×W``: ``uint8``, ``uint16`` or float in
+        [0, 1], as :meth:`predict` takes them): ``float32 3×h×w`` in [0, 1], resized to :attr:`resize_to` (area
+        interpolation) when the model states a size.
 
         Raises:
-            InvalidOptionError: the image is not H×W×3.
+            InvalidOptionError: the image is not RGB or grey of those pixel types, is empty, or is float beyond
+                [0, 1].
         """
-        if image.ndim != 3 or image.shape[2] != 3:
-            raise InvalidOptionError(f"expected RGB images, got shape {image.shape}")
+        return self._prepare(_rgb_image(image))
+
+    def _prepare(self, image: np.ndarray) -> np.ndarray:
+        """:meth:`prepare` of an image already checked (:func:`_rgb_image`)."""
+        if image.dtype != np.uint8:  # uint16 and float: to [0, 1] first (cv2 resizes float32, not float16)
+            image = image.astype(np.float32) * np.float32(1 / 65535 if image.dtype == np.uint16 else 1)
         if self.resize_to is not None and image.shape[:2] != self.resize_to:
             image = cv2.resize(image, (self.resize_to[1], self.resize_to[0]), interpolation=cv2.INTER_AREA)
-        return image.transpose(2, 0, 1).astype(np.float32) / 255.0
+        chw = image.transpose(2, 0, 1).astype(np.float32)
+        return chw / np.float32(255) if image.dtype == np.uint8 else chw
 
     def infer(self, inputs: list[np.ndarray]) -> list[np.ndarray]:
         """Road probabilities (``float32 h×w``) of prepared inputs (:meth:`prepare`), at the network's size;
@@ -335,7 +354,123 @@ class Predictor:
         h, w = size
         return prob if prob.shape == (h, w) else cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
 
-    def predict(self, images: list[np.ndarray]) -> list[np.ndarray]:
-        """Road probability (``float32 H×W`` in [0, 1]) of each ``H×W×3 uint8`` RGB image, at its own size."""
-        probs = self.infer([self.prepare(img) for img in images])
-        return [self.restore(p, img.shape[:2]) for p, img in zip(probs, images)]
+    def predict(self, images: np.ndarray | Iterable[np.ndarray], batch_size: int = 8) -> list[np.ndarray]:
+        """Road probability (``float32 H×W`` in [0, 1]) of each image, at its own size, in order.
+
+        Args:
+            images: RGB images, each ``H×W×3`` (or grey, ``H×W`` or ``H×W×1``: repeated to three channels, as
+                :func:`freespace.io.codecs.read_image` gives grey files) with pixels ``uint8`` (0…255), ``uint16``
+                (0…65535: scaled by 1/65535) or float (``float16/32/64`` in [0, 1], as they are), any size (sizes
+                may differ): one image (an ``H×W×3`` or ``H×W`` array), a batch (an ``N×H×W×3`` array, or a list
+                or tuple of images), or any iterable of images (a generator: read once, ``batch_size`` images at a
+                time, so that a long one is never all in memory; the probabilities are).
+            batch_size: images per network call (1…:data:`~freespace.limits.MAX_BATCH_SIZE`).
+
+        Returns:
+            A list of one probability map per image (a list of one for one image).
+
+        Raises:
+            InvalidOptionError: no image at all; a path instead of an image (read it first:
+                :func:`freespace.io.codecs.read_image`); an image of other channels (RGBA: drop the alpha; 2, 5,
+                …), an empty one (a side of 0), one of another pixel type (bool, signed integers) or float outside
+                [0, 1] (NaN included: a 0…255 float image must be divided by 255 first); a bad ``batch_size``.
+        """
+        if isinstance(batch_size, bool) or not isinstance(batch_size, int) or not 1 <= batch_size <= MAX_BATCH_SIZE:
+            raise InvalidOptionError(f"{param('batch_size')} must be an integer in 1…{MAX_BATCH_SIZE}, got "
+                                     f"{batch_size!r}")
+        out: list[np.ndarray] = []
+        batch: list[np.ndarray] = []
+        for image in _images(images):
+            batch.append(image)
+            if len(batch) == batch_size:
+                out += self._predict_batch(batch, len(out))
+                batch = []
+        if batch:
+            out += self._predict_batch(batch, len(out))
+        if not out:
+            raise InvalidOptionError("Predictor.predict was given no image; give one or more RGB images (H×W×3)")
+        return out
+
+    def _predict_batch(self, images: list[np.ndarray], first: int) -> list[np.ndarray]:
+        """:meth:`predict` of a list of images, the first of them image ``first`` of the input (for messages)."""
+        checked = []
+        for i, img in enumerate(images):
+            try:
+                checked.append(_rgb_image(img))
+            except InvalidOptionError as exc:
+                raise InvalidOptionError(f"image {first + i} (counted from 0) given to Predictor.predict: "
+                                         f"{exc.render()}") from None
+        probs = self.infer([self._prepare(img) for img in checked])
+        return [self.restore(p, img.shape[:2]) for p, img in zip(probs, checked)]
+
+
+def _describe(x: Any) -> str:
+    """What ``x`` is, as a message says it: ``"an array of float64 of shape (4, 4, 3)"`` or ``"a value of type
+    str"``."""
+    if isinstance(x, np.ndarray):
+        return f"an array of {x.dtype} of shape {x.shape}"
+    return f"a value of type {type(x).__name__}"
+
+
+_PIXELS = "uint8 0…255, uint16 0…65535 or float in [0, 1]"
+
+
+def _rgb_image(image: Any) -> np.ndarray:
+    """``image`` as an ``H×W×3`` array of one of the pixel types :meth:`Predictor.predict` takes, checked (a grey
+    ``H×W`` or ``H×W×1`` image repeated to three channels, as :mod:`freespace.io.video` gives grey frames).
+
+    Raises:
+        InvalidOptionError: what is wrong with it, in one line.
+    """
+    if isinstance(image, (str, bytes, os.PathLike)):
+        raise InvalidOptionError(f"expected an RGB image array (H×W×3), got the path {image!r}; read it first "
+                                 f"(freespace.io.codecs.read_image)")
+    try:
+        arr = image if isinstance(image, np.ndarray) else np.asarray(image)
+    except (ValueError, TypeError):  # ragged nested lists
+        raise InvalidOptionError(f"expected an RGB image array (H×W×3), got {_describe(image)}, which is "
+                                 f"none") from None
+    grey = arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] == 1)
+    if not grey and (arr.ndim != 3 or arr.shape[2] != 3):
+        hint = "; drop the alpha channel (image[:, :, :3])" if arr.ndim == 3 and arr.shape[2] == 4 else ""
+        raise InvalidOptionError(f"expected an RGB image H×W×3 (or grey H×W), got {_describe(image)}{hint}")
+    if arr.size == 0:
+        raise InvalidOptionError(f"expected an RGB image H×W×3, got an empty one of shape {arr.shape}")
+    if arr.dtype not in (np.uint8, np.uint16) and not np.issubdtype(arr.dtype, np.floating):
+        raise InvalidOptionError(f"expected an RGB image of pixels {_PIXELS}, got {_describe(image)}")
+    if np.issubdtype(arr.dtype, np.floating):
+        low, high = float(np.min(arr)), float(np.max(arr))
+        if not (0.0 <= low and high <= 1.0):  # NaN fails both
+            bad = "NaN" if np.isnan(arr).any() else f"values in [{low:g}, {high:g}]"
+            raise InvalidOptionError(f"expected a float RGB image in [0, 1], got {bad} ({arr.dtype}); divide a "
+                                     f"0…255 image by 255 (or give it as uint8)")
+    if grey:
+        arr = np.repeat(arr.reshape(arr.shape[0], arr.shape[1], 1), 3, axis=2)
+    return arr
+
+
+def _images(images: Any) -> Iterator[Any]:
+    """The images of what :meth:`Predictor.predict` takes (one image, a batch array, an iterable), one by one;
+    each is checked by :meth:`Predictor.prepare`.
+
+    Raises:
+        InvalidOptionError: ``images`` is a path, or an array neither an image nor a batch, or no iterable.
+    """
+    if isinstance(images, (str, bytes, os.PathLike)):
+        raise InvalidOptionError(f"Predictor.predict takes RGB images (arrays H×W×3), got the path {images!r}; "
+                                 f"read it first (freespace.io.codecs.read_image)")
+    if isinstance(images, np.ndarray):
+        if images.ndim in (2, 3):  # one image: RGB H×W×3 (or grey)
+            yield images
+            return
+        if images.ndim == 4:
+            yield from images
+            return
+        raise InvalidOptionError(f"Predictor.predict takes an RGB image (H×W×3), a batch of them (N×H×W×3) or a "
+                                 f"list of images, got {_describe(images)}")
+    try:
+        it = iter(images)
+    except TypeError:
+        raise InvalidOptionError(f"Predictor.predict takes an RGB image (H×W×3), a batch (N×H×W×3) or an "
+                                 f"iterable of images, got {_describe(images)}") from None
+    yield from it

@@ -19,6 +19,7 @@ import math
 import re
 import warnings
 import zlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Callable
 
@@ -31,15 +32,21 @@ from freespace.labels import RoadLabel
 from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS
 
 __all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES",
-           "MAX_IMAGE_SIDE", "read_image", "image_header_size", "check_image_pixels", "describe_image", "read_raw",
+           "OUTPUT_IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "image_header_size", "image_orientation",
+           "image_frame_count", "upright", "MultiFrameImageError", "check_image_pixels", "describe_image", "read_raw",
            "write_image", "encode_image", "read_disparity", "write_disparity", "png_disparity_overflow",
            "read_depth", "read_road_label",
            "road_label_from_image", "road_label_to_kitti"]
 
 DISPARITY_SUFFIXES = (".png", ".npy", ".pfm")
 DEPTH_SUFFIXES = (".png", ".npy", ".pfm")
-# what OpenCV reads and writes here
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff", ".webp")
+#: the suffixes of the still-image files read here (frames, labels, right images): each one's content a format
+#: whose header :func:`image_header_size` reads and OpenCV decodes; a folder's files of other suffixes are not
+#: images to freespace (HDR and PFM files hold floats, not 8/16-bit images; ``.jp2`` and ``.avif`` are not read)
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm", ".pbm", ".pnm", ".pam", ".tif", ".tiff", ".webp",
+                  ".ras", ".sr")
+#: the suffixes of the image files written here (:func:`write_image`): what OpenCV encodes from any RGB or grey image
+OUTPUT_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff", ".webp")
 
 #: the largest image side (pixels) a network is trained or run at: bounds sizes read from options and files
 MAX_IMAGE_SIDE = 8192
@@ -81,9 +88,11 @@ def _u(data: bytes, at: int, n: int, order: str = "big") -> int:
     return int.from_bytes(data[at:at + n], order)  # type: ignore[arg-type]
 
 
-def _jpeg_size(data: bytes) -> tuple[int, int]:
+def _jpeg_markers(data: bytes) -> Iterator[tuple[int, int]]:
+    """``(marker, position)`` of each marker segment of a JPEG file up to its scan, skipping fill bytes and the
+    markers without a segment (IndexError or ValueError for a file cut short or no JPEG)."""
     pos = 2
-    while True:  # the markers up to the frame header (SOFn), skipping fill bytes and each segment
+    while True:
         if data[pos] != 0xFF:
             raise ValueError("not a marker")
         marker = data[pos + 1]
@@ -91,27 +100,48 @@ def _jpeg_size(data: bytes) -> tuple[int, int]:
             pos += 1
         elif marker == 0x01 or 0xD0 <= marker <= 0xD8:  # markers without a segment
             pos += 2
-        elif 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
-            return _u(data, pos + 7, 2), _u(data, pos + 5, 2)
-        elif marker in (0xD9, 0xDA):
-            raise ValueError("no frame header")
+        elif marker in (0xD9, 0xDA):  # the end, or the scan: no header segment after it
+            return
         else:
+            yield marker, pos
             pos += 2 + _u(data, pos + 2, 2)
 
 
-def _tiff_size(data: bytes) -> tuple[int, int]:
+def _jpeg_size(data: bytes) -> tuple[int, int]:
+    for marker, pos in _jpeg_markers(data):  # the frame header (SOFn) states the size
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            return _u(data, pos + 7, 2), _u(data, pos + 5, 2)
+    raise ValueError("no frame header")
+
+
+def _tiff_start(data: bytes) -> tuple[str, bool, int]:
+    """A TIFF structure's byte order, whether it is a BigTIFF (8-byte offsets and counts) and its first IFD's
+    offset."""
     order = "little" if data[:2] == b"II" else "big"
-    big = _u(data, 2, 2, order) == 43  # BigTIFF: 8-byte offsets and counts
-    width = 8 if big else 4
-    ifd = _u(data, 8 if big else 4, width, order)
-    entries = min(_u(data, ifd, 8 if big else 2, order), 4096)
+    big = _u(data, 2, 2, order) == 43
+    return order, big, _u(data, 8 if big else 4, 8 if big else 4, order)
+
+
+def _tiff_ifd(data: bytes, at: int, order: str, big: bool, most: int = 4096) -> tuple[dict[int, int], int]:
+    """The single numbers of the TIFF IFD at offset ``at`` (tag → value: SHORT, LONG or LONG8 entries; of its first
+    ``most`` entries, which TIFF sorts by tag) and the offset of the next IFD (0: none, or the file ends before
+    it says)."""
+    head, step, width = (8, 20, 8) if big else (2, 12, 4)
+    entries = min(_u(data, at, head, order), 4096)
     found: dict[int, int] = {}
-    for k in range(entries):
-        at = ifd + (8 if big else 2) + k * (20 if big else 12)
-        tag, kind = _u(data, at, 2, order), _u(data, at + 2, 2, order)
-        if tag in (256, 257):  # ImageWidth, ImageLength: SHORT, LONG or LONG8
-            found[tag] = _u(data, at + 4 + width, {3: 2, 4: 4, 16: 8}[kind], order)
-    return found[256], found[257]
+    for k in range(min(entries, most)):
+        e = at + head + k * step
+        tag, kind = _u(data, e, 2, order), _u(data, e + 2, 2, order)
+        if kind in (3, 4, 16):
+            found[tag] = _u(data, e + 4 + width, {3: 2, 4: 4, 16: 8}[kind], order)
+    nxt = at + head + entries * step
+    return found, (_u(data, nxt, width, order) if nxt + width <= len(data) else 0)
+
+
+def _tiff_size(data: bytes) -> tuple[int, int]:
+    order, big, first = _tiff_start(data)
+    found = _tiff_ifd(data, first, order, big)[0]
+    return found[256], found[257]  # ImageWidth, ImageLength
 
 
 def _bmp_size(data: bytes) -> tuple[int, int]:
@@ -154,19 +184,14 @@ _HEADERS: tuple[tuple[tuple[bytes, ...], Callable[[bytes], tuple[int, int]]], ..
     ((b"P1", b"P2", b"P3", b"P4", b"P5", b"P6", b"P7", b"Pf", b"PF"), _pnm_size),
     ((b"GIF87a", b"GIF89a"), lambda d: (_u(d, 6, 2, "little"), _u(d, 8, 2, "little"))),
     ((b"RIFF",), lambda d: _webp_size(d) if d[8:12] == b"WEBP" else (0, 0)),
+    ((b"\x59\xa6\x6a\x95",), lambda d: (_u(d, 4, 4), _u(d, 8, 4))),  # Sun raster
 )
-_FORMATS = "PNG, JPEG, BMP, TIFF, PPM/PGM/PAM, GIF or WebP"
+_FORMATS = "PNG, JPEG, BMP, TIFF, PPM/PGM/PBM/PAM, Sun raster, GIF or WebP"
 
 
-def image_header_size(data: bytes) -> tuple[int, int] | None:
-    """The size ``(W, H)`` in pixels that an image file's header states (read from its first bytes, nothing
-    decoded), or None when ``data`` is no image of a format read here (PNG, JPEG, BMP, TIFF, PPM/PGM/PAM/PFM, GIF,
-    WebP) or its header is cut short or states no size.
-
-    Example:
-        >>> image_header_size(b"P5 640 480 255 ")  # a PGM header
-        (640, 480)
-    """
+def _stored_size(data: bytes) -> tuple[int, int] | None:
+    """The size ``(W, H)`` an image file's header states, as the pixels are stored; None: see
+    :func:`image_header_size`."""
     for signatures, size in _HEADERS:
         if data.startswith(signatures):
             try:
@@ -175,6 +200,241 @@ def image_header_size(data: bytes) -> tuple[int, int] | None:
                 return None
             return (w, h) if w >= 1 and h >= 1 else None
     return None
+
+
+def image_header_size(data: bytes) -> tuple[int, int] | None:
+    """The size ``(W, H)`` in pixels of an image file as it is read here (upright: width and height swapped when
+    its EXIF orientation, :func:`image_orientation`, turns it by 90°), from its header (its first bytes, nothing
+    decoded); None when ``data`` is no image of a format read here (PNG, JPEG, BMP, TIFF, PPM/PGM/PBM/PAM/PFM,
+    Sun raster, GIF, WebP) or its header is cut short or states no size.
+
+    Example:
+        >>> image_header_size(b"P5 640 480 255 ")  # a PGM header
+        (640, 480)
+    """
+    size = _stored_size(data)
+    if size is not None and _ORIENTATIONS[image_orientation(data)][0]:
+        return size[1], size[0]
+    return size
+
+
+#: what each EXIF orientation (1–8) does to the stored pixels to make them upright, in this order: transpose
+#: (swap rows and columns), flip upside down, flip left to right (1: nothing; 6: turn 90° clockwise; 8: turn 90°
+#: anticlockwise; 3: turn 180°; 2, 4, 5 and 7 mirror)
+_ORIENTATIONS: dict[int, tuple[bool, bool, bool]] = {
+    1: (False, False, False), 2: (False, False, True), 3: (False, True, True), 4: (False, True, False),
+    5: (True, False, False), 6: (True, False, True), 7: (True, True, True), 8: (True, True, False)}
+_EXIF = b"Exif\x00\x00"
+_TIFF_SIGNATURES = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+_ORIENTATION_TAG = 274
+
+
+def _exif_orientation(tiff: bytes) -> int:
+    """The orientation (tag 274 of its first IFD) of an EXIF block (a TIFF structure, with or without its
+    ``Exif\\0\\0`` prefix); 1 when it states none or a value outside 1–8."""
+    if tiff.startswith(_EXIF):
+        tiff = tiff[len(_EXIF):]
+    if not tiff.startswith(_TIFF_SIGNATURES):
+        return 1
+    try:
+        order, big, first = _tiff_start(tiff)
+        value = _tiff_ifd(tiff, first, order, big)[0].get(_ORIENTATION_TAG, 1)
+    except (IndexError, ValueError):
+        return 1
+    return value if value in _ORIENTATIONS else 1
+
+
+def _png_chunks(data: bytes) -> Iterator[tuple[bytes, int, int]]:
+    """``(type, position of the data, length)`` of a PNG file's chunks up to its first IDAT (included)."""
+    pos = len(_PNG_SIGNATURE)
+    while pos + 8 <= len(data):
+        length, kind = _u(data, pos, 4), bytes(data[pos + 4:pos + 8])
+        yield kind, pos + 8, length
+        if kind in (b"IDAT", b"IEND"):
+            return
+        pos += 12 + length
+
+
+def _riff_chunks(data: bytes) -> Iterator[tuple[bytes, int, int]]:
+    """``(FourCC, position of the data, length)`` of a WebP (RIFF) file's chunks."""
+    pos = 12
+    while pos + 8 <= len(data):
+        kind, length = bytes(data[pos:pos + 4]), _u(data, pos + 4, 4, "little")
+        yield kind, pos + 8, length
+        pos += 8 + length + (length & 1)
+
+
+def image_orientation(data: bytes) -> int:
+    """The EXIF orientation (1–8; 1: stored upright) an image file states, as cameras tag a frame they store
+    turned (6: turn it 90° clockwise to view it): a JPEG's Exif APP1 segment, a TIFF's first IFD, a PNG's
+    ``eXIf`` chunk or a WebP's ``EXIF`` chunk; 1 for other files, or one that states none (or a value outside
+    1–8).
+
+    Example:
+        >>> image_orientation(b"P5 640 480 255 ")  # PGM holds no EXIF
+        1
+    """
+    try:
+        if data.startswith(b"\xff\xd8\xff"):
+            for marker, pos in _jpeg_markers(data):
+                if marker == 0xE1 and data[pos + 4:pos + 10] == _EXIF:
+                    return _exif_orientation(data[pos + 4:pos + 2 + _u(data, pos + 2, 2)])
+                if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+                    break  # the frame header: EXIF comes before it
+        elif data.startswith(_TIFF_SIGNATURES):
+            return _exif_orientation(data)
+        elif data.startswith(_PNG_SIGNATURE):
+            for kind, pos, length in _png_chunks(data):
+                if kind == b"eXIf":
+                    return _exif_orientation(data[pos:pos + length])
+        elif data.startswith(b"RIFF") and data[8:12] == b"WEBP":
+            for kind, pos, length in _riff_chunks(data):
+                if kind == b"EXIF":
+                    return _exif_orientation(data[pos:pos + length])
+    except (IndexError, ValueError):
+        pass
+    return 1
+
+
+def upright(image: np.ndarray, orientation: int) -> np.ndarray:
+    """``image`` (``H×W`` or ``H×W×C``, as stored in its file) turned and mirrored as its EXIF ``orientation``
+    (1–8, :func:`image_orientation`) says, so that it stands upright (as image viewers show it); orientation 5–8
+    swap its width and height.
+
+    Example:
+        >>> upright(np.array([[1, 2, 3]]), 6)  # 90° clockwise: the first pixel goes to the top
+        array([[1],
+               [2],
+               [3]])
+    """
+    transpose, flip_v, flip_h = _ORIENTATIONS[orientation]
+    if transpose:
+        image = image.swapaxes(0, 1)
+    if flip_v:
+        image = image[::-1]
+    if flip_h:
+        image = image[:, ::-1]
+    return np.ascontiguousarray(image)
+
+
+def _gif_frames(data: bytes) -> int:
+    """The images of a GIF file (its image descriptors, up to its trailer or the end of the file)."""
+    steps = 0
+
+    def skip_blocks(pos: int) -> int:
+        nonlocal steps
+        while data[pos]:
+            pos += data[pos] + 1
+            steps += 1
+        return pos + 1
+
+    frames, pos = 0, 13
+    if data[10] & 0x80:  # a global colour table
+        pos += 3 * (2 << (data[10] & 7))
+    try:  # at most 2 million blocks (500 MB of full ones): a crafted file of tiny blocks costs little
+        while pos < len(data) and data[pos] != 0x3B and steps < 2_000_000:
+            steps += 1
+            if data[pos] == 0x21:  # an extension: its label, then data sub-blocks
+                pos = skip_blocks(pos + 2)
+            elif data[pos] == 0x2C:  # an image: its descriptor, local colour table, LZW code size, sub-blocks
+                frames += 1
+                flags = data[pos + 9]
+                pos += 10 + (3 * (2 << (flags & 7)) if flags & 0x80 else 0)
+                pos = skip_blocks(pos + 1)
+            else:
+                break
+    except IndexError:  # cut short: the images before the cut
+        pass
+    return frames
+
+
+def _tiff_pages(data: bytes) -> int:
+    """The full-resolution pages of a TIFF file: its IFDs, less reduced-resolution images (thumbnails) and
+    transparency masks (NewSubfileType bits 0 and 2)."""
+    order, big, at = _tiff_start(data)
+    pages, seen = 0, set()
+    while at and at not in seen and len(seen) < 10_000:  # a crafted chain costs little
+        seen.add(at)
+        try:
+            tags, nxt = _tiff_ifd(data, at, order, big, most=16)  # NewSubfileType (254) is the lowest tag
+        except (IndexError, ValueError):
+            break
+        pages += not tags.get(254, 0) & 0b101
+        at = nxt
+    return pages
+
+
+#: the headers of a binary PBM (magic, width, height, one whitespace) and PGM or PPM (then the largest value)
+_GAP = rb"(?:\s|#[^\n]*\n)+"
+_PBM_HEADER = re.compile(rb"P4" + _GAP + rb"(\d+)" + _GAP + rb"(\d+)\s")
+_PGM_HEADER = re.compile(rb"(P[56])" + _GAP + rb"(\d+)" + _GAP + rb"(\d+)" + _GAP + rb"(\d+)\s")
+_PAM_HEADER = re.compile(rb"P7\n(.*?)ENDHDR\n", re.S)
+_SPACE = re.compile(rb"[ \t\r\n]*")
+
+
+def _pnm_images(data: bytes) -> int:
+    """The images of a binary Netpbm file (PBM/PGM/PPM/PAM), which may hold several one after another: each
+    header, then its raster of the size it states (1 for the text formats, P1–P3, whose rasters are not
+    measured)."""
+    images, pos = 0, 0
+    while pos < len(data) and images < 100_000:
+        if data.startswith(b"P7", pos):
+            head = _PAM_HEADER.match(data, pos)
+            if head is None:
+                break
+            fields = dict(re.findall(rb"(WIDTH|HEIGHT|DEPTH|MAXVAL)\s+(\d+)", head.group(1)))
+            w, h, depth = (int(fields.get(k, b"0")) for k in (b"WIDTH", b"HEIGHT", b"DEPTH"))
+            size, start = w * h * depth * (2 if int(fields.get(b"MAXVAL", b"255")) > 255 else 1), head.end()
+        elif data.startswith(b"P4", pos):
+            m = _PBM_HEADER.match(data, pos)
+            if m is None:
+                break
+            size, start = (int(m.group(1)) + 7) // 8 * int(m.group(2)), m.end()  # rows padded to whole bytes
+        else:
+            m = _PGM_HEADER.match(data, pos)
+            if m is None:
+                break
+            w, h, top = int(m.group(2)), int(m.group(3)), int(m.group(4))
+            size, start = w * h * (3 if m.group(1) == b"P6" else 1) * (2 if top > 255 else 1), m.end()
+        images += 1
+        pos = _SPACE.match(data, start + size).end()  # type: ignore[union-attr]
+    return max(images, 1)
+
+
+def _frames(data: bytes) -> tuple[int, str]:
+    """How many images an image file holds, and what it is when more than one."""
+    try:
+        if data.startswith((b"P4", b"P5", b"P6", b"P7")):
+            return _pnm_images(data), "a Netpbm file of several images"
+        if data.startswith(_TIFF_SIGNATURES):
+            return _tiff_pages(data), "a multi-page TIFF"
+        if data.startswith((b"GIF87a", b"GIF89a")):
+            return _gif_frames(data), "an animated GIF"
+        if data.startswith(_PNG_SIGNATURE):
+            animation, before_idat = 0, False
+            for kind, pos, _ in _png_chunks(data):
+                if kind == b"acTL":
+                    animation = _u(data, pos, 4)
+                before_idat |= kind == b"fcTL"
+            # the default image (IDAT) is a frame of the animation when a frame control comes before it
+            return (animation + (0 if before_idat or not animation else 1)), "an animated PNG (APNG)"
+        if data.startswith(b"RIFF") and data[8:12] == b"WEBP":
+            return sum(kind == b"ANMF" for kind, _, _ in _riff_chunks(data)), "an animated WebP"
+    except (IndexError, ValueError):
+        pass
+    return 1, ""
+
+
+def image_frame_count(data: bytes) -> int:
+    """How many images an image file holds: the frames of an animated WebP, PNG (APNG) or GIF, the pages of a
+    multi-page TIFF (thumbnails and masks aside), the images of a binary Netpbm file (PGM, PPM, … one after
+    another); 1 for any other image file (at least 1).
+
+    Example:
+        >>> image_frame_count(b"P5 640 480 255 ")
+        1
+    """
+    return max(1, _frames(data)[0])
 
 
 def check_image_pixels(width: int, height: int, what: str) -> None:
@@ -186,7 +446,35 @@ def check_image_pixels(width: int, height: int, what: str) -> None:
                                f"fits); give a smaller image (or check the file: a crafted header?)")
 
 
+class MultiFrameImageError(CorruptFileError):
+    """An image file holds several images (an animated WebP, PNG or GIF, a multi-page TIFF), where one is read:
+    refused rather than reduced to its first, with how many it holds (:func:`image_frame_count`). A command that
+    skips unreadable frames (``adapt``) refuses it all the same: it is no damaged file but a sequence to split."""
+
+
+def _tiff_probe(orientation: int) -> bytes:
+    """A 3×2 (W×H) grey 8-bit uncompressed TIFF of the pixels 1…6, row by row, tagged with ``orientation``."""
+    tags = [(256, 3), (257, 2), (258, 8), (259, 1), (262, 1), (273, 8 + 2 + 11 * 12 + 4), (274, orientation),
+            (277, 1), (278, 2), (279, 6), (284, 1)]
+    ifd = len(tags).to_bytes(2, "little") + b"".join(
+        tag.to_bytes(2, "little") + (3).to_bytes(2, "little") + (1).to_bytes(4, "little") + value.to_bytes(4, "little")
+        for tag, value in tags)
+    return b"II*\x00" + (8).to_bytes(4, "little") + ifd + b"\x00" * 4 + bytes(range(1, 7))
+
+
+@functools.cache
+def _tiff_decoder_orients(orientation: int) -> bool:
+    """Whether OpenCV's TIFF decoder applies the TIFF ``orientation`` tag itself (OpenCV 5 does, even with
+    ``IMREAD_UNCHANGED``, where other formats come as stored): found once by decoding a tiny tagged TIFF."""
+    stored = np.arange(1, 7, dtype=np.uint8).reshape(2, 3)
+    img = cv2.imdecode(np.frombuffer(_tiff_probe(orientation), np.uint8), cv2.IMREAD_UNCHANGED)
+    return img is not None and not np.array_equal(img, stored)
+
+
 def _decode(path: PathLike, what: str, flags: int) -> np.ndarray:
+    """Decode the image file ``path`` upright (its EXIF orientation applied, :func:`upright`), after checking its
+    header (a sound PNG, a format read here, within :data:`~freespace.limits.MAX_IMAGE_PIXELS`) and that it holds
+    one image (an animated or multi-page file is refused: :func:`image_frame_count`)."""
     data = read_bytes(path, what, MAX_IMAGE_FILE_BYTES, _FILE_LIMIT)
     damage = _png_damage(data)
     if damage is not None:
@@ -196,15 +484,27 @@ def _decode(path: PathLike, what: str, flags: int) -> np.ndarray:
         raise CorruptFileError(f"cannot decode {what} {path}: not a readable image file (empty, truncated or another "
                                f"format; read here: {_FORMATS})")
     check_image_pixels(*size, f"{what} {path}")
+    frames, kind = _frames(data)
+    if frames > 1:
+        raise MultiFrameImageError(f"cannot read {what} {path}: it holds {frames} images ({kind}), and freespace "
+                                   f"reads one image a file rather than take the first alone; split it into one "
+                                   f"image file per frame (e.g. `magick FILE frame_%04d.png`) and give those")
+    if flags != cv2.IMREAD_UNCHANGED:  # the orientation is applied here, once, whatever the flags
+        flags |= cv2.IMREAD_IGNORE_ORIENTATION
     img = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
     if img is None:
         raise CorruptFileError(f"cannot decode {what} {path}: not a readable image file (empty, truncated or "
                                f"another format)")
+    orientation = image_orientation(data)
+    if orientation != 1 and not (data.startswith(_TIFF_SIGNATURES) and _tiff_decoder_orients(orientation)):
+        img = upright(img, orientation)
     return img
 
 
 def read_raw(path: PathLike, *, what: str = "image") -> np.ndarray:
-    """Decode an image file as stored: 8 or 16 bits, 1–4 channels (colour channels in RGB order).
+    """Decode an image file with its values as stored: 8 or 16 bits, 1–4 channels (colour channels in RGB order),
+    upright as :func:`read_image` reads it (its EXIF orientation applied, so that a label stays on its image's
+    pixels); a file of several images is refused (:class:`MultiFrameImageError`).
 
     For label ids and depth maps, whose values must not be converted.
     """
@@ -215,14 +515,20 @@ def read_raw(path: PathLike, *, what: str = "image") -> np.ndarray:
 
 
 def read_image(path: PathLike, *, what: str = "image") -> np.ndarray:
-    """Read an image file.
+    """Read an image file, upright: its EXIF orientation (a JPEG's, TIFF's, PNG's ``eXIf`` or WebP's; a dash-cam
+    or phone frame stored turned, :func:`image_orientation`) applied, as image viewers show it, so that a frame
+    tagged "turn 90°" comes out ``W×H`` where its pixels are stored ``H×W``. Every reader here does the same
+    (:func:`read_raw`: labels and depth maps; disparity and depth PNGs), so that a label or a right image stays
+    on its frame's pixels; :func:`image_header_size` gives the size so read.
 
     Returns:
         ``H×W×3 uint8`` RGB for colour files (alpha dropped), ``H×W uint8`` for grey files.
         16-bit files are scaled to 8 bits.
 
     Raises:
-        InputFileError: the file is missing or unreadable. CorruptFileError: it is not an image.
+        InputFileError: the file is missing or unreadable. CorruptFileError: it is not an image; or
+        :class:`MultiFrameImageError`: it holds several (an animated WebP, PNG or GIF, a multi-page TIFF: split
+        it into one file per frame; freespace never takes the first alone).
     """
     img = _decode(path, what, cv2.IMREAD_UNCHANGED)
     if img.dtype == np.uint16:

@@ -43,13 +43,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, param
+from freespace.runtime.signals import signals_held
 
 PathLike = str | os.PathLike[str]
 
 __all__ = ["PathLike", "atomic_write_bytes", "write_files_together", "atomic_write_text", "encode_json", "write_json",
            "write_csv", "check_outputs", "check_writable", "check_output_kind", "check_writable_files", "missing_input",
            "read_bytes", "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "unfollowable_link",
-           "META", "MARK", "FILE_SUFFIXES", "writing_as", "mark_written", "check_suffix"]
+           "META", "MARK", "FILE_SUFFIXES", "writing_as", "mark_written", "check_suffix", "shown_path"]
 
 # ---------------------------------------------------------------------------------------------------
 # atomic writes
@@ -271,7 +272,9 @@ def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:
     files are removed and every earlier file at the targets is left as it was.
 
     Every target is checked first (:func:`replaceable`: no device, pipe or socket, no read-only file); a
-    file that replaces one keeps its mode. Returns the paths written.
+    file that replaces one keeps its mode. The renames run with SIGINT, SIGTERM and SIGHUP held back
+    (:func:`freespace.runtime.signals.signals_held`), so a signal never leaves some targets new and others old.
+    Returns the paths written.
     """
     staged: list[tuple[str, Path]] = []
     targets = [Path(t) for t in files]
@@ -291,11 +294,12 @@ def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:
                 mark_written(tmp)
             except OSError as exc:
                 raise OutputError(f"cannot write {target}: {exc.strerror}; choose a writable output path") from None
-        for tmp, target in staged:
-            try:
-                os.replace(tmp, target)
-            except OSError as exc:
-                raise OutputError(f"cannot write {target}: {exc.strerror}; choose another output path") from None
+        with signals_held():  # every target or none: SIGINT/SIGTERM/SIGHUP wait for the renames
+            for tmp, target in staged:
+                try:
+                    os.replace(tmp, target)
+                except OSError as exc:
+                    raise OutputError(f"cannot write {target}: {exc.strerror}; choose another output path") from None
     except BaseException:
         for tmp, _ in staged:
             Path(tmp).unlink(missing_ok=True)
@@ -305,12 +309,26 @@ def write_files_together(files: Mapping[PathLike, bytes]) -> list[Path]:
 
 def atomic_write_text(path: PathLike, text: str) -> Path:
     """Write UTF-8 ``text`` to ``path`` atomically. Returns the path written."""
-    return atomic_write_bytes(path, text.encode("utf-8"))
+    return atomic_write_bytes(path, shown_path(text).encode("utf-8"))  # file names of any bytes: valid UTF-8
 
 
 def encode_json(obj: Any) -> bytes:
-    """``obj`` as the bytes of an indented UTF-8 JSON file (NaN/inf are rejected: use None)."""
-    return (json.dumps(obj, indent=2, allow_nan=False) + "\n").encode("utf-8")
+    """``obj`` as the bytes of an indented UTF-8 JSON file (NaN/inf are rejected: use None); its strings as
+    :func:`shown_path` shows them (a file name of bytes that are not UTF-8 holds no lone surrogate, which strict
+    JSON readers refuse)."""
+    return (json.dumps(_shown_strings(obj), indent=2, allow_nan=False) + "\n").encode("utf-8")
+
+
+def _shown_strings(obj: Any) -> Any:
+    """``obj`` with every string in it (keys too, at any depth of dicts, lists and tuples) as :func:`shown_path`
+    shows it."""
+    if isinstance(obj, str):
+        return shown_path(obj)
+    if isinstance(obj, dict):
+        return {shown_path(k) if isinstance(k, str) else k: _shown_strings(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_shown_strings(v) for v in obj]
+    return obj
 
 
 def check_output_kind(path: Path, flag: str, folder: bool) -> None:
@@ -422,9 +440,11 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
         inputs: parameter name → input path (file or folder; None = not given).
 
     Raises :class:`InvalidOptionError` when an output is an input, lies inside an input folder, or is a
-    folder that holds an input, or when two outputs are the same path. Symbolic links are resolved
-    first, so a link to an input counts as the input. Then :class:`OutputError` for an output that is an
-    existing regular file that the running command did not write.
+    folder that holds an input, when an input folder holds a symbolic link (a file or a folder, at any depth)
+    that leads to an existing output or into it (the command would read the file, then replace it), or when
+    two outputs are the same path. Symbolic links are resolved first, so a link to an input counts as the
+    input. Then :class:`OutputError` for an output that is an existing regular file that the running command
+    did not write.
     """
     def real(p: PathLike) -> Path:
         return Path(os.path.realpath(os.path.expanduser(os.fspath(p))))
@@ -446,6 +466,14 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
             if src.is_relative_to(out):
                 raise InvalidOptionError(f"the input {in_name} {src} lies inside {out_name} {out}; choose an "
                                          f"output folder that holds no input")
+    existing = {name: out for name, out in outs.items() if out.exists()}  # a new output holds no input yet
+    for in_name, src in ins.items() if existing else ():
+        found = _link_into(src, existing) if src.is_dir() else None
+        if found is not None:
+            out_name, link, target = found
+            raise InvalidOptionError(f"the input {in_name} {src} holds {link.relative_to(src)}, a symbolic link to "
+                                     f"{target} in {out_name} {existing[out_name]}, which the command would read, then "
+                                     f"replace; choose another output path, or put a copy of the file in its place")
     seen: dict[Path, str] = {}
     for out_name, out in outs.items():
         if out in seen:
@@ -454,6 +482,31 @@ def check_outputs(outputs: dict[str, PathLike | None], inputs: dict[str, PathLik
     for key, path in outputs.items():  # a regular file there is a file output (a folder output is no file)
         if path is not None:
             _refuse_foreign(Path(os.path.expanduser(os.fspath(path))), named(key))
+
+
+def _link_into(folder: Path, outputs: Mapping[str, Path]) -> tuple[str, Path, Path] | None:
+    """The first symbolic link under ``folder`` (in name order, a folder's own links before its subfolders'; a link
+    to a folder is not followed into) that leads to one of ``outputs`` (name → existing path, resolved) or into it:
+    ``(name, link, where it leads)``, else None. Only links can: a file of the folder that is no link lies outside
+    every output (checked before)."""
+    stack = [folder]
+    while stack:
+        try:
+            with os.scandir(stack.pop()) as items:
+                entries = sorted(items, key=lambda e: e.name)
+        except OSError:
+            continue  # an unreadable folder: its files are not read either
+        below = []
+        for entry in entries:
+            if entry.is_symlink():
+                target = Path(os.path.realpath(entry.path))
+                name = next((n for n, out in outputs.items() if target.is_relative_to(out)), None)
+                if name is not None:
+                    return name, Path(entry.path), target
+            elif entry.is_dir(follow_symlinks=False):
+                below.append(Path(entry.path))
+        stack.extend(reversed(below))
+    return None
 
 
 def write_csv(path: PathLike, fields: Sequence[str], rows: Iterable[Mapping[str, Any]],
@@ -517,3 +570,20 @@ def read_bytes(path: PathLike, what: str, max_bytes: int | None = None, limit: s
     return data
 
 
+
+
+def shown_path(path: PathLike | bytes) -> str:
+    """``path`` (or any file name) as a message, a printed line or a record writes it: itself when it is valid
+    Unicode; else (a name of bytes that are not UTF-8, which Python holds as lone surrogates that no UTF-8 output
+    can take: ``UnicodeEncodeError``) with each such byte written ``\\xNN`` (``b"fr\\xe9me.png"`` is shown
+    ``fr\\xe9me.png``). For showing only: a file is opened, and an output named, by the path itself."""
+    text = os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        pass
+    try:
+        return os.fsencode(text).decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # surrogates that no file name decoded to
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")

@@ -11,8 +11,9 @@ name and every entry it wrote (``"name"`` a file, ``"name/"`` a whole subtree, e
 * a lock (``OUT/.freespace/lock``, ``flock``) keeps two runs out of one folder: a whole run takes it
   alone, the shards of one run (:mod:`freespace.runtime.shard`) and the cells of one ``reproduce`` share it;
 * staged output (:meth:`OwnedFolder.staged`) is written under ``OUT/.freespace/stage-<pid>-…`` and moved
-  into place file by file (one atomic rename each) when the block ends; an interrupted stage
-  (SIGINT, SIGTERM, or SIGKILL) is removed by the next run that claims the folder.
+  into place file by file (one atomic rename each) when the block ends, SIGINT, SIGTERM and SIGHUP held back
+  until the last file is in place (all or nothing); an interrupted stage (a signal before the move, or
+  SIGKILL, which cannot be held back) is removed by the next run that claims the folder.
 
 Entries are confined to the folder. A manifest entry must be a relative POSIX path of plain names (no
 ``..``, ``.``, empty or absolute path, nor one inside ``.freespace``); a manifest that lists another is
@@ -40,7 +41,7 @@ The folder itself is never renamed or replaced, so an output folder that is a sy
 stage), so a run killed half-way leaves only files that its next run knows.
 
 Also here: :func:`freespace.io.files.write_files_together` (several output files written all or nothing, earlier
-files kept when it fails). Only the standard library is imported.
+files kept when it fails). Only the standard library is imported (and :mod:`freespace.runtime.signals`).
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ from freespace.io.files import (
     special_kind,
     write_files_together,
 )
+from freespace.runtime.signals import signals_held
 
 PathLike = str | os.PathLike[str]
 
@@ -221,7 +223,10 @@ class OwnedFolder:
 
         When the block raises (or is interrupted), the stage is removed and the folder is left as it
         was. Files are moved one atomic rename each, ``.json`` files last (a summary appears once the
-        files it describes are in place).
+        files it describes are in place), with ``SIGINT``, ``SIGTERM`` and ``SIGHUP`` held back until the last
+        is in place (:func:`freespace.runtime.signals.signals_held`; the signal then ends the command): every
+        file of the stage or none, never some. ``SIGKILL`` cannot be held back: a run killed during the move
+        leaves files its manifest lists (the next run replaces them) and its stage (the next run removes it).
         """
         try:
             stage = Path(tempfile.mkdtemp(dir=self._meta, prefix=f"{_STAGE}{os.getpid()}-"))
@@ -241,18 +246,24 @@ class OwnedFolder:
             for w in targets:
                 self._not_in_a_nested_folder(w)
             old = {w: replaceable(t, f"{self.flag} {self.path}: the output file") for w, t in targets.items()}
-            self.record(written)
-            for path in files:
-                rel = path.relative_to(stage).as_posix()
-                target = targets[rel]
-                target.parent.mkdir(parents=True, exist_ok=True)
-                if not path.is_symlink():
-                    keep_mode(path, old[rel])
-                os.replace(path, target)
-            if stale:
-                self.forget(stale)
+            with signals_held():  # all the files, or (a signal before) none: SIGINT/SIGTERM/SIGHUP wait for the move
+                self.record(written)
+                for path in files:
+                    rel = path.relative_to(stage).as_posix()
+                    _move(path, targets[rel], old[rel])
+                if stale:
+                    self.forget(stale)
         finally:
             shutil.rmtree(stage, ignore_errors=True)
+
+
+def _move(path: Path, target: Path, old: os.stat_result | None) -> None:
+    """Move the staged file ``path`` onto ``target`` in one rename, with the mode of ``old``, the file it replaces
+    (a link keeps its own)."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    if not path.is_symlink():
+        keep_mode(path, old)
+    os.replace(path, target)
 
 
 def _read_manifest(path: Path) -> tuple[str | None, list[str]]:

@@ -36,10 +36,13 @@ from freespace.errors import CorruptFileError, InputFileError, InvalidOptionErro
 from freespace.io.codecs import IMAGE_SUFFIXES, check_image_pixels, read_image
 from freespace.io.files import PathLike, keep_mode, mark_written, missing_input, replaceable
 
-__all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path",
+__all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path", "is_image_path",
            "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "DEFAULT_FPS"]
 
-VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".ts", ".y4m")
+#: the suffixes of the files decoded as videos (FFmpeg), an animated GIF among them; still images are
+#: :data:`IMAGE_SUFFIXES` (PNG, JPEG, PGM, …), and a file of any other suffix is refused, never guessed at
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".ts", ".m2ts", ".mts",
+                  ".y4m", ".flv", ".3gp", ".ogv", ".mjpeg", ".mjpg", ".h264", ".h265", ".hevc", ".gif")
 DEFAULT_FPS = 10.0
 """Frame rate given to folders and globs of images (KITTI's cameras run at 10 Hz)."""
 
@@ -63,6 +66,33 @@ def _quiet_opencv() -> Iterator[None]:
             cv_log.setLogLevel(old)
 
 
+def _unicode(name: str) -> bool:
+    """Whether ``name`` is valid Unicode (no surrogates: what a file name of bytes that are not UTF-8 holds)."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def _opencv_name(path: Path, *, folder: bool = False) -> Iterator[str]:
+    """A name under which OpenCV opens ``path`` (``folder``: a file in the folder ``path``, the name's last part
+    to be added): ``path`` itself, or, when it is no valid Unicode (a file name of bytes that are not UTF-8, which
+    Python holds as surrogates and OpenCV's Python binding crashes on), a symbolic link of a plain name to it in a
+    temporary folder, there while the ``with`` block lasts (open the capture or writer inside it: FFmpeg keeps the
+    file open, not its name)."""
+    name = os.fspath(path)
+    if _unicode(name):
+        yield name
+        return
+    suffix = "" if folder else "".join(c for c in path.suffix if c.isascii() and (c.isalnum() or c == "."))
+    with tempfile.TemporaryDirectory(prefix="freespace-") as tmp:
+        link = os.path.join(tmp, ("folder" if folder else "input") + suffix)
+        os.symlink(os.path.abspath(name), link)
+        yield link
+
+
 def _natural_key(path: Path) -> list[object]:
     """Sort key that orders ``frame_2`` before ``frame_10`` (digit runs compare as numbers)."""
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path.name)]
@@ -71,6 +101,11 @@ def _natural_key(path: Path) -> list[object]:
 def is_video_path(path: PathLike) -> bool:
     """True when ``path`` names a file with a video suffix (:data:`VIDEO_SUFFIXES`)."""
     return Path(path).suffix.lower() in VIDEO_SUFFIXES
+
+
+def is_image_path(path: PathLike) -> bool:
+    """True when ``path`` names a file with a still-image suffix (:data:`IMAGE_SUFFIXES`)."""
+    return Path(path).suffix.lower() in IMAGE_SUFFIXES
 
 
 def _rgb(image: np.ndarray) -> np.ndarray:
@@ -143,12 +178,14 @@ class FrameSource:
 
 
 def _open_capture(path: Path) -> cv2.VideoCapture:
-    with _quiet_opencv():
-        cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    with _quiet_opencv(), _opencv_name(path) as name:
+        cap = cv2.VideoCapture(name, cv2.CAP_FFMPEG)
     if not cap.isOpened():
         cap.release()
         raise CorruptFileError(f"cannot decode video {path}: not a video file OpenCV/FFmpeg can read (corrupt, "
                                f"truncated or an unsupported codec)")
+    # frames upright, as images are read: a phone's video turned by its rotation metadata (OpenCV's default)
+    cap.set(cv2.CAP_PROP_ORIENTATION_AUTO, 1)
     try:  # the size its stream states, before a frame is decoded
         check_image_pixels(int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)),
                            f"the frames of video {path}")
@@ -199,9 +236,14 @@ def open_frames(source: PathLike, *, fps: float | None = None, default_fps: floa
     """Open a video file, a folder of images, one image, or a glob of images as a :class:`FrameSource`.
 
     What ``source`` names, in this order: an existing folder (its images, :data:`IMAGE_SUFFIXES`, in
-    natural order: ``2.png`` before ``10.png``); an existing image file (one frame); another existing
-    file (a video, decoded with FFmpeg); otherwise a glob pattern (``*``, ``?``, ``[``; its image files
-    in natural order). The first frame is decoded here, so an unreadable source fails now.
+    natural order: ``2.png`` before ``10.png``); an existing image file (one frame); an existing video file
+    (:data:`VIDEO_SUFFIXES`, decoded with FFmpeg); otherwise a glob pattern (``*``, ``?``, ``[``; its image files
+    in natural order). A file is an image or a video by its suffix; one of neither is refused. The first frame is
+    decoded here, so an unreadable source fails now.
+
+    Images are read upright (their EXIF orientation applied, :func:`freespace.io.codecs.read_image`); an image
+    file that holds several (an animated WebP or PNG, a multi-page TIFF) is refused when it is read, with how many
+    it holds: split it into one file per frame (an animated GIF is a video here).
 
     Args:
         source: path or glob pattern.
@@ -212,9 +254,11 @@ def open_frames(source: PathLike, *, fps: float | None = None, default_fps: floa
         The :class:`FrameSource` (iterate it for the frames).
 
     Raises:
-        InputFileError: the path does not exist, the folder has no images, the glob matches no image, or
-            two of its images give one frame name (``a.png`` and ``a.jpg``; letter case aside).
-        CorruptFileError: the video cannot be decoded or has no frames; the first image is not an image.
+        InputFileError: the path does not exist, the folder has no images, the glob matches no image, a file
+            has neither an image nor a video suffix, or two of its images give one frame name (``a.png`` and
+            ``a.jpg``; letter case aside).
+        CorruptFileError: the video cannot be decoded or has no frames; the first image is not an image, or holds
+            several.
         InvalidOptionError: a frame rate ≤ 0.
     """
     for name, value in (("fps", fps), ("default fps", default_fps)):
@@ -230,17 +274,15 @@ def open_frames(source: PathLike, *, fps: float | None = None, default_fps: floa
                                  f"folder of frames or a glob such as 'frames/*.png'")
         src = _image_source("folder", spec, paths, default_fps)
     elif path.is_file():
-        if path.suffix.lower() in IMAGE_SUFFIXES:
+        if is_image_path(path):
             src = _image_source("image", spec, [path], default_fps)
-        else:
-            try:
-                src = _probe_video(path, default_fps)
-            except CorruptFileError:
-                if is_video_path(path):
-                    raise
-                raise CorruptFileError(f"input {path} is no image freespace reads ({', '.join(IMAGE_SUFFIXES)}) "
-                                       f"and no video FFmpeg decodes; convert it to such images or to an MP4 "
-                                       f"video") from None
+        elif is_video_path(path):
+            src = _probe_video(path, default_fps)
+        else:  # decided by the suffix, never by what FFmpeg makes of it (it decodes a PGM as a one-frame video)
+            raise InputFileError(f"input {path} is no image freespace reads ({', '.join(IMAGE_SUFFIXES)}) and no "
+                                 f"video FFmpeg decodes ({', '.join(VIDEO_SUFFIXES)}): its suffix "
+                                 f"{path.suffix or '(none)'} is neither; convert it to such images or to an MP4 "
+                                 f"video (or give it the suffix of its format)")
     elif path.exists():  # a named pipe, socket or device: never opened (a pipe would block)
         raise missing_input(path, "input")
     elif _GLOB_CHARS.search(spec):
@@ -299,14 +341,15 @@ class VideoWriter:
         replaceable(self.path)  # no device, pipe or read-only file: before the first frame is encoded
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.stem}.", suffix=".tmp.mp4")
+            stem = self.path.stem if self.path.stem.isprintable() and _unicode(self.path.stem) else "video"
+            fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{stem}.", suffix=".tmp.mp4")
             os.close(fd)
         except OSError as exc:
             raise OutputError(f"cannot write {self.path}: {exc.strerror}; choose a writable output folder") from None
         self._tmp = Path(tmp)
-        with _quiet_opencv():
-            writer = cv2.VideoWriter(str(self._tmp), cv2.CAP_FFMPEG, cv2.VideoWriter_fourcc(*"mp4v"), self.fps,
-                                     (w + w % 2, h + h % 2))
+        with _quiet_opencv(), _opencv_name(self._tmp.parent, folder=True) as folder:
+            writer = cv2.VideoWriter(os.path.join(folder, self._tmp.name), cv2.CAP_FFMPEG,
+                                     cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w + w % 2, h + h % 2))
         if not writer.isOpened():
             self.abort()
             raise OutputError(f"cannot open an MP4 (mp4v) writer for {self.path}; this OpenCV build lacks FFmpeg "
