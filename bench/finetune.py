@@ -118,8 +118,8 @@ def _cell_text(s: dict) -> str:
 
 def table(results: list[dict]) -> str:
     """The markdown table of the cells: F [95 %] (precision / recall) per set, minutes of training."""
-    rows = ["| start | frames | other `val` frames | `val` 51–101 (unseen) | dusk drive | training (min) | best epoch |",
-            "|---|---:|---|---|---|---:|---:|"]
+    rows = ["| start | frames | other `val` frames | `val` 51–101 (unseen) | dusk drive | training (min) "
+            "| best epoch |", "|---|---:|---|---|---|---:|---:|"]
     for r in sorted(results, key=lambda r: (r["start"], r["frames"])):
         rows.append(f"| {r['start']} | {r['frames']} | {_cell_text(r['other'])} | {_cell_text(r['unseen'])} | "
                     f"{_cell_text(r['dusk'])} | {r['train_seconds'] / 60:.1f} | {r['best_epoch']} |")

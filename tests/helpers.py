@@ -134,4 +134,10 @@ def refused(capsys: pytest.CaptureFixture, argv: list[str], *, match: str | None
     return err
 
 
-
+def tiny_model_folder(parent: Path, size: tuple[int, int] = (32, 96)) -> Path:
+    """A model folder ``parent/tiny-road``: ``model.ckpt`` (a tiny Fast-SCNN of input ``size``, H×W) and a card."""
+    folder = parent / "tiny-road"
+    folder.mkdir()
+    tiny_road_checkpoint(folder / "model.ckpt", size, width=0.25)
+    (folder / "README.md").write_text("# tiny-road — a test model\n")
+    return folder

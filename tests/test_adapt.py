@@ -18,7 +18,7 @@ import pytest
 from freespace.cli import main
 from freespace.io.codecs import write_image
 
-from helpers import road_frame, tiny_road_checkpoint
+from helpers import road_frame, tiny_model_folder
 
 pytest.importorskip("onnxruntime")
 
@@ -31,11 +31,7 @@ FOLDER_FILES = {"model.onnx", "model.ckpt", "README.md", "before_after.jpg", "co
 @pytest.fixture(scope="module")
 def model(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A model folder: ``model.ckpt`` (the tiny network) and a card."""
-    folder = tmp_path_factory.mktemp("models") / "tiny-road"
-    folder.mkdir()
-    tiny_road_checkpoint(folder / "model.ckpt", SIZE, width=0.25)
-    (folder / "README.md").write_text("# tiny-road — a test model\n")
-    return folder
+    return tiny_model_folder(tmp_path_factory.mktemp("models"), SIZE)
 
 
 def _frames(folder: Path, n: int, seed: int = 500) -> Path:

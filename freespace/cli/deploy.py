@@ -25,6 +25,9 @@ def predict_parser(p: argparse.ArgumentParser) -> None:
                    help="write the confidence PNGs only, not overlays/ (for real time: an overlay PNG costs ~3 masks)")
     p.add_argument("--threads", type=WORKERS, help="the network's CPU threads: ONNX Runtime's, or PyTorch's with "
                                                     "--checkpoint (default: the cores this process may use)")
+    p.add_argument("--tta", action="store_true", help="test-time augmentation: each frame seen with its light "
+                                                      "normalised, averaged with its mirror image (two network passes "
+                                                      "a frame; finds more road in dark or bright frames)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
     p.add_argument("--out", required=True, help="output folder (PNGs), or OUT.mp4: the overlaid video")
     p.set_defaults(func=cmd_predict)
@@ -36,7 +39,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
     summary = predict(args.input, args.out, checkpoint=args.checkpoint, onnx=args.onnx, threads=args.threads,
                       batch_size=args.batch_size, shard=args.shard, overlays=not args.no_overlays,
-                      progress=not args.no_progress)
+                      progress=not args.no_progress, tta=args.tta)
     print(predict_report(summary, args.out, args.shard))
     return 0
 

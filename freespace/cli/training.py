@@ -73,6 +73,8 @@ def evaluate_parser(p: argparse.ArgumentParser) -> None:
     f.add_argument("--tolerance", type=bounded_int(0, 64), metavar="LEVELS",
                    help="palette: a pixel within LEVELS of a colour on every channel has it (default 8)")
     p.add_argument("--threads", type=WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
+    p.add_argument("--tta", action="store_true", help="score the model as predict --tta runs it (light normalised, "
+                                                      "mirror averaged)")
     p.add_argument("--no-overlays", action="store_true", help="labelled folder: skip the TP/FN/FP overlays")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (a new one, or one this command wrote)")
@@ -87,8 +89,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                  split=args.split, subset=args.subset, splits_dir=args.splits_dir, images=args.images,
                  labels=args.labels, label_format=args.label_format, road=args.road, ignore=args.ignore,
                  tolerance=args.tolerance, labels_like=args.labels_like, threads=args.threads,
-                 overlays=not args.no_overlays,
-                 progress=not args.no_progress)
+                 overlays=not args.no_overlays, progress=not args.no_progress, tta=args.tta)
     print(evaluate_report(m, args.out))
     return 0
 

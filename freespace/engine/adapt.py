@@ -8,8 +8,9 @@ label, by **mean-teacher self-training in rounds**:
 - at the start of each round (one pass over the frames) the teacher labels every frame (ONNX Runtime on a
   float32 export of the teacher, ~10× a PyTorch forward on a CPU): its road probability on the frame and on its
   mirror image, averaged, both seen with their light normalised (a gamma to a mean brightness of
-  :data:`LABEL_BRIGHTNESS` and a local contrast equalisation, :func:`normalise_light`, which finds most of the
-  road that the published model misses at dusk); pixels with ``p > threshold`` are road, ``p < 1 − threshold``
+  :data:`~freespace.data.photometry.LABEL_BRIGHTNESS` and a local contrast equalisation,
+  :func:`~freespace.data.photometry.normalise_light`, which finds most of the road that the published model misses
+  at dusk); pixels with ``p > threshold`` are road, ``p < 1 − threshold``
   not road, the rest ignored;
 - the *student* learns those labels on strongly augmented views (random scale and crop of half the frame's
   width, :data:`CROP_WIDTH`; mirror, brightness, contrast, saturation, gamma, blur, noise:
@@ -60,7 +61,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from freespace.data.photometry import strong_photometry
+from freespace.data.photometry import normalise_light, strong_photometry
 from freespace.engine.adapt_io import (
     CHECKPOINT,
     MAX_FRAMES,
@@ -111,12 +112,6 @@ IGNORE = 255
 #: the student's views are crops of this share of the frame's width, at the frame's scale: half the cost of a
 #: step (the network is fully convolutional; the published model sees whole frames as before)
 CROP_WIDTH = 0.5
-#: the teacher labels a frame after a gamma that brings its mean brightness to this (in [0, 1]; the published
-#: model's KITTI frames average 0.35) and a local contrast equalisation (:func:`normalise_light`): seeing CamVid's
-#: dusk frames so, the first published ``real-road-fast``'s F there (commit 732c574) rises from 0.35 to 0.76, on
-#: its daylight ones it stays 0.88 (chosen on those development frames; the student still learns the frames as
-#: they are)
-LABEL_BRIGHTNESS = 0.40
 
 
 #: the bounds of adapt's numeric options (the command line's types too); of them only ``minutes`` may be None
@@ -196,20 +191,10 @@ def _teacher_session(net: Any, size: tuple[int, int], threads: int) -> Any:
     return ort.InferenceSession(buf.getvalue(), session_options(threads), providers=["CPUExecutionProvider"])
 
 
-def normalise_light(image: np.ndarray) -> np.ndarray:
-    """The teacher's view of an ``H×W×3 uint8`` RGB frame: a gamma that brings its mean brightness to
-    :data:`LABEL_BRIGHTNESS`, then CLAHE (clip limit 2, 8×8 tiles) on the lightness (CIE Lab's L)."""
-    x = np.clip(image.astype(np.float32) / 255.0, 1e-6, 1.0)
-    gamma = math.log(LABEL_BRIGHTNESS) / math.log(min(max(float(x.mean()), 1e-3), 0.999))
-    lab = cv2.cvtColor((x ** gamma * 255.0).astype(np.uint8), cv2.COLOR_RGB2LAB)
-    lab[..., 0] = cv2.createCLAHE(clipLimit=2.0, tileGridSize=(8, 8)).apply(np.ascontiguousarray(lab[..., 0]))
-    return cv2.cvtColor(lab, cv2.COLOR_LAB2RGB)
-
-
 def road_probabilities(session: Any, images: np.ndarray, batch: int = 8, normalise: bool = False) -> np.ndarray:
     """The road probability (``N×h×w float16`` in [0, 1]) of ``N×h×w×3 uint8`` frames at the network's size:
     the mean of the network's on the frame and (mirrored back) on its mirror image; with ``normalise``, on
-    the frames as :func:`normalise_light` makes them (the teacher's view)."""
+    the frames as :func:`~freespace.data.photometry.normalise_light` makes them (the teacher's view)."""
     out = np.empty(images.shape[:3], np.float16)
     for i in range(0, len(images), batch):
         chunk = images[i:i + batch]
@@ -381,8 +366,9 @@ def _guard(before: dict[str, float], now: dict[str, float], settings: AdaptSetti
     """Refuse a model that drifted to all road, no road or far from the published one (see the module).
 
     ``view_share``: the published model's road share of the held-out frames in the teacher's view
-    (:func:`normalise_light`), which the student learns: the share may rise to twice the larger of it and the
-    share before (dusk frames, where the light normalisation finds the road the published model misses).
+    (:func:`~freespace.data.photometry.normalise_light`), which the student learns: the share may rise to twice the
+    larger of it and the share before (dusk frames, where the light normalisation finds the road the published
+    model misses).
 
     Raises:
         CollapseError: one line that says what drifted, by how much, and what to change.
@@ -657,6 +643,8 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     before, held_before = _measure(session, data, source_masks)
     _check_teacher(data, before, held_before, p, settings, checkpoint)
     view_share = _view_share(data)
+    tta = data.probs[data.held].astype(np.float32)  # the published model as predict runs it with tta
+    before_tta = {"road_share": view_share, "confidence": float(np.maximum(tta, 1 - tta).mean())}
     student = _student(teacher)
     opt = torch.optim.AdamW(student.parameters(), lr=settings.lr, weight_decay=0.0)
     per_step = _batch_split(settings.batch_size, src is not None)[0]
@@ -679,5 +667,5 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
         if stats["stopped"]:
             break
     bar.close()
-    return {"net": teacher, "rounds": rows, "before": before, "after": now, "held": held,
+    return {"net": teacher, "rounds": rows, "before": before, "before_tta": before_tta, "after": now, "held": held,
             "held_probs": (held_before, held_now), "train_frames": len(train)}

@@ -333,10 +333,12 @@ def _frames_line(frames: Frames, what: str) -> str:
 def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | None) -> str:
     """The adapted model's card (Markdown)."""
     s, b, a = summary["settings"], summary["before"], summary["after"]
+    t = summary.get("before_tta", {})
     rows = [("road share (p ≥ 0.5)", "road_share"), ("mean confidence, max(p, 1 − p)", "confidence")]
     if "source_agreement" in a:
         rows.append(("source frames: mask agreement with the published model", "source_agreement"))
-    table = "\n".join(f"| {label} | {b.get(k, 1.0):.1%} | {a[k]:.1%} |" for label, k in rows)
+    table = "\n".join(f"| {label} | {b.get(k, 1.0):.1%} | {t[k]:.1%} | {a[k]:.1%} |" if k in t else
+                      f"| {label} | {b.get(k, 1.0):.1%} | — | {a[k]:.1%} |" for label, k in rows)
     size = summary["image_size"]
     limit = f", at most {s['minutes']:g} min" if s["minutes"] else ""
     facts = "\n".join(f"| {k} | {v} |" for k, v in (
@@ -366,8 +368,11 @@ quickstart).
 
 ## How the prediction changed (the held-out frames)
 
-| | before | after |
-|---|---|---|
+The published model as it is, as `freespace predict` runs it with test-time augmentation (`tta`: light
+normalised, mirror averaged; what adapt must add to, since its teacher sees frames so), and adapted:
+
+| | before | before, with tta | after |
+|---|---|---|---|
 {table}
 
 ![held-out frames: the road (magenta) before (left) and after (right) adaptation](before_after.jpg)
@@ -407,7 +412,8 @@ def write_model_folder(stage: Path, run: dict[str, Any], hp: dict[str, Any], fol
                "frame_sizes": [list(s) for s in frames.sizes], "source_frames": len(src.names) if src else 0,
                "held_out": len(run["held"]), "train_frames": run["train_frames"], "settings": config,
                "rounds": len(run["rounds"]), "seconds": round(seconds, 1), "threads": run["threads"],
-               "before": run["before"], "after": run["after"], "export": {"fp16": export["fp16"]},
+               "before": run["before"], "before_tta": run["before_tta"], "after": run["after"],
+               "export": {"fp16": export["fp16"]},
                "record": {"commit": package_commit(), "torch": torch.__version__}}
     atomic_write_text(stage / "README.md", _card(summary, folder, frames, src))
     write_json(stage / "summary.json", summary)

@@ -313,7 +313,7 @@ def _run_record(predictor: Predictor, source: FrameSource, shard: tuple[int, int
 
     path = getattr(predictor, "path", None)
     spec = os.path.abspath(source.spec) if source.kind == "glob" else os.path.realpath(source.spec)
-    names = b"\n".join(sorted(os.fsencode(p.stem) for p in source.paths))  # any name, as its bytes
+    names = b"\n".join(sorted(os.fsencode(p.stem) for p in source.paths))  # any name, as its bytes (and tta)
     size = getattr(predictor, "resize_to", None)
     name = getattr(predictor, "name", None)
     return {"model": shown_path(name) if isinstance(name, str) else name,  # as its JSON file holds them
@@ -321,7 +321,7 @@ def _run_record(predictor: Predictor, source: FrameSource, shard: tuple[int, int
             "image_size": list(size) if size is not None else None, "input": shown_path(spec),
             "frames": len(source.paths),
             "frames_sha256": hashlib.sha256(names).hexdigest(), "shards": shard[1] if shard else None,
-            "overlays": overlays}
+            "overlays": overlays, "tta": getattr(predictor, "tta", False)}
 
 
 def _join_run(folder: OwnedFolder, record: dict[str, Any]) -> None:
@@ -380,7 +380,8 @@ def _summary(predictor: Predictor, stats: RunStats, **extra: Any) -> dict[str, A
     return {"frames": n, "seconds_per_frame": stats.network_seconds / n if n else None,
             "frames_per_second": n / wall if n and wall > 0 else None, "seconds": wall,
             "network_share": stats.network_seconds / wall if n and wall > 0 else None, "model": predictor.name,
-            "image_size": list(predictor.resize_to) if predictor.resize_to is not None else None, **extra}
+            "image_size": list(predictor.resize_to) if predictor.resize_to is not None else None,
+            "tta": getattr(predictor, "tta", False), **extra}
 
 
 def _predict_into(predictor: Predictor, source: FrameSource, out: Path, batch_size: int, progress: bool,
@@ -440,14 +441,16 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
 
 def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
             threads: int | None = None, batch_size: int = 4, shard: str | tuple[int, int] | None = None,
-            overlays: bool = True, progress: bool = True) -> dict[str, Any]:
+            overlays: bool = True, progress: bool = True, tta: bool = False) -> dict[str, Any]:
     """``freespace predict``: the road confidence PNGs and overlays of every frame of ``inputs`` in the folder
     ``out`` (:func:`predict_folder`), or, when ``out`` names a video (``.mp4``), the overlaid video
     (:func:`predict_video`), with the model of ``checkpoint`` or ``onnx`` (one of them).
 
     ``out`` is checked before the model is loaded. ``shard`` (``"K/N"`` or ``(K, N)``, 1-based) and
     ``overlays=False`` are for a folder ``out`` only. ``threads``: the network's CPU threads (None: the cores
-    this process may use; else 1…:func:`~freespace.limits.max_workers`, checked first).
+    this process may use; else 1…:func:`~freespace.limits.max_workers`, checked first). ``tta``: each frame seen
+    with its light normalised and averaged with its mirror image (:class:`~freespace.inference.predictor.Predictor`;
+    two network passes a frame), recorded in the output's run record and summary.
 
     Returns:
         The run's summary (:func:`predict_folder` or :func:`predict_video`).
@@ -470,7 +473,7 @@ def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = No
     if video and not overlays:
         raise InvalidOptionError(f"{param('no_overlays')} leaves out the overlay PNGs of a folder {param('out')}; a "
                                  f"video {param('out')} is the overlay: leave out {param('no_overlays')}")
-    predictor = Predictor(checkpoint=checkpoint, onnx=onnx, threads=threads)
+    predictor = Predictor(checkpoint=checkpoint, onnx=onnx, threads=threads, tta=tta)
     if video:
         return predict_video(predictor, inputs, out, batch_size=batch_size, progress=progress)
     return predict_folder(predictor, inputs, out, batch_size=batch_size, progress=progress, shard=shard,

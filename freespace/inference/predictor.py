@@ -19,7 +19,7 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
-from freespace.io.files import PathLike, missing_input
+from freespace.io.files import PathLike, missing_input, unicode_name
 from freespace.limits import MAX_BATCH_SIZE, check_threads, usable_cores
 
 if TYPE_CHECKING:
@@ -191,15 +191,6 @@ def _check_onnx_signature(session: Any, path: Path) -> None:
                                f"class scores with C ≥ 2 (non-road, road) ({_EXPORT_HINT})")
 
 
-def _unicode(name: str) -> bool:
-    """Whether ``name`` is valid Unicode: not a file name of bytes that are not UTF-8 (held as surrogates)."""
-    try:
-        name.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return True
-
-
 def _fixed(dim: Any) -> int | None:
     """An ONNX input dimension as a number when the model fixes it, else None (a name or unknown)."""
     return dim if isinstance(dim, int) and not isinstance(dim, bool) and dim > 0 else None
@@ -227,11 +218,19 @@ class Predictor:
     The images it takes (:meth:`predict`, :meth:`prepare`) are RGB, ``H×W×3`` (grey ``H×W`` ones are repeated to
     three channels, as :mod:`freespace.io.video` does), of one of three pixel types: ``uint8`` (0…255), ``uint16``
     (0…65535, scaled by 1/65535) or float (values in [0, 1]); see :meth:`predict`.
+
+    ``tta`` (test-time augmentation): each frame is seen as ``freespace adapt``'s teacher sees it, its light
+    normalised (:func:`~freespace.data.photometry.normalise_light`, at the network's size) and the probability
+    averaged with that of its mirror image (mirrored back): two passes of the network a frame, and the road found
+    in frames darker or lighter than the model's training frames.
     """
 
     def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
-                 threads: int | None = None) -> None:
+                 threads: int | None = None, tta: bool = False) -> None:
         check_threads(threads)
+        if not isinstance(tta, bool):
+            raise InvalidOptionError(f"{param('tta')} is True or False, got {tta!r}")
+        self.tta = tta
         if (checkpoint is None) == (onnx is None):
             raise InvalidOptionError(f"give exactly one of {param('checkpoint')} and {param('onnx')}")
         self.resize_to: tuple[int, int] | None = None
@@ -254,7 +253,7 @@ class Predictor:
             if not path.is_file():
                 raise missing_input(path, "ONNX model")
             try:  # a name that is no valid Unicode (bytes that are not UTF-8): its bytes, which onnxruntime takes
-                self.session = ort.InferenceSession(str(path) if _unicode(str(path)) else path.read_bytes(),
+                self.session = ort.InferenceSession(str(path) if unicode_name(str(path)) else path.read_bytes(),
                                                     session_options(threads), providers=["CPUExecutionProvider"])
             except Exception as exc:  # onnxruntime raises its own types for corrupt files
                 raise CorruptFileError(f"cannot load {path} as an ONNX model ({type(exc).__name__})") from None
@@ -332,19 +331,29 @@ class Predictor:
             image = image.astype(np.float32) * np.float32(1 / 65535 if image.dtype == np.uint16 else 1)
         if self.resize_to is not None and image.shape[:2] != self.resize_to:
             image = cv2.resize(image, (self.resize_to[1], self.resize_to[0]), interpolation=cv2.INTER_AREA)
+        if self.tta:  # the light normalised at the network's size (as adapt's teacher sees frames)
+            from freespace.data.photometry import normalise_light  # (the data package: only when asked)
+
+            if image.dtype != np.uint8:
+                image = np.clip(np.rint(image * 255), 0, 255).astype(np.uint8)
+            image = normalise_light(image)
         chw = image.transpose(2, 0, 1).astype(np.float32)
         return chw / np.float32(255) if image.dtype == np.uint8 else chw
 
     def infer(self, inputs: list[np.ndarray]) -> list[np.ndarray]:
         """Road probabilities (``float32 h×w``) of prepared inputs (:meth:`prepare`), at the network's size;
-        inputs of one size go through the network together."""
+        inputs of one size go through the network together (with ``tta``, and their mirror images)."""
         by_size: dict[tuple[int, ...], list[int]] = {}
         for i, x in enumerate(inputs):
             by_size.setdefault(x.shape, []).append(i)
         out: list[np.ndarray | None] = [None] * len(inputs)
         for idx in by_size.values():
-            for i, prob in zip(idx, self._run(np.stack([inputs[i] for i in idx]))):
-                out[i] = prob
+            batch = np.stack([inputs[i] for i in idx])
+            probs = self._run(batch)
+            if self.tta:  # the mirror image's probability, mirrored back, averaged in
+                probs = (probs + self._run(np.ascontiguousarray(batch[..., ::-1]))[..., ::-1]) / 2
+            for i, prob in zip(idx, probs):
+                out[i] = np.ascontiguousarray(prob)
         return out  # type: ignore[return-value]
 
     @staticmethod

@@ -50,7 +50,7 @@ PathLike = str | os.PathLike[str]
 __all__ = ["PathLike", "atomic_write_bytes", "write_files_together", "atomic_write_text", "encode_json", "write_json",
            "write_csv", "check_outputs", "check_writable", "check_output_kind", "check_writable_files", "missing_input",
            "read_bytes", "replaceable", "keep_mode", "special_kind", "inside_meta", "on_pseudo_fs", "unfollowable_link",
-           "META", "MARK", "FILE_SUFFIXES", "writing_as", "mark_written", "check_suffix", "shown_path"]
+           "META", "MARK", "FILE_SUFFIXES", "writing_as", "mark_written", "check_suffix", "shown_path", "unicode_name"]
 
 # ---------------------------------------------------------------------------------------------------
 # atomic writes
@@ -572,17 +572,24 @@ def read_bytes(path: PathLike, what: str, max_bytes: int | None = None, limit: s
 
 
 
+def unicode_name(name: str) -> bool:
+    """Whether ``name`` is valid Unicode: not a file name of bytes that are not UTF-8 (which Python holds as lone
+    surrogates, and which libraries taking UTF-8 text cannot open)."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
 def shown_path(path: PathLike | bytes) -> str:
     """``path`` (or any file name) as a message, a printed line or a record writes it: itself when it is valid
     Unicode; else (a name of bytes that are not UTF-8, which Python holds as lone surrogates that no UTF-8 output
     can take: ``UnicodeEncodeError``) with each such byte written ``\\xNN`` (``b"fr\\xe9me.png"`` is shown
     ``fr\\xe9me.png``). For showing only: a file is opened, and an output named, by the path itself."""
     text = os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
-    try:
-        text.encode("utf-8")
+    if unicode_name(text):
         return text
-    except UnicodeEncodeError:
-        pass
     try:
         return os.fsencode(text).decode("utf-8", "backslashreplace")
     except UnicodeEncodeError:  # surrogates that no file name decoded to

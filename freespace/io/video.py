@@ -34,7 +34,7 @@ import numpy as np
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
 from freespace.io.codecs import IMAGE_SUFFIXES, check_image_pixels, read_image
-from freespace.io.files import PathLike, keep_mode, mark_written, missing_input, replaceable
+from freespace.io.files import PathLike, keep_mode, mark_written, missing_input, replaceable, unicode_name
 
 __all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path", "is_image_path",
            "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "DEFAULT_FPS"]
@@ -66,15 +66,6 @@ def _quiet_opencv() -> Iterator[None]:
             cv_log.setLogLevel(old)
 
 
-def _unicode(name: str) -> bool:
-    """Whether ``name`` is valid Unicode (no surrogates: what a file name of bytes that are not UTF-8 holds)."""
-    try:
-        name.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return True
-
-
 @contextlib.contextmanager
 def _opencv_name(path: Path, *, folder: bool = False) -> Iterator[str]:
     """A name under which OpenCV opens ``path`` (``folder``: a file in the folder ``path``, the name's last part
@@ -83,7 +74,7 @@ def _opencv_name(path: Path, *, folder: bool = False) -> Iterator[str]:
     temporary folder, there while the ``with`` block lasts (open the capture or writer inside it: FFmpeg keeps the
     file open, not its name)."""
     name = os.fspath(path)
-    if _unicode(name):
+    if unicode_name(name):
         yield name
         return
     suffix = "" if folder else "".join(c for c in path.suffix if c.isascii() and (c.isalnum() or c == "."))
@@ -341,7 +332,7 @@ class VideoWriter:
         replaceable(self.path)  # no device, pipe or read-only file: before the first frame is encoded
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            stem = self.path.stem if self.path.stem.isprintable() and _unicode(self.path.stem) else "video"
+            stem = self.path.stem if self.path.stem.isprintable() and unicode_name(self.path.stem) else "video"
             fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{stem}.", suffix=".tmp.mp4")
             os.close(fd)
         except OSError as exc:

@@ -6,7 +6,7 @@ unlabelled frames of another city and camera, as one generic ``freespace`` datas
   label).
 - Unlabelled frames (e.g. CamVid's 367 ``train`` frames, none of them opened with a label): the teacher is one
   or more published-format model folders (``model.onnx``), each run on the frame and its mirror image as
-  ``freespace adapt``'s teacher sees them (light normalised: :func:`freespace.engine.adapt.normalise_light`),
+  ``freespace adapt``'s teacher sees them (light normalised: :func:`freespace.data.photometry.normalise_light`),
   the probabilities averaged over models and mirrors, brought to the frame's size; road where p > THRESHOLD,
   not road where p < 1 - THRESHOLD, don't care between. They join the training list only.
 - Optionally (``--drive-teacher``), models trained on the drives fill the don't care of the drives' training
