@@ -40,6 +40,7 @@ from freespace.data.base import StereoRoadDataset
 from freespace.data.photometry import strong_photometry
 from freespace.errors import DatasetError
 from freespace.io.codecs import read_image
+from freespace.io.frame_fit import check_resize, fit
 from freespace.labels import IGNORE_INDEX
 
 __all__ = ["RoadSegmentationDataset", "Item", "VirtualAugment", "IGNORE_INDEX", "label_to_index", "resized_intrinsics",
@@ -157,6 +158,8 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         virtual: road-plane virtual views, drawn from (``seed``, epoch, i); before the conventional
             augmentation when both are on.
         zoom: with ``affine``, also scale by a factor in 1 ± ``zoom`` (0: off; at most 0.5).
+        resize: how a frame is fitted to ``size``: ``stretch`` or ``letterbox`` (aspect kept, the border don't
+            care; :mod:`freespace.io.frame_fit`).
 
     Raises:
         DatasetError: a requested frame is unknown or has no label.
@@ -166,7 +169,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
                  transform: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None, *,
                  size: tuple[int, int] | None = None, affine: bool = False, seed: int = 0,
                  cache: bool = False, virtual: VirtualAugment | None = None, flip: bool = False,
-                 photometric: bool | str = False, zoom: float = 0.0) -> None:
+                 photometric: bool | str = False, zoom: float = 0.0, resize: str = "stretch") -> None:
         self.dataset = dataset
         wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
         self.items = [n if isinstance(n, Item) else Item(dataset.index(n), n) for n in wanted]
@@ -175,6 +178,9 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
             raise DatasetError(f"{len(unlabelled)} frames have no road label (first: {unlabelled[0]}); "
                                f"train on a labelled split")
         self.transform, self.size, self.affine, self.seed, self.cache = transform, size, affine, seed, cache
+        self.resize = check_resize(resize)
+        if virtual is not None and self.resize != "stretch":
+            raise ValueError("virtual views take stretched frames (their intrinsics are scaled, not letterboxed)")
         self._cache: dict[tuple[int, str | None], tuple[np.ndarray, np.ndarray]] = {}
         if not 0 <= zoom <= 0.5:
             raise ValueError(f"zoom must be in [0, 0.5], got {zoom}")
@@ -200,9 +206,8 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
             self._K[key] = resized_intrinsics(self.virtual.planes[item.index][0], image.shape[:2],
                                             tuple(self.size) if self.size is not None else image.shape[:2])
         if self.size is not None and image.shape[:2] != tuple(self.size):
-            h, w = self.size
-            image = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
-            label = cv2.resize(label, (w, h), interpolation=cv2.INTER_NEAREST)  # labels: never bilinear
+            image = fit(image, tuple(self.size), self.resize)
+            label = fit(label, tuple(self.size), self.resize, label=True, fill=IGNORE_INDEX)  # labels: never bilinear
         if self.cache:
             self._cache[key] = (image, label)
         return image, label

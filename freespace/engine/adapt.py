@@ -534,6 +534,9 @@ def _checkpoint_size(hp: dict[str, Any], ckpt: Path) -> tuple[int, int]:
     size = hp.get("image_size")
     if size is None:
         raise CorruptFileError(f"{ckpt} states no training image size; adapt needs the size the model runs at")
+    if hp.get("resize", "stretch") != "stretch":
+        raise InvalidOptionError(f"{ckpt} was trained on letterboxed frames ({hp.get('resize')!r}); adapt fits "
+                                 f"frames by stretching them to the model's size: adapt a model trained so")
     if not (isinstance(size, (list, tuple)) and len(size) == 2
             and all(isinstance(x, int) and not isinstance(x, bool) and MIN_FRAME_SIDE <= x <= MAX_IMAGE_SIDE
                     for x in size)):

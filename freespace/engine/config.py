@@ -41,7 +41,10 @@ from freespace.engine.option_values import (
     weights_path,
 )
 from freespace.errors import MAX_SEED, CorruptFileError, InvalidOptionError, param
+from freespace.evaluation.label_presets import LABEL_PRESETS
+from freespace.evaluation.labelled import LABEL_FORMATS
 from freespace.io.files import PathLike, atomic_write_text, check_outputs, check_writable
+from freespace.io.frame_fit import RESIZE_MODES
 from freespace.limits import (
     MAX_BATCH_SIZE,
     MAX_DEVICES,
@@ -87,18 +90,6 @@ def _models() -> tuple[str, ...]:
     from freespace.models import list_models  # imports torch: only called for training
 
     return tuple(list_models())
-
-
-def _label_formats() -> tuple[str, ...]:
-    from freespace.evaluation.labelled import LABEL_FORMATS
-
-    return LABEL_FORMATS
-
-
-def _label_presets() -> tuple[str, ...]:
-    from freespace.evaluation.label_presets import LABEL_PRESETS
-
-    return tuple(LABEL_PRESETS)
 
 
 def _disparity_sources() -> tuple[str, ...]:
@@ -175,6 +166,8 @@ class TrainConfig:
                                                              "0.001 = 0.1 point)", 0.0, metavar="F")
     image_size: ImageSize = option("HxW all frames are resized to (default: the first frame's size)",
                                     FIRST_FRAME_SIZE, metavar="HxW")
+    resize: str = option("how a frame fits image_size: stretch, or letterbox (aspect kept, the border don't care; "
+                         "prediction then does the same)", "stretch", choices=RESIZE_MODES, metavar="HOW")
     seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = option("seed of the split, the data order, the augmentation "
                                                              "and the weights", 0)
     devices: Annotated[int, Field(ge=1, le=MAX_DEVICES)] = option("processes or GPUs", 1)
@@ -202,10 +195,10 @@ class TrainConfig:
     images: PathText | None = option(f"a labelled folder to train on instead of a dataset: its images, each with "
                                       f"its label image of the same name in {param('labels')}", None, metavar="DIR")
     label_format: str | None = option(f"how {param('images')}' labels are written (as evaluate reads them), or "
-                                      f"{param('labels_like')}", None, choices=_label_formats, metavar="NAME")
+                                      f"{param('labels_like')}", None, choices=LABEL_FORMATS, metavar="NAME")
     labels_like: str | None = option(f"the labels are a public set's (docs/own-data.md gives each one's source), "
                                      f"instead of {param('label_format')}/{param('road')}/{param('ignore')}", None,
-                                     choices=_label_presets, metavar="SET")
+                                     choices=tuple(LABEL_PRESETS), metavar="SET")
     road: str | None = option("class-id: the road's ids (CamVid: 3); palette: its colours R,G,B[;R,G,B]", None,
                               metavar="VALUES")
     ignore: str | None = option(f"don't-care ids, grey values or colours, as {param('road')}", None, metavar="VALUES")
@@ -255,6 +248,8 @@ class TrainConfig:
                     (f.name != "encoder_weights" or weights_path(value)):
                 value = os.path.expanduser(value)  # as a shell would (a YAML file's ~/data too)
             object.__setattr__(self, f.name, value)
+        if self.resize != "stretch" and "virtual" in self.augment:
+            raise InvalidOptionError(f"{param('augment')} virtual takes stretched frames; leave out {param('resize')}")
         if self.photometric_strength != "mild" and not self.photometric:
             raise InvalidOptionError(f"{param('photometric_strength')} {self.photometric_strength} says how "
                                      f"{param('photometric')} recolours; give {param('photometric')} too")

@@ -17,6 +17,7 @@ from typing import Any
 
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, param
 from freespace.io.files import PathLike
+from freespace.io.frame_fit import check_resize
 
 __all__ = ["InitWeights", "init_checkpoint", "read_init", "resolve_init", "check_encoder", "CHECKPOINT"]
 
@@ -83,7 +84,8 @@ def _read(path: Path, mtime: int, size: int) -> InitWeights:
                                f"32 to 8192 pixels a side")
     return InitWeights(path, {k: v.detach().clone() for k, v in net.state_dict().items()},
                        {"model": hp["model"], "model_options": dict(hp.get("model_options") or {}),
-                        "image_size": list(image_size) if image_size else None})
+                        "image_size": list(image_size) if image_size else None,
+                        "resize": check_resize(hp.get("resize", "stretch"), "init")})
 
 
 def resolve_init(config: Any) -> Any:
@@ -103,7 +105,8 @@ def resolve_init(config: Any) -> Any:
     if config.encoder_weights is not None:
         raise InvalidOptionError(f"{param('init')} gives every weight; leave out {param('encoder_weights')}")
     defaults = type(config).__dataclass_fields__
-    theirs = {"model": weights.hp["model"], "encoder_name": weights.hp["model_options"].get("encoder_name")}
+    theirs = {"model": weights.hp["model"], "encoder_name": weights.hp["model_options"].get("encoder_name"),
+              "resize": weights.hp["resize"]}
     for key, value in theirs.items():
         mine = getattr(config, key)
         if mine != defaults[key].default and mine != value:
@@ -114,8 +117,7 @@ def resolve_init(config: Any) -> Any:
         raise InvalidOptionError(f"{param('init')} {config.init} was trained at {size[0]}x{size[1]} (HxW); "
                                  f"{param('image_size')} {config.image_size[0]}x{config.image_size[1]} would change "
                                  f"what its weights see: leave it out")
-    return replace(config, model=theirs["model"], encoder_name=theirs["encoder_name"],
-                   image_size=size if size is not None else config.image_size)
+    return replace(config, **theirs, image_size=size if size is not None else config.image_size)
 
 
 def check_encoder(model: str, preset: str, encoder_name: str | None, encoder_weights: str | None) -> None:

@@ -169,7 +169,7 @@ def export_model_folder(checkpoint: PathLike, out: PathLike, *, licence: str,
     buf = _io.BytesIO()
     torch.save({"state_dict": {f"net.{k}": v.detach().clone() for k, v in net.state_dict().items()},
                 "hyper_parameters": {"model": hp["model"], "model_options": hp.get("model_options", {}),
-                                     "image_size": size}}, buf)
+                                     "image_size": size, "resize": hp.get("resize", "stretch")}}, buf)
     with claim_folder(out, "export") as owned, owned.staged() as stage:
         atomic_write_bytes(stage / CHECKPOINT, buf.getvalue())
         with tempfile.TemporaryDirectory() as tmp:  # export refuses a path inside the stage's .freespace folder

@@ -32,14 +32,16 @@ class RoadModule(pl.LightningModule):
 
     def __init__(self, model: str, model_options: dict[str, Any], lr: float, momentum: float,
                  weight_decay: float, image_size: tuple[int, int] | list[int] | None = None, seed: int = 0,
-                 val_window: int = 1, encoder_weights: str | None = None, freeze: str = "none") -> None:
+                 val_window: int = 1, encoder_weights: str | None = None, freeze: str = "none",
+                 resize: str = "stretch") -> None:
         """``seed``: the run's seed, from which dropout draws (with the epoch); ``val_window``: the epochs
         over which ``val_f_window`` (the early-stopping and checkpoint criterion when > 1) averages the
         validation F-score; ``encoder_weights``: the encoder's initial weights ("imagenet" or a file; a
         checkpoint rebuilds the network without them and loads its own tensors); ``freeze``: what keeps its
         starting values while training: ``none``, ``norm`` (every batch norm stays in eval mode: its running
         statistics are the start's, its scale and shift still learn) or ``encoder`` (``norm``, and the weights of
-        the network's ``encoder`` are fixed)."""
+        the network's ``encoder`` are fixed); ``resize``: how frames were fitted to ``image_size``
+        (:mod:`freespace.io.frame_fit`), kept in the checkpoint so that prediction fits them the same way."""
         super().__init__()
         self.save_hyperparameters()
         weights = {"encoder_weights": encoder_weights} if encoder_weights is not None else {}

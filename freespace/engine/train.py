@@ -429,7 +429,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                                                 cache=True, virtual=data["virtual"] if k == "train" else None,
                                                 flip=config.flip and k == "train",
                                                 photometric=photometric if k == "train" else False,
-                                                zoom=config.zoom if k == "train" else 0.0)
+                                                zoom=config.zoom if k == "train" else 0.0, resize=config.resize)
                         for k in ("train", "val", "test"))
 
     def loader(frames: RoadSegmentationDataset, shuffle: bool) -> torch.utils.data.DataLoader:
@@ -441,7 +441,7 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
     module = RoadModule(config.model, config.model_options(), config.lr, config.momentum, config.weight_decay,
                         image_size=list(size), seed=config.seed, val_window=config.val_window,
-                        encoder_weights=config.encoder_weights, freeze=frozen_part(config))
+                        encoder_weights=config.encoder_weights, freeze=frozen_part(config), resize=config.resize)
     if config.init is not None and not resume:  # every weight from the init (a resumed run has its own)
         module.net.load_state_dict(read_init(config.init).state)
     elif not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint

@@ -68,11 +68,12 @@ def export_model(checkpoint: PathLike, fmt: str, out: PathLike, calibration: Pat
     if calibration is not None:  # read before the export: a bad folder fails fast
         from freespace.inference.quantize import calibration_inputs
 
-        calib_inputs = calibration_inputs(calibration, size)
+        calib_inputs = calibration_inputs(calibration, size, resize=hp.get("resize", "stretch"))
     gen = torch.Generator().manual_seed(0)  # the same check inputs every time: a refusal is repeatable
     example = torch.rand(1, 3, *size, generator=gen)
     checks = [torch.rand(1, 3, *size, generator=gen), torch.rand(2, 3, size[0] - 7, size[1] - 13, generator=gen)]
-    meta = {"model": hp["model"], "image_size": json.dumps(list(size)), "producer": "freespace"}
+    meta = {"model": hp["model"], "image_size": json.dumps(list(size)), "producer": "freespace",
+            "resize": hp.get("resize", "stretch")}
     with warnings.catch_warnings():
         if not log.isEnabledFor(logging.DEBUG):  # torch's deprecations and tracer notes, unless -v
             warnings.simplefilter("ignore")

@@ -14,12 +14,12 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import cv2
 import numpy as np
 
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
 from freespace.io.files import PathLike, missing_input, unicode_name
+from freespace.io.frame_fit import RESIZE_MODES, fit, unfit
 from freespace.limits import MAX_BATCH_SIZE, check_threads, usable_cores
 
 if TYPE_CHECKING:
@@ -191,6 +191,18 @@ def _check_onnx_signature(session: Any, path: Path) -> None:
                                f"class scores with C ≥ 2 (non-road, road) ({_EXPORT_HINT})")
 
 
+def _resize_mode(mode: Any, source: PathLike) -> str:
+    """The way a model's frames are fitted to its input (:data:`~freespace.io.frame_fit.RESIZE_MODES`), as its
+    checkpoint or ONNX metadata records it (models before the record: ``stretch``).
+
+    Raises:
+        CorruptFileError: a record that names no such way.
+    """
+    if mode not in RESIZE_MODES:
+        raise CorruptFileError(f"{source} records the input fit {mode!r}; freespace knows {', '.join(RESIZE_MODES)}")
+    return mode
+
+
 def _fixed(dim: Any) -> int | None:
     """An ONNX input dimension as a number when the model fixes it, else None (a name or unknown)."""
     return dim if isinstance(dim, int) and not isinstance(dim, bool) and dim > 0 else None
@@ -244,6 +256,7 @@ class Predictor:
             self.device = "cuda" if torch.cuda.is_available() else "cpu"
             self.model.to(self.device)
             self.resize_to = _image_size(hp.get("image_size"), checkpoint)
+            self.resize = _resize_mode(hp.get("resize", "stretch"), checkpoint)
             self.name = hp["model"]
             self.session, self.batch = None, None
         else:
@@ -271,6 +284,7 @@ class Predictor:
                 raise CorruptFileError(f"{path} fixes one side of its input only ({shape}); freespace resizes images "
                                        f"to a fixed height and width, or to none ({_EXPORT_HINT})")
             self.resize_to = _image_size(size, path)
+            self.resize = _resize_mode(meta.get("resize", "stretch"), path)
             self.batch = _fixed(shape[0])
             self.name = meta.get("model", path.stem)
             self.model = None
@@ -330,7 +344,7 @@ class Predictor:
         if image.dtype != np.uint8:  # uint16 and float: to [0, 1] first (cv2 resizes float32, not float16)
             image = image.astype(np.float32) * np.float32(1 / 65535 if image.dtype == np.uint16 else 1)
         if self.resize_to is not None and image.shape[:2] != self.resize_to:
-            image = cv2.resize(image, (self.resize_to[1], self.resize_to[0]), interpolation=cv2.INTER_AREA)
+            image = fit(image, self.resize_to, self.resize)
         if self.tta:  # the light normalised at the network's size (as adapt's teacher sees frames)
             from freespace.data.photometry import normalise_light  # (the data package: only when asked)
 
@@ -356,12 +370,10 @@ class Predictor:
                 out[i] = np.ascontiguousarray(prob)
         return out  # type: ignore[return-value]
 
-    @staticmethod
-    def restore(prob: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-        """``prob`` (``float32 h×w``) at ``size`` = (H, W): bilinear on the probabilities (a threshold after it
-        gives a smooth mask boundary, not the network's blocks)."""
-        h, w = size
-        return prob if prob.shape == (h, w) else cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
+    def restore(self, prob: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+        """``prob`` (``float32 h×w``) at ``size`` = (H, W): the frame's part of the input (:attr:`resize`), bilinear
+        on the probabilities (a threshold after it gives a smooth mask boundary, not the network's blocks)."""
+        return unfit(prob, size, self.resize)
 
     def predict(self, images: np.ndarray | Iterable[np.ndarray], batch_size: int = 8) -> list[np.ndarray]:
         """Road probability (``float32 H×W`` in [0, 1]) of each image, at its own size, in order.

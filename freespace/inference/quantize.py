@@ -30,16 +30,16 @@ CALIBRATION_FRAMES = 32
 
 
 def calibration_inputs(source: PathLike, size: tuple[int, int] | None,
-                       limit: int = CALIBRATION_FRAMES) -> list[np.ndarray]:
+                       limit: int = CALIBRATION_FRAMES, resize: str = "stretch") -> list[np.ndarray]:
     """Up to ``limit`` frames of ``source`` (a folder, glob or video: :func:`~freespace.io.video.open_frames`),
-    evenly spread, as network inputs: ``float32 1×3×H×W`` in [0, 1], resized (area) to ``size`` = (H, W) or
-    left at their own size when None.
+    evenly spread, as network inputs: ``float32 1×3×H×W`` in [0, 1], fitted to ``size`` = (H, W) as ``resize``
+    says (:func:`freespace.io.frame_fit.fit`: the model's own way) or left at their own size when None.
 
     Raises:
         InputFileError: the source is missing or holds no frames (the message names the parameter ``calibration``).
         CorruptFileError: a frame cannot be decoded.
     """
-    import cv2
+    from freespace.io.frame_fit import fit
 
     try:
         frames = open_frames(source)
@@ -50,7 +50,7 @@ def calibration_inputs(source: PathLike, size: tuple[int, int] | None,
     for frame in itertools.islice(itertools.islice(frames, 0, None, step), limit):
         image = frame.image
         if size is not None and image.shape[:2] != tuple(size):
-            image = cv2.resize(image, (size[1], size[0]), interpolation=cv2.INTER_AREA)
+            image = fit(image, tuple(size), resize)
         out.append(image.transpose(2, 0, 1)[None].astype(np.float32) / 255.0)
     return out
 
