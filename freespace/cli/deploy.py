@@ -28,6 +28,8 @@ def predict_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tta", action="store_true", help="test-time augmentation: each frame seen with its light "
                                                       "normalised, averaged with its mirror image (two network passes "
                                                       "a frame; finds more road in dark or bright frames)")
+    p.add_argument("--profile", action="store_true", help="also print each stage's time per frame: decode, "
+                                                          "preprocess, network, postprocess, write")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
     p.add_argument("--out", required=True, help="output folder (PNGs), or OUT.mp4: the overlaid video")
     p.set_defaults(func=cmd_predict)
@@ -40,7 +42,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     summary = predict(args.input, args.out, checkpoint=args.checkpoint, onnx=args.onnx, threads=args.threads,
                       batch_size=args.batch_size, shard=args.shard, overlays=not args.no_overlays,
                       progress=not args.no_progress, tta=args.tta)
-    print(predict_report(summary, args.out, args.shard))
+    print(predict_report(summary, args.out, args.shard, profile=args.profile))
     return 0
 
 

@@ -263,8 +263,11 @@ def _ransac(x: np.ndarray, y: np.ndarray, d: np.ndarray, threshold: float, rng: 
     if not ok.any():
         return None
     params = np.linalg.solve(A[ok], ds[tri[ok]][..., None])[..., 0]  # K'×3
-    res = ds[:, None] - (xs[:, None] * params[:, 0] + ys[:, None] * params[:, 1] + params[:, 2])
-    cost = np.minimum(res * res, threshold * threshold).sum(axis=0)
+    # residuals of every sample pixel under every hypothesis (S×K'), one matrix product, squared in place
+    res = np.column_stack([xs, ys, np.ones_like(xs)]) @ params.T
+    np.subtract(ds[:, None], res, out=res)
+    np.multiply(res, res, out=res)
+    cost = np.minimum(res, threshold * threshold, out=res).sum(axis=0)
     a, b, c = params[int(np.argmin(cost))]
     return float(a), float(b), float(c)
 

@@ -111,6 +111,11 @@ def _stages(predictor: Any) -> tuple[Callable[[np.ndarray], Any], Callable[[list
     return (lambda image: image), predictor.predict, (lambda prob, size: prob)
 
 
+#: the stages of a prediction run, in order, as its profile names them: reading and decoding a frame, fitting it to
+#: the network's input, the network, bringing the probability back to the frame's size, writing the outputs
+STAGES = ("decode", "preprocess", "network", "postprocess", "write")
+
+
 @dataclasses.dataclass
 class RunStats:
     """What a prediction run measured: ``frames`` written, ``network_seconds`` (wall time inside the
@@ -119,6 +124,16 @@ class RunStats:
     frames: int = 0
     network_seconds: float = 0.0
     wall_seconds: float = 0.0
+    #: each stage's own wall seconds, summed over the frames (:data:`STAGES`): in a pipeline the stages run in
+    #: three threads at once, so their sum exceeds the wall time by what the overlap saved
+    stage_seconds: dict[str, float] = dataclasses.field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
+
+    def profile(self) -> dict[str, float | None]:
+        """Milliseconds per frame of each stage (:data:`STAGES`) and of the whole run (``end_to_end``)."""
+        n = self.frames
+        out: dict[str, float | None] = {k: 1000 * v / n if n else None for k, v in self.stage_seconds.items()}
+        out["end_to_end"] = 1000 * self.wall_seconds / n if n else None
+        return out
 
 
 def run_frames(predictor: Any, frames: Iterable[VideoFrame], batch_size: int,
@@ -142,23 +157,46 @@ def run_frames(predictor: Any, frames: Iterable[VideoFrame], batch_size: int,
     Returns:
         :class:`RunStats`.
     """
-    prepare, infer, restore = _stages(predictor)
+    prepare_frame, infer, restore = _stages(predictor)
     stats = RunStats()
+    spent = stats.stage_seconds
     t_start = time.perf_counter()
+
+    def decoded() -> Iterator[VideoFrame]:
+        it = iter(frames)
+        while True:
+            t0 = time.perf_counter()
+            frame = next(it, None)
+            spent["decode"] += time.perf_counter() - t0
+            if frame is None:
+                return
+            yield frame
+
+    def prepare(image: np.ndarray) -> Any:
+        t0 = time.perf_counter()
+        x = prepare_frame(image)
+        spent["preprocess"] += time.perf_counter() - t0
+        return x
 
     def network(batch: list[tuple[VideoFrame, Any]]) -> list[np.ndarray]:
         t0 = time.perf_counter()
         probs = infer([x for _, x in batch])
         stats.network_seconds += time.perf_counter() - t0
+        spent["network"] = stats.network_seconds
         if on_batch is not None:
             on_batch(len(batch))
         return probs
 
     def finish(frame: VideoFrame, prob: np.ndarray) -> None:
-        write(frame, restore(prob, frame.image.shape[:2]))
+        t0 = time.perf_counter()
+        full = restore(prob, frame.image.shape[:2])
+        t1 = time.perf_counter()
+        write(frame, full)
+        spent["postprocess"] += t1 - t0
+        spent["write"] += time.perf_counter() - t1
         stats.frames += 1
 
-    (_run_pipelined if pipeline else _run_serially)(frames, batch_size, prepare, network, finish)
+    (_run_pipelined if pipeline else _run_serially)(decoded(), batch_size, prepare, network, finish)
     stats.wall_seconds = time.perf_counter() - t_start
     return stats
 
@@ -381,7 +419,7 @@ def _summary(predictor: Predictor, stats: RunStats, **extra: Any) -> dict[str, A
             "frames_per_second": n / wall if n and wall > 0 else None, "seconds": wall,
             "network_share": stats.network_seconds / wall if n and wall > 0 else None, "model": predictor.name,
             "image_size": list(predictor.resize_to) if predictor.resize_to is not None else None,
-            "tta": getattr(predictor, "tta", False), **extra}
+            "tta": getattr(predictor, "tta", False), "profile_ms_per_frame": stats.profile(), **extra}
 
 
 def _predict_into(predictor: Predictor, source: FrameSource, out: Path, batch_size: int, progress: bool,
@@ -480,13 +518,20 @@ def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = No
                           overlays=overlays)
 
 
-def predict_report(summary: dict[str, Any], out: PathLike, shard: str | None = None) -> str:
+def predict_report(summary: dict[str, Any], out: PathLike, shard: str | None = None, profile: bool = False) -> str:
     """One line on a :func:`predict` run (``summary``: its return value) into ``out``: frames, frames per second
-    end to end, the network's time per frame and share; ``shard``: the run's ``"K/N"`` as given."""
+    end to end, the network's time per frame and share; ``shard``: the run's ``"K/N"`` as given. With ``profile``
+    a second line: each stage's milliseconds per frame (``summary["profile_ms_per_frame"]``)."""
     out = shown_path(out)  # a name of any bytes: printable
     if not summary["frames"]:
         return f"0 frames in shard {shard} → {out}"
-    return (f"{summary['frames']} frames in {summary['seconds']:.2f} s: {summary['frames_per_second']:.1f} frames per "
+    line = (f"{summary['frames']} frames in {summary['seconds']:.2f} s: {summary['frames_per_second']:.1f} frames per "
             f"second end to end (first frame read to last written); the network "
             f"{summary['seconds_per_frame'] * 1000:.1f} ms per frame, {100 * summary['network_share']:.0f} % of the "
             f"time" + (f" (shard {shard})" if shard else "") + f" → {out}")
+    if not profile:
+        return line
+    ms = summary["profile_ms_per_frame"]
+    stages = ", ".join(f"{k} {ms[k]:.1f}" for k in STAGES)
+    return (line + f"\nprofile, ms per frame (each stage's own time; in the pipeline they overlap across threads): "
+                   f"{stages}; end to end {ms['end_to_end']:.1f}")
