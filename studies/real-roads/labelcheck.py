@@ -34,6 +34,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import student  # noqa: E402  (the study's own script: the teachers' labels)
 
 CAMVID_ROAD, CAMVID_VOID = 3, 11
+#: the road's colour in the KITTI semantics frames of other streets (Cityscapes palette)
+KITTI_DEV_ROAD = (128, 64, 128)
 
 
 def count(label: np.ndarray, human_road: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -83,9 +85,35 @@ def check_kitti2015(teachers: list[Path], autolabels: Path, kitti2015: Path) -> 
     return {name: summary(s) for name, s in sums.items()}
 
 
-def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path) -> dict[str, dict[str, float]]:
+#: the label sources of a teacher's probability (issue 70, item 1): one global confidence (student.py's), class-
+#: balanced thresholds per band of rows, and the confident label completed by appearance (a graph cut)
+SOURCES = ("confident", "balanced", "appearance")
+
+
+def _kitti_colours(classes: np.ndarray) -> np.ndarray:
+    """A class map (1 road, 0 not road, 255 don't care) as a KITTI-colour label (``H×W×3`` BGR)."""
+    label = np.zeros((*classes.shape, 3), np.uint8)
+    label[classes == 1] = student.ROAD_BGR
+    label[classes == 0] = student.NON_ROAD_BGR
+    return label
+
+
+def labels_of(source: str, image: np.ndarray, prob: np.ndarray) -> np.ndarray:
+    """The KITTI-colour label (BGR) that ``source`` (:data:`SOURCES`) makes of ``prob`` on ``image``."""
+    from freespace.datagen.completion import balanced_label, complete_by_appearance
+
+    if source == "confident":
+        return student.label_from(prob)
+    if source == "balanced":
+        return _kitti_colours(balanced_label(prob))
+    return _kitti_colours(complete_by_appearance(image, prob, student.THRESHOLD))
+
+
+def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
+                 sources: tuple[str, ...] = ("confident",)) -> dict[str, dict[str, float]]:
     """The CamVid labels of ``teachers`` (light normalised), ``raw_teachers`` (as they are) and the mean of all
-    models, on ``val`` and the dusk frames under ``camvid`` (``make.sh``'s layout)."""
+    models, on ``val`` and the dusk frames under ``camvid`` (``make.sh``'s layout), each made by every label
+    ``sources`` (:data:`SOURCES`; other than ``confident``, named ``name / source``)."""
     normalised, raw = student._sessions(teachers), student._sessions(raw_teachers)
     sums: dict[str, np.ndarray] = {}
     for part, images, masks in (("val", "val", "valannot"), ("dusk", "train", "duskannot")):
@@ -101,9 +129,34 @@ def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path) -
                 named["all"] = ((len(normalised) * named["teachers"] + len(raw) * named["raw teachers"])
                                 / (len(normalised) + len(raw)))
             for name, prob in named.items():
-                key = f"{part}, {name}"
-                sums[key] = sums.get(key, 0) + count(student.label_from(prob), classes == CAMVID_ROAD,
-                                                     classes != CAMVID_VOID)
+                for source in sources:
+                    key = f"{part}, {name}" + ("" if source == "confident" else f" / {source}")
+                    sums[key] = sums.get(key, 0) + count(labels_of(source, image, prob), classes == CAMVID_ROAD,
+                                                         classes != CAMVID_VOID)
+    return {name: summary(s) for name, s in sums.items()}
+
+
+def check_kitti_dev(teachers: list[Path], kitti_dev: Path,
+                    sources: tuple[str, ...] = ("confident",)) -> dict[str, dict[str, float]]:
+    """The labels ``teachers`` (frames as they are) make on the 22 KITTI frames of other streets under
+    ``kitti_dev`` (``images/``, ``masks/``: Cityscapes colours, road within 8 levels of (128, 64, 128)), by every
+    label ``sources``, pooled over all 22 and over the 9 with the most road (the wide streets)."""
+    sessions = student._sessions(teachers)
+    frames = []
+    for path in sorted((kitti_dev / "masks").glob("*.png")):
+        mask = _rgb(path).astype(np.int16)
+        human = (np.abs(mask - np.array(KITTI_DEV_ROAD)).max(2) <= 8)
+        frames.append((path.name, human))
+    wide = {name for name, _ in sorted(frames, key=lambda f: -int(f[1].sum()))[:9]}
+    sums: dict[str, np.ndarray] = {}
+    for name, human in frames:
+        image = _rgb(kitti_dev / "images" / name)
+        prob = student.teacher_probability(image, sessions, normalise=False)
+        for source in sources:
+            counts = count(labels_of(source, image, prob), human, np.ones_like(human))
+            for group in ("all 22",) + (("9 wide",) if name in wide else ()):
+                key = f"{group} / {source}"
+                sums[key] = sums.get(key, 0) + counts
     return {name: summary(s) for name, s in sums.items()}
 
 
@@ -118,13 +171,23 @@ def main() -> None:
     c.add_argument("--camvid", type=Path, required=True, help="make.sh's camvid folder")
     c.add_argument("--teacher", type=Path, action="append", default=[], help="a model folder, light normalised")
     c.add_argument("--raw-teacher", type=Path, action="append", default=[], help="a model folder, frames as they are")
+    c.add_argument("--sources", default="confident", help=f"label sources, comma-separated: {', '.join(SOURCES)}")
+    d = sub.add_parser("kittidev", help="a teacher's labels on the 22 KITTI frames of other streets")
+    d.add_argument("--kitti-dev", type=Path, required=True, help="make.sh's kitti_dev folder")
+    d.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder, frames as they are")
+    d.add_argument("--sources", default="confident", help=f"label sources, comma-separated: {', '.join(SOURCES)}")
     a = ap.parse_args()
     if a.check == "kitti2015":
         result = check_kitti2015(a.teacher, a.autolabels, a.kitti2015)
+    elif a.check == "kittidev":
+        result = check_kitti_dev(a.teacher, a.kitti_dev, tuple(a.sources.split(",")))
     else:
         if not a.teacher and not a.raw_teacher:
             ap.error("give --teacher MODEL or --raw-teacher MODEL")
-        result = check_camvid(a.teacher, a.raw_teacher, a.camvid)
+        sources = tuple(a.sources.split(","))
+        if not set(sources) <= set(SOURCES):
+            ap.error(f"--sources takes {', '.join(SOURCES)}")
+        result = check_camvid(a.teacher, a.raw_teacher, a.camvid, sources)
     print(json.dumps(result, indent=1))
 
 

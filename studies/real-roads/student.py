@@ -127,13 +127,16 @@ def fill_drives(out: Path, names: list[str], sessions: list[tuple[object, tuple[
 
 def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
           prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
-          drive_teachers: list[Path] | None = None, drive_teacher_first: bool = False) -> dict[str, object]:
+          drive_teachers: list[Path] | None = None, drive_teacher_first: bool = False,
+          complete: bool = False) -> dict[str, object]:
     """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
     (a new folder); return the report. ``drive_copies``: each training frame of the drives is listed this many
     times (``<name>-c1``, ...: each copy draws its own augmentation), to weigh the drives against the other
     frames. ``drive_teachers``: model folders whose confident labels fill the don't care of the drives' training
     frames (:func:`fill_drives`; ``drive_teacher_first``: their confident labels win over the autolabels); the
-    validation and test frames keep their autolabels."""
+    validation and test frames keep their autolabels. ``complete``: the frames' confident labels are completed by
+    appearance (:func:`freespace.datagen.completion.complete_by_appearance`: a graph cut on the frame's colours
+    labels the pixels the teacher is unsure of; issue 70, item 1)."""
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
     lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}
@@ -144,7 +147,14 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
     confident, road = [], []
     for path in sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png"):
         image = cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-        label = teacher_labels(image, sessions, threshold)
+        if complete:
+            from freespace.datagen.completion import complete_by_appearance
+
+            classes = complete_by_appearance(image, teacher_probability(image, sessions), threshold)
+            label = np.zeros((*classes.shape, 3), np.uint8)
+            label[classes == 1], label[classes == 0] = ROAD_BGR, NON_ROAD_BGR
+        else:
+            label = teacher_labels(image, sessions, threshold)
         name = f"{prefix}-{path.stem}"
         _link(path, out / "left" / f"{name}.png")
         cv2.imwrite(str(out / "label" / f"{name}.png"), label)
@@ -158,7 +168,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
     report = {"teachers": [str(t) for t in teachers], "threshold": threshold, "frames": str(frames),
               "counts": {k: len(v) for k, v in lists.items()}, "teacher_frames": len(road),
               "drive_copies": drive_copies, "drive_teachers": [str(t) for t in drive_teachers or []],
-              "drives_filled": filled,
+              "drives_filled": filled, "completed_by_appearance": complete,
               "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road))}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
@@ -176,11 +186,13 @@ def main() -> None:
                     help="a model folder whose confident labels fill the drives' training frames' don't care")
     ap.add_argument("--drive-teacher-first", action="store_true",
                     help="the drive teachers' confident labels win over the autolabels (the whole frame)")
+    ap.add_argument("--complete", action="store_true",
+                    help="complete the teachers' confident labels of --frames by appearance (a graph cut)")
     a = ap.parse_args()
     if a.drive_teacher_first and not a.drive_teacher:
         ap.error("--drive-teacher-first needs --drive-teacher MODEL")
     print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold,
-                           a.drive_copies, a.drive_teacher, a.drive_teacher_first)))
+                           a.drive_copies, a.drive_teacher, a.drive_teacher_first, a.complete)))
 
 
 if __name__ == "__main__":
