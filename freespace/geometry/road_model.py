@@ -237,8 +237,30 @@ def _plane_lsq(x: np.ndarray, y: np.ndarray, d: np.ndarray) -> tuple[float, floa
     n = d.size
     mx, my, md = x.mean(), y.mean(), d.mean()
     xc, yc = x - mx, y - my
-    sxx, syy, sxy = xc @ xc / n, yc @ yc / n, xc @ yc / n
-    sxd, syd = xc @ d / n, yc @ d / n
+    return _solve_plane(n, mx, my, md, xc @ xc / n, yc @ yc / n, xc @ yc / n, xc @ d / n, yc @ d / n)
+
+
+#: the products whose sums over a pixel set give its plane's normal equations (:func:`_plane_from_sums`)
+_PRODUCTS = ("xx", "xy", "x", "yy", "y", "1", "xd", "yd", "d")
+
+
+def _products(x: np.ndarray, y: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """``n×9`` float64: each pixel's :data:`_PRODUCTS`, so that a 0/1 weight vector's product with it gives the
+    sums of a subset (one matrix-vector product instead of indexing three arrays)."""
+    return np.column_stack([x * x, x * y, x, y * y, y, np.ones_like(x), x * d, y * d, d])
+
+
+def _plane_from_sums(sums: np.ndarray) -> tuple[float, float, float]:
+    """:func:`_plane_lsq` of the pixels whose :func:`_products` sum to ``sums``."""
+    sxx, sxy, sx, syy, sy, n, sxd, syd, sd = (float(v) for v in sums)
+    mx, my, md = sx / n, sy / n, sd / n
+    return _solve_plane(int(n), mx, my, md, sxx / n - mx * mx, syy / n - my * my, sxy / n - mx * my,
+                        sxd / n - mx * md, syd / n - my * md)
+
+
+def _solve_plane(n: int, mx: float, my: float, md: float, sxx: float, syy: float, sxy: float, sxd: float,
+                 syd: float) -> tuple[float, float, float]:
+    """The plane of a pixel set from its means and (co)variances; RoadFitError when its pixels lie on a line."""
     det = sxx * syy - sxy * sxy
     # smallest eigenvalue of the 2×2 coordinate covariance, relative to the largest
     tr = sxx + syy
@@ -327,6 +349,7 @@ def fit_road_model(disparity: np.ndarray, road_mask: np.ndarray, *, robust: bool
         hypothesis = _ransac(x, y, d, inlier_threshold, rng, num_hypotheses, sample_size)
         if hypothesis is not None:
             plane = hypothesis
+        products = _products(x, y, d)
         for _ in range(max_iterations):
             a, b, c = plane
             new_keep = np.abs(d - (a * x + b * y + c)) <= inlier_threshold
@@ -338,7 +361,7 @@ def fit_road_model(disparity: np.ndarray, road_mask: np.ndarray, *, robust: bool
             if count == np.count_nonzero(keep) and np.array_equal(new_keep, keep):
                 break
             keep = new_keep
-            plane = _plane_lsq(x[keep], y[keep], d[keep])
+            plane = _plane_from_sums(keep.astype(np.float64) @ products)
         else:
             a, b, c = plane
             keep = np.abs(d - (a * x + b * y + c)) <= inlier_threshold
