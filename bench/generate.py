@@ -132,7 +132,8 @@ Command: `.venv/bin/python bench/generate.py` (medians of 20 runs; the literal i
 
 {table}
 
-- robust fit + warp / floor: **{t_ours / t_floor:.2f}×** (target ≤ 1.5×, issue 71); literal / ours: {t_literal / t_ours:.0f}×.
+- robust fit + warp / floor: **{t_ours / t_floor:.2f}×** (target ≤ 1.5×, issue 71); literal / ours:
+  {t_literal / t_ours:.0f}×.
 - `freespace generate` for one pair, process start to exit (median of 7): **{t_cli_file:.2f} s** with a
   disparity file, **{t_cli_sgbm:.2f} s** with SGBM disparity and left-right check (target < 1 s).
 """
