@@ -355,7 +355,8 @@ class KittiRaw(StereoRoadDataset):
         folder = self._missing_right[0]
         more = f" (and {len(self._missing_right) - 1} more drives)" if len(self._missing_right) > 1 else ""
         other = f", or {alternative}" if alternative else ""
-        raise DatasetError(f"{folder} {'holds no .png' if folder.is_dir() else 'not found'}: drive "
+        state = "holds no .png" if folder.is_dir() else "is a file" if folder.exists() else "not found"
+        raise DatasetError(f"{folder} {state}: drive "
                            f"{folder.parents[1].name} has no right images{more}, and {why}; give {param('root')} "
                            f"drives with image_03/data{other}")
 

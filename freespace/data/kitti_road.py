@@ -34,7 +34,7 @@ import numpy as np
 
 from freespace.data.base import FrameRef, Problem, StereoRoadDataset
 from freespace.data.registry import register_dataset
-from freespace.errors import DatasetError, InputFileError, InvalidOptionError, param
+from freespace.errors import DatasetError, InvalidOptionError, param
 from freespace.geometry import StereoCalibration
 from freespace.geometry.depth import rig_from_kitti
 from freespace.geometry.lidar import velodyne_to_disparity
@@ -93,7 +93,8 @@ class KittiRoad(StereoRoadDataset):
     def _list(self) -> list[FrameRef]:
         image_dir = self.base / "image_2"
         if not image_dir.is_dir():
-            raise InputFileError(f"{image_dir} not found; a KITTI road root holds data_road/{self.split}/image_2")
+            raise missing_input(image_dir, "image folder", "folder",
+                                hint=f"a KITTI road root holds data_road/{self.split}/image_2")
         right_dir = self.root / "data_road_right" / self.split / "image_3"
         disp_dir = self.disparity_dir or (self.base / "disparity" if (self.base / "disparity").is_dir() else None)
         depth_dir = self.base / "depth_u16"

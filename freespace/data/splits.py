@@ -24,7 +24,7 @@ import numpy as np
 
 from freespace.data.base import StereoRoadDataset
 from freespace.errors import DatasetError, InputFileError, InvalidOptionError, check_seed, param
-from freespace.io.files import PathLike, atomic_write_text
+from freespace.io.files import PathLike, atomic_write_text, missing_input
 
 __all__ = ["SPLIT_NAMES", "SPLIT_BY", "split_sizes", "make_splits", "make_block_splits", "split_frames",
            "parse_fractions", "check_split_by", "write_splits", "read_splits", "split_dataset"]
@@ -213,7 +213,7 @@ def read_splits(folder: PathLike, known: Sequence[str] | None = None) -> dict[st
     for k in SPLIT_NAMES:
         path = folder / f"{k}.txt"
         if not path.is_file():
-            raise InputFileError(f"subset list not found: {path} (expected train.txt, val.txt, test.txt)")
+            raise missing_input(path, "subset list", "file", hint="expected train.txt, val.txt, test.txt")
         out[k] = [line.strip() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
     for k in SPLIT_NAMES:
         twice = sorted({n for n in out[k] if out[k].count(n) > 1})

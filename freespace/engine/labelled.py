@@ -45,7 +45,8 @@ class LabelledSet:
     def files(self) -> dict[str, list[Path]]:
         """The files read, by the option that named their folder (``images``, ``labels``, and ``val_images``,
         ``val_labels`` when given)."""
-        own = self.groups["train"] + (self.groups["val"] if self.held_out else [])
+        held = self.held_out and self.groups["val"] is not self.groups["train"]
+        own = self.groups["train"] + (self.groups["val"] if held else [])
         found = {"images": [f.image for f in own], "labels": [f.label for f in own]}
         if not self.held_out:
             found.update(val_images=[f.image for f in self.groups["val"]],
@@ -71,10 +72,10 @@ def labelled_frames(config: Any) -> LabelledSet:
     per configuration.
 
     Raises:
-        InputFileError: a folder missing. DatasetError: images without labels or labels without images, a label of
-            another size than its image, no road pixel in any training label, no labelled pixel. CorruptFileError:
-            a label of the wrong kind for its format. InvalidOptionError: a road value no label holds, fewer
-            training frames than ``batch_size``.
+        InputFileError: a folder missing, images without labels or labels without images. DatasetError: a label of
+            another size than its image, a road value in no label (no road pixel in any training label), no
+            evaluated pixel, the same frame names in the training and validation folders. CorruptFileError: a label
+            of the wrong kind for its format. InvalidOptionError: fewer training frames than ``batch_size``.
     """
     cached = getattr(config, "_labelled", None)
     if cached is not None:
@@ -103,10 +104,8 @@ def labelled_frames(config: Any) -> LabelledSet:
         raise InvalidOptionError(f"{len(train)} training frames are fewer than {param('batch_size')} "
                                  f"{config.batch_size}; lower it to at most {len(train)}, or label more frames")
     _check_sizes(train + val)
-    scan = scan_labels(train, fmt).check()
-    if len(scan.unevaluated) == scan.frames or not any(scan.road.values()):  # (check refuses these; kept explicit)
-        raise DatasetError(f"no training label in {config.labels} holds a road pixel; check {param('label_format')}")
-    if val and val is not train:
+    scan = scan_labels(train, fmt).check()  # no evaluated pixel, or a road value in no label: refused
+    if val:
         scan_labels(val, fmt).check(each_road_value=False)  # a validation set may hold few road classes
     stats = {"frames": scan.frames, "unevaluated": list(scan.unevaluated), "values": scan.held(),
              "road_pixels": {str(k): v for k, v in scan.road.items()}, "bits": list(scan.bits)}
