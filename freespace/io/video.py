@@ -21,14 +21,11 @@ from __future__ import annotations
 
 import contextlib
 import glob as _glob
-import itertools
 import math
 import os
 import re
 import tempfile
-from collections import deque
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,7 +35,6 @@ import numpy as np
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, OutputError, ShapeMismatchError
 from freespace.io.codecs import IMAGE_SUFFIXES, check_image_pixels, read_image
 from freespace.io.files import PathLike, keep_mode, mark_written, missing_input, replaceable, unicode_name
-from freespace.limits import usable_cores
 
 __all__ = ["VideoFrame", "FrameSource", "VideoWriter", "open_frames", "is_video_path", "is_image_path",
            "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "DEFAULT_FPS"]
@@ -125,10 +121,6 @@ class VideoFrame:
     image: np.ndarray
 
 
-#: threads that decode the images of a folder or glob, and how many frames ahead of the consumer they may be
-DECODE_THREADS, DECODE_AHEAD = 2, 4
-
-
 @dataclass(frozen=True)
 class FrameSource:
     """A sequence of frames, decoded lazily. Iterating it yields :class:`VideoFrame` one at a time
@@ -158,28 +150,8 @@ class FrameSource:
         return self.count
 
     def _image_frames(self) -> Iterator[VideoFrame]:
-        """The images in order, decoded by :data:`DECODE_THREADS` threads at most :data:`DECODE_AHEAD` frames ahead
-        (OpenCV's decoders release the GIL: a 1080p PNG is decoded beside the one before it; memory stays
-        bounded); one thread where this process has one core. A file that cannot be read raises when its turn
-        comes, as one decoded in order would."""
-        def frame(i: int, path: Path) -> VideoFrame:
-            return VideoFrame(i, path.stem, _rgb(read_image(path, what="frame")))
-
-        if len(self.paths) < 2 or usable_cores() < 2:
-            yield from (frame(i, path) for i, path in enumerate(self.paths))
-            return
-        todo = iter(enumerate(self.paths))
-        with ThreadPoolExecutor(max_workers=DECODE_THREADS, thread_name_prefix="freespace-decode") as pool:
-            pending = deque(pool.submit(frame, i, p) for i, p in itertools.islice(todo, DECODE_AHEAD))
-            try:
-                while pending:
-                    done = pending.popleft().result()
-                    for i, p in itertools.islice(todo, 1):
-                        pending.append(pool.submit(frame, i, p))
-                    yield done
-            finally:  # stopped early (an error, or the consumer closed the generator): nothing more is decoded
-                for future in pending:
-                    future.cancel()
+        for i, path in enumerate(self.paths):
+            yield VideoFrame(i, path.stem, _rgb(read_image(path, what="frame")))
 
     def _video_frames(self) -> Iterator[VideoFrame]:
         path = self.paths[0]
