@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import ROOT, machine, timeit, write_section  # noqa: E402
+from _common import ROOT, machine, write_section  # noqa: E402
 from freespace.geometry import fit_road_model, generate_view  # noqa: E402
 from freespace.io.codecs import read_disparity, read_image, write_image  # noqa: E402
 
@@ -89,6 +89,21 @@ def literal(left: np.ndarray, right: np.ndarray, disp: np.ndarray, road: np.ndar
     return out
 
 
+def alternated(fns: list, rounds: int = 200, warmup: int = 5) -> list[float]:
+    """Median wall seconds of each of ``fns``, timed in turn within every round (so that a slower or faster
+    stretch of the machine falls on all of them alike, which timing one after the other does not)."""
+    for _ in range(warmup):
+        for fn in fns:
+            fn()
+    times: list[list[float]] = [[] for _ in fns]
+    for _ in range(rounds):
+        for k, fn in enumerate(fns):
+            t0 = time.perf_counter()
+            fn()
+            times[k].append(time.perf_counter() - t0)
+    return [statistics.median(t) for t in times]
+
+
 def cli_seconds(args: list[str], repeat: int = 7) -> float:
     exe = str(Path(sys.executable).with_name("freespace"))
     times = []
@@ -101,11 +116,11 @@ def cli_seconds(args: list[str], repeat: int = 7) -> float:
 
 def main() -> None:
     left, right, disp, road, disp_path, source = load_frame()
-    t_floor = timeit(lambda: floor(left, right, disp, road))
-    t_fit = timeit(lambda: fit_road_model(disp, road))
     model = fit_road_model(disp, road)
-    t_warp = timeit(lambda: generate_view(left, right, model))
-    t_ours = timeit(lambda: generate_view(left, right, fit_road_model(disp, road)))
+    t_floor, t_fit, t_warp, t_ours = alternated([lambda: floor(left, right, disp, road),
+                                                 lambda: fit_road_model(disp, road),
+                                                 lambda: generate_view(left, right, model),
+                                                 lambda: generate_view(left, right, fit_road_model(disp, road))])
     t0 = time.perf_counter()
     literal(left, right, disp, road)
     t_literal = time.perf_counter() - t0
@@ -128,7 +143,8 @@ def main() -> None:
     table = "| step | ms per frame |\n|---|---:|\n" + "\n".join(f"| {k} | {v * 1e3:.1f} |" for k, v in rows)
     body = f"""Machine: {machine()}.
 Frame: {source}, 1242×375, {int(road.sum())} road pixels in the label ({model.num_valid} with a disparity).
-Command: `.venv/bin/python bench/generate.py` (medians of 20 runs; the literal implementation once).
+Command: `.venv/bin/python bench/generate.py` (medians of 200 rounds, the four timed in turn within each round; the
+literal implementation once).
 
 {table}
 
