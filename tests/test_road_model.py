@@ -166,3 +166,17 @@ def test_no_plane_has_enough_inliers() -> None:
     disp = rng.uniform(1, 100, SHAPE).astype(np.float32)
     with pytest.raises(RoadFitError, match="agree with one plane"):
         fit_road_model(disp, road_mask(SHAPE), inlier_threshold=0.01, min_pixels=5000)
+
+
+def test_the_reweighting_solves_as_plain_least_squares() -> None:
+    """The fit's iterations solve each inlier set from sums of the pixels' products (one matrix-vector product):
+    the same plane as the centred least squares, to rounding (issue 71: the drives' autolabels kept their hash)."""
+    from freespace.geometry.road_model import _plane_from_sums, _plane_lsq, _products
+
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-1, 1, 5000), rng.uniform(-1, 1, 5000)
+    d = 0.3 * x + 12.0 * y + 40.0 + rng.normal(0, 0.5, 5000)
+    keep = rng.random(5000) < 0.7
+    direct = _plane_lsq(x[keep], y[keep], d[keep])
+    summed = _plane_from_sums(keep.astype(np.float64) @ _products(x, y, d))
+    np.testing.assert_allclose(summed, direct, rtol=1e-10, atol=1e-10)
