@@ -35,3 +35,22 @@ def test_the_profile_names_every_stage(tmp_path: Path, capsys: pytest.CaptureFix
         profile = json.loads((out / "summary.json").read_text())["profile_ms_per_frame"]
         assert set(profile) == {*STAGES, "end_to_end"} and all(v >= 0 for v in profile.values())
         assert profile["network"] > 0 and profile["decode"] > 0 and profile["write"] > 0
+
+
+def test_jpeg_overlays_are_asked_for_and_recorded(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from helpers import refused
+
+    ckpt = tiny_road_checkpoint(tmp_path / "m.ckpt", SIZE, width=0.25)
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for i in range(4):
+        write_image(frames / f"f{i}.png", road_frame((64, 192), i)[0])
+    out = tmp_path / "out"
+    base = ["predict", "--checkpoint", str(ckpt), "--input", str(frames), "--no-progress"]
+    assert main([*base, "--out", str(out), "--overlay-format", "jpg", "--shard", "1/2"]) == 0
+    assert sorted(p.suffix for p in (out / "overlays").iterdir()) == [".jpg", ".jpg"]
+    assert json.loads((out / "predict.json").read_text())["overlay_format"] == "jpg"
+    refused(capsys, [*base, "--out", str(out), "--shard", "2/2"], match="overlay_format 'jpg' → 'png'")
+    refused(capsys, [*base, "--out", str(tmp_path / "v.mp4"), "--overlay-format", "jpg"], match="a video is one file")
+    refused(capsys, [*base, "--out", str(tmp_path / "o2"), "--overlay-format", "jpg", "--no-overlays"],
+            match="they are left out")

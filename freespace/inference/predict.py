@@ -67,6 +67,8 @@ def _shard_marker(shard: tuple[int, int]) -> str:
 
 #: what made a ``predict`` output folder (:func:`_run_record`): the shards of one run share it, others are refused
 RUN_RECORD = "predict.json"
+#: the formats of ``overlays/``: lossless PNG, or JPEG for speed
+OVERLAY_FORMATS = ("png", "jpg")
 
 
 #: predictions a pipeline holds waiting to be written (its writer always has the next one at hand); decoded
@@ -299,8 +301,8 @@ _OVERLAY_LUT = _overlay_lut()
 
 def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_size: int = 4,
                    progress: bool = True, shard: tuple[int, int] | None = None, overlays: bool = True,
-                   pipeline: bool = True) -> dict[str, Any]:
-    """Write ``OUT/<name>.png`` (8-bit road confidence, the input's size), ``OUT/overlays/<name>.png``,
+                   pipeline: bool = True, overlay_format: str = "png") -> dict[str, Any]:
+    """Write ``OUT/<name>.png`` (8-bit road confidence, the input's size), ``OUT/overlays/<name>.png`` (or ``.jpg``),
     ``OUT/summary.json`` and ``OUT/predict.json`` (:data:`RUN_RECORD`: what made it) for every frame of ``inputs``.
 
     Args:
@@ -315,6 +317,8 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
             images only.
         overlays: also write ``overlays/`` (an RGB PNG per frame: its encoding costs about three times the
             mask's; leave them out for real time).
+        overlay_format: ``png`` (lossless) or ``jpg`` (JPEG at OpenCV's quality 95: about an eighth of a 1080p
+            PNG's encoding time), recorded in ``predict.json``.
         pipeline: decode, predict and write in three overlapped threads (:func:`run_frames`); the outputs
             are the same either way.
 
@@ -324,19 +328,23 @@ def predict_folder(predictor: Predictor, inputs: PathLike, out: PathLike, batch_
         ``model``, ``image_size``, ``shard``.
     """
     _check_batch_size(batch_size)
+    if overlay_format not in OVERLAY_FORMATS:
+        raise InvalidOptionError(f"{param('overlay_format')} must be one of {', '.join(OVERLAY_FORMATS)}, got "
+                                 f"{overlay_format!r}")
     check_writable(out, folder=True)
     check_outputs({"out": out}, {"input": inputs})
     source = open_frames(inputs)
     check_outputs({"out": out}, _input_paths(source))
     frames = _shard_source(source, shard) if shard is not None else source
-    record = _run_record(predictor, source, shard, overlays)
+    record = {**_run_record(predictor, source, shard, overlays), "overlay_format": overlay_format if overlays else None}
     with claim_folder(out, "predict", shared=shard is not None) as folder:
         if shard is not None:
             _join_run(folder, record)
         with folder.staged(replace=shard is None) as staging:
             if shard is None:
                 write_json(staging / RUN_RECORD, record)
-            summary = _predict_into(predictor, frames, staging, batch_size, progress, shard, overlays, pipeline)
+            summary = _predict_into(predictor, frames, staging, batch_size, progress, shard,
+                                    overlay_format if overlays else None, pipeline)
         if shard is not None:
             _join_summaries(folder, shard[1])
     return summary
@@ -423,7 +431,7 @@ def _summary(predictor: Predictor, stats: RunStats, **extra: Any) -> dict[str, A
 
 
 def _predict_into(predictor: Predictor, source: FrameSource, out: Path, batch_size: int, progress: bool,
-                  shard: tuple[int, int] | None, overlays: bool = True, pipeline: bool = True) -> dict[str, Any]:
+                  shard: tuple[int, int] | None, overlays: str | None = "png", pipeline: bool = True) -> dict[str, Any]:
     from freespace.runtime.log import progress_bar
 
     bar = progress_bar(None, total=len(source), desc="predict", unit="frame", enabled=progress)
@@ -432,7 +440,7 @@ def _predict_into(predictor: Predictor, source: FrameSource, out: Path, batch_si
         conf = to_confidence(prob)
         write_image(out / f"{frame.name}.png", conf)
         if overlays:
-            write_image(out / "overlays" / f"{frame.name}.png", fast_overlay(frame.image, conf >= 128))
+            write_image(out / "overlays" / f"{frame.name}.{overlays}", fast_overlay(frame.image, conf >= 128))
 
     stats = run_frames(predictor, source, batch_size, write, pipeline=pipeline, on_batch=bar.update)
     bar.close()
@@ -479,7 +487,8 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
 
 def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
             threads: int | None = None, batch_size: int = 4, shard: str | tuple[int, int] | None = None,
-            overlays: bool = True, progress: bool = True, tta: bool = False) -> dict[str, Any]:
+            overlays: bool = True, progress: bool = True, tta: bool = False,
+            overlay_format: str = "png") -> dict[str, Any]:
     """``freespace predict``: the road confidence PNGs and overlays of every frame of ``inputs`` in the folder
     ``out`` (:func:`predict_folder`), or, when ``out`` names a video (``.mp4``), the overlaid video
     (:func:`predict_video`), with the model of ``checkpoint`` or ``onnx`` (one of them).
@@ -508,6 +517,9 @@ def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = No
     if video and shard:
         raise InvalidOptionError(f"{param('shard')} writes frames into a folder; a video {param('out')} is one file: "
                                  f"leave out {param('shard')}")
+    if overlay_format != "png" and (video or not overlays):
+        raise InvalidOptionError(f"{param('overlay_format')} is the format of a folder's overlays/; "
+                                 f"{'a video is one file' if video else 'they are left out'}: leave it out")
     if video and not overlays:
         raise InvalidOptionError(f"{param('no_overlays')} leaves out the overlay PNGs of a folder {param('out')}; a "
                                  f"video {param('out')} is the overlay: leave out {param('no_overlays')}")
@@ -515,7 +527,7 @@ def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = No
     if video:
         return predict_video(predictor, inputs, out, batch_size=batch_size, progress=progress)
     return predict_folder(predictor, inputs, out, batch_size=batch_size, progress=progress, shard=shard,
-                          overlays=overlays)
+                          overlays=overlays, overlay_format=overlay_format)
 
 
 def predict_report(summary: dict[str, Any], out: PathLike, shard: str | None = None, profile: bool = False) -> str:
