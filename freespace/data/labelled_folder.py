@@ -14,6 +14,7 @@ Torch-free.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from freespace.data.base import FrameRef, StereoRoadDataset
@@ -47,10 +48,6 @@ class LabelledFolderDataset(StereoRoadDataset):
         """The frame's label, decoded by the folder's :class:`~freespace.evaluation.labelled.LabelFormat`."""
         return read_label(Path(frame.label), self.label_format)  # type: ignore[arg-type]
 
-    def names(self, group: str) -> list[str]:
-        """The names of ``group``'s frames, in name order."""
-        return [f.name for f in self.groups.get(group, [])]
-
 
 def held_out_by_name(names: list[str], share: float) -> tuple[list[str], list[str]]:
     """``names`` (sorted) split into training and validation frames: the last ``ceil(share · n)`` by name order are
@@ -61,8 +58,6 @@ def held_out_by_name(names: list[str], share: float) -> tuple[list[str], list[st
         >>> held_out_by_name(["a", "b", "c", "d", "e"], 0.2)
         (['a', 'b', 'c', 'd'], ['e'])
     """
-    import math
-
     names = sorted(names)
     n = min(len(names) - 1, math.ceil(share * len(names))) if share > 0 else 0
     return names[: len(names) - n], names[len(names) - n:]

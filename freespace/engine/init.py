@@ -74,14 +74,17 @@ def read_init(init: PathLike) -> InitWeights:
 
 @functools.lru_cache(maxsize=4)
 def _read(path: Path, mtime: int, size: int) -> InitWeights:
+    from freespace.engine.adapt_io import MIN_FRAME_SIDE
     from freespace.inference.predictor import load_checkpoint
+    from freespace.io.codecs import MAX_IMAGE_SIDE
 
     net, hp = load_checkpoint(path)
     image_size = hp.get("image_size")
+    sides = range(MIN_FRAME_SIDE, MAX_IMAGE_SIDE + 1)
     if image_size is not None and not (isinstance(image_size, (list, tuple)) and len(image_size) == 2
-                                       and all(isinstance(v, int) and 32 <= v <= 8192 for v in image_size)):
+                                       and all(isinstance(v, int) and v in sides for v in image_size)):
         raise CorruptFileError(f"{path} states the input size {image_size!r}; a checkpoint's image_size is [H, W], "
-                               f"32 to 8192 pixels a side")
+                               f"{MIN_FRAME_SIDE} to {MAX_IMAGE_SIDE} pixels a side")
     return InitWeights(path, {k: v.detach().clone() for k, v in net.state_dict().items()},
                        {"model": hp["model"], "model_options": dict(hp.get("model_options") or {}),
                         "image_size": list(image_size) if image_size else None,
