@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from freespace.errors import FreespaceError, InputFileError, InvalidOptionError, param
+from freespace.io.codecs import MIN_FRAME_SIDE
 from freespace.io.files import PathLike, atomic_write_bytes
 
 __all__ = ["Frames", "read_frames", "frame_paths", "save_checkpoint", "checkpoint_from_onnx", "write_model_folder",
@@ -37,8 +38,6 @@ __all__ = ["Frames", "read_frames", "frame_paths", "save_checkpoint", "checkpoin
 CHECKPOINT = "model.ckpt"
 #: frames adapt uses at most (evenly spaced among more): 1000 frames at 192×640 hold 370 MB in memory
 MAX_FRAMES = 1000
-#: a frame's side at least (pixels): the smallest size a network trains at; a smaller image (a 1×1 icon) shows no road
-MIN_FRAME_SIDE = 32
 #: the bytes of the published model's card read at most for its title, and the title's characters at most
 MAX_CARD_BYTES, MAX_TITLE_CHARS = 64 * 1024, 200
 

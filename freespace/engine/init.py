@@ -74,9 +74,8 @@ def read_init(init: PathLike) -> InitWeights:
 
 @functools.lru_cache(maxsize=4)
 def _read(path: Path, mtime: int, size: int) -> InitWeights:
-    from freespace.engine.adapt_io import MIN_FRAME_SIDE
     from freespace.inference.predictor import load_checkpoint
-    from freespace.io.codecs import MAX_IMAGE_SIDE
+    from freespace.io.codecs import MAX_IMAGE_SIDE, MIN_FRAME_SIDE
 
     net, hp = load_checkpoint(path)
     image_size = hp.get("image_size")

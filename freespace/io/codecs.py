@@ -39,7 +39,7 @@ from freespace.labels import RoadLabel
 from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS
 
 __all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES",
-           "OUTPUT_IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "read_image", "image_header_size", "image_orientation",
+           "OUTPUT_IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "MIN_FRAME_SIDE", "read_image", "image_header_size", "image_orientation",
            "image_frame_count", "upright", "MultiFrameImageError", "check_image_pixels", "describe_image", "read_raw",
            "write_image", "encode_image", "read_disparity", "write_disparity", "png_disparity_overflow",
            "read_depth", "read_road_label",
@@ -57,6 +57,8 @@ OUTPUT_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".ppm", ".tif", ".tiff
 
 #: the largest image side (pixels) a network is trained or run at: bounds sizes read from options and files
 MAX_IMAGE_SIDE = 8192
+#: a frame's side at least (pixels): the smallest size a network trains at; a smaller image (a 1×1 icon) shows no road
+MIN_FRAME_SIDE = 32
 
 #: the file limit as the messages name it
 _FILE_LIMIT = f"image file limit of {MAX_IMAGE_FILE_BYTES:,} bytes (MAX_IMAGE_FILE_BYTES)"
