@@ -82,7 +82,7 @@ def balanced_label(prob: np.ndarray, share: float = 0.8, bands: int = 8, min_con
 
 
 def complete_by_appearance(image: np.ndarray, prob: np.ndarray, threshold: float = 0.9,
-                           iterations: int = 3) -> np.ndarray:
+                           iterations: int = 3, seeds: np.ndarray | None = None) -> np.ndarray:
     """The confident label (:func:`confident_label`) with its uncertain pixels completed by a graph cut on the
     image's colours (see the module docstring).
 
@@ -90,13 +90,19 @@ def complete_by_appearance(image: np.ndarray, prob: np.ndarray, threshold: float
         image: ``H×W×3 uint8`` RGB frame. prob: its road probability, ``float H×W`` in [0, 1].
         threshold: the seeds' confidence (road above it, not road below 1 − it).
         iterations: GrabCut's iterations (each re-fits the colour models).
+        seeds: a class map (``uint8 H×W``) to complete instead of the confident label, e.g. labels carried along
+            time (:mod:`freespace.datagen.temporal`).
 
     Returns:
         ``uint8 H×W``: 1 road, 0 not road (every pixel labelled, unless a class has no seed: then the confident
         label as it is).
     """
     prob = _check(prob, image)
-    seeds = confident_label(prob, threshold)
+    if seeds is None:
+        seeds = confident_label(prob, threshold)
+    elif seeds.shape != prob.shape:
+        raise ShapeMismatchError(f"the seeds are {seeds.shape[1]}×{seeds.shape[0]} but the probability "
+                                 f"{prob.shape[1]}×{prob.shape[0]} (W×H); give the seeds of that image")
     if not ((seeds == 1).any() and (seeds == 0).any()):
         return seeds
     mask = np.where(prob >= 0.5, cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)

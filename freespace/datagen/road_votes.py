@@ -16,11 +16,37 @@ from freespace.geometry.homography import homography_from_pose
 from freespace.geometry.plane import RoadPlane
 from freespace.labels import RoadLabel
 
-__all__ = ["propagate_frame"]
+__all__ = ["propagate_frame", "decide_votes", "blurred_grey"]
 
 
-def _blur(image: np.ndarray) -> np.ndarray:
+def blurred_grey(image: np.ndarray) -> np.ndarray:
+    """``image`` (``H×W×3`` RGB or ``H×W`` grey, ``uint8``) as ``float32 H×W`` grey levels after a 5-pixel Gaussian
+    blur: what two frames are compared on where a vote counts."""
     return cv2.GaussianBlur(grey(image).astype(np.float32), (5, 5), 0)
+
+
+def decide_votes(road: np.ndarray, valid: np.ndarray, road_votes: np.ndarray,
+                 other_votes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A label after its sources' votes (step 4 of :mod:`freespace.datagen.propagate`).
+
+    Args:
+        road, valid: ``bool H×W``: the frame's own label (road where ``valid & road``; don't care where not valid).
+        road_votes, other_votes: ``int H×W``: sources saying road and not road at each pixel.
+
+    Returns:
+        The new ``road`` and ``valid`` (``bool H×W``) and a ``uint8 H×W`` change map: 0 unchanged, 1 don't care →
+        road, 2 → don't care (more sources contradict the label than agree with it).
+    """
+    road, valid = road.copy(), valid.copy()
+    gained = ~valid & (road_votes > 0) & (other_votes == 0)
+    against = np.where(road, other_votes, road_votes)
+    support = np.where(road, road_votes, other_votes)
+    conflict = valid & (against > 0) & (against > support)
+    road[gained], valid[gained] = True, True
+    road[conflict], valid[conflict] = False, False
+    change = np.zeros(road.shape, np.uint8)
+    change[gained], change[conflict] = 1, 2
+    return road, valid, change
 
 
 def propagate_frame(image: np.ndarray, label: RoadLabel, model: RoadModel, K: np.ndarray, baseline: float,
@@ -41,7 +67,7 @@ def propagate_frame(image: np.ndarray, label: RoadLabel, model: RoadModel, K: np
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     plane = RoadPlane.from_road_model(model, fx, baseline, cx, cy, fy)
     below_horizon = model.disparity((h, w)) > 0
-    grey_t = _blur(image)
+    grey_t = blurred_grey(image)
     road_votes = np.zeros((h, w), np.int16)
     other_votes = np.zeros((h, w), np.int16)
     near_disparity = fx * baseline / options.near_depth
@@ -51,18 +77,10 @@ def propagate_frame(image: np.ndarray, label: RoadLabel, model: RoadModel, K: np
         code = np.where(sure, np.where(src_label.road, 2, 1), 0).astype(np.uint8)
         flags = cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP
         code_t = cv2.warpPerspective(code, H, (w, h), flags=flags, borderValue=0)
-        grey_s = cv2.warpPerspective(_blur(src_image), H, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+        grey_s = cv2.warpPerspective(blurred_grey(src_image), H, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                      borderValue=-1000.0)
         agree = (np.abs(grey_s - grey_t) <= options.max_grey_difference) & below_horizon
         road_votes += (code_t == 2) & agree
         other_votes += (code_t == 1) & agree
-    road, valid = label.road.copy(), label.valid.copy()
-    gained = ~label.valid & (road_votes > 0) & (other_votes == 0)
-    against = np.where(label.road, other_votes, road_votes)
-    support = np.where(label.road, road_votes, other_votes)
-    conflict = label.valid & (against > 0) & (against > support)
-    road[gained], valid[gained] = True, True
-    road[conflict], valid[conflict] = False, False
-    change = np.zeros((h, w), np.uint8)
-    change[gained], change[conflict] = 1, 2
+    road, valid, change = decide_votes(label.road, label.valid, road_votes, other_votes)
     return RoadLabel(road=road, valid=valid), change

@@ -39,8 +39,9 @@ from freespace.labels import RoadLabel
 from freespace.limits import MAX_IMAGE_FILE_BYTES, MAX_IMAGE_PIXELS
 
 __all__ = ["load_yaml", "label_image_problem", "DISPARITY_SUFFIXES", "DEPTH_SUFFIXES", "IMAGE_SUFFIXES",
-           "OUTPUT_IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "MIN_FRAME_SIDE", "read_image", "image_header_size", "image_orientation",
-           "image_frame_count", "upright", "MultiFrameImageError", "check_image_pixels", "describe_image", "read_raw",
+           "OUTPUT_IMAGE_SUFFIXES", "MAX_IMAGE_SIDE", "MIN_FRAME_SIDE", "read_image", "image_header_size",
+           "image_orientation", "image_frame_count", "upright", "MultiFrameImageError", "check_image_pixels",
+           "describe_image", "read_raw",
            "write_image", "encode_image", "read_disparity", "write_disparity", "png_disparity_overflow",
            "read_depth", "read_road_label",
            "road_label_from_image", "road_label_to_kitti"]

@@ -27,6 +27,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from freespace.datagen.completion import balanced_label, complete_by_appearance, confident_label
+from freespace.datagen.temporal import CarryOptions, carry_along
 from freespace.evaluation.real_frames import FULL_MASK_FRAMES as KITTI2015_FRAMES
 from freespace.evaluation.real_frames import SHARED
 
@@ -86,8 +88,12 @@ def check_kitti2015(teachers: list[Path], autolabels: Path, kitti2015: Path) -> 
 
 
 #: the label sources of a teacher's probability (issue 70, item 1): one global confidence (student.py's), class-
-#: balanced thresholds per band of rows, and the confident label completed by appearance (a graph cut)
-SOURCES = ("confident", "balanced", "appearance")
+#: balanced thresholds per band of rows, the confident label completed by appearance (a graph cut), the confident
+#: label carried along time from the next frames (a sequence's road-plane homographies,
+#: :mod:`freespace.datagen.temporal`), and that carried label completed by appearance
+SOURCES = ("confident", "balanced", "appearance", "temporal", "temporal+appearance")
+#: how labels are carried along time: 24 frames ahead; a not-road label turns road when 3 of them say road
+CARRY = CarryOptions(window=24, override=3)
 
 
 def _kitti_colours(classes: np.ndarray) -> np.ndarray:
@@ -98,41 +104,47 @@ def _kitti_colours(classes: np.ndarray) -> np.ndarray:
     return label
 
 
-def labels_of(source: str, image: np.ndarray, prob: np.ndarray) -> np.ndarray:
-    """The KITTI-colour label (BGR) that ``source`` (:data:`SOURCES`) makes of ``prob`` on ``image``."""
-    from freespace.datagen.completion import balanced_label, complete_by_appearance
-
+def labels_of(source: str, images: list[np.ndarray], probs: list[np.ndarray]) -> list[np.ndarray]:
+    """The KITTI-colour labels (BGR) that ``source`` (:data:`SOURCES`) makes of the road probabilities ``probs`` of
+    ``images`` (RGB frames of one camera, consecutive and in time order for the temporal sources)."""
     if source == "confident":
-        return student.label_from(prob)
+        return [student.label_from(prob) for prob in probs]
     if source == "balanced":
-        return _kitti_colours(balanced_label(prob))
-    return _kitti_colours(complete_by_appearance(image, prob, student.THRESHOLD))
+        return [_kitti_colours(balanced_label(prob)) for prob in probs]
+    seeds = [confident_label(prob, student.THRESHOLD) for prob in probs]
+    if source.startswith("temporal"):
+        seeds = carry_along(images, seeds, [prob >= 0.5 for prob in probs], CARRY)[0]
+    if source.endswith("appearance"):
+        seeds = [complete_by_appearance(image, prob, student.THRESHOLD, seeds=seed)
+                 for image, prob, seed in zip(images, probs, seeds)]
+    return [_kitti_colours(seed) for seed in seeds]
 
 
 def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
                  sources: tuple[str, ...] = ("confident",)) -> dict[str, dict[str, float]]:
     """The CamVid labels of ``teachers`` (light normalised), ``raw_teachers`` (as they are) and the mean of all
-    models, on ``val`` and the dusk frames under ``camvid`` (``make.sh``'s layout), each made by every label
-    ``sources`` (:data:`SOURCES`; other than ``confident``, named ``name / source``)."""
+    models, on ``val`` and the dusk frames under ``camvid`` (``make.sh``'s layout; each set one sequence in time
+    order: ``val`` 15 frames a second, dusk one), each made by every label ``sources`` (:data:`SOURCES`; other than
+    ``confident``, named ``name / source``)."""
     normalised, raw = student._sessions(teachers), student._sessions(raw_teachers)
     sums: dict[str, np.ndarray] = {}
-    for part, images, masks in (("val", "val", "valannot"), ("dusk", "train", "duskannot")):
-        for path in sorted((camvid / masks).glob("*.png")):
-            classes = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-            image = _rgb(camvid / images / path.name)
-            named = {}
-            if teachers:
-                named["teachers"] = student.teacher_probability(image, normalised, normalise=True)
-            if raw_teachers:
-                named["raw teachers"] = student.teacher_probability(image, raw, normalise=False)
-            if teachers and raw_teachers:  # the mean over every model
-                named["all"] = ((len(normalised) * named["teachers"] + len(raw) * named["raw teachers"])
-                                / (len(normalised) + len(raw)))
-            for name, prob in named.items():
-                for source in sources:
-                    key = f"{part}, {name}" + ("" if source == "confident" else f" / {source}")
-                    sums[key] = sums.get(key, 0) + count(labels_of(source, image, prob), classes == CAMVID_ROAD,
-                                                         classes != CAMVID_VOID)
+    for part, folder, masks in (("val", "val", "valannot"), ("dusk", "train", "duskannot")):
+        paths = sorted((camvid / masks).glob("*.png"))
+        classes = [cv2.imread(str(path), cv2.IMREAD_GRAYSCALE) for path in paths]
+        images = [_rgb(camvid / folder / path.name) for path in paths]
+        named: dict[str, list[np.ndarray]] = {}
+        if teachers:
+            named["teachers"] = [student.teacher_probability(im, normalised, normalise=True) for im in images]
+        if raw_teachers:
+            named["raw teachers"] = [student.teacher_probability(im, raw, normalise=False) for im in images]
+        if teachers and raw_teachers:  # the mean over every model
+            named["all"] = [(len(normalised) * a + len(raw) * b) / (len(normalised) + len(raw))
+                            for a, b in zip(named["teachers"], named["raw teachers"])]
+        for name, probs in named.items():
+            for source in sources:
+                key = f"{part}, {name}" + ("" if source == "confident" else f" / {source}")
+                for label, human in zip(labels_of(source, images, probs), classes):
+                    sums[key] = sums.get(key, 0) + count(label, human == CAMVID_ROAD, human != CAMVID_VOID)
     return {name: summary(s) for name, s in sums.items()}
 
 
@@ -153,7 +165,7 @@ def check_kitti_dev(teachers: list[Path], kitti_dev: Path,
         image = _rgb(kitti_dev / "images" / name)
         prob = student.teacher_probability(image, sessions, normalise=False)
         for source in sources:
-            counts = count(labels_of(source, image, prob), human, np.ones_like(human))
+            counts = count(labels_of(source, [image], [prob])[0], human, np.ones_like(human))
             for group in ("all 22",) + (("9 wide",) if name in wide else ()):
                 key = f"{group} / {source}"
                 sums[key] = sums.get(key, 0) + counts
@@ -180,7 +192,10 @@ def main() -> None:
     if a.check == "kitti2015":
         result = check_kitti2015(a.teacher, a.autolabels, a.kitti2015)
     elif a.check == "kittidev":
-        result = check_kitti_dev(a.teacher, a.kitti_dev, tuple(a.sources.split(",")))
+        sources = tuple(a.sources.split(","))
+        if not set(sources) <= set(SOURCES[:3]):  # single frames: nothing to carry along time
+            ap.error(f"kittidev's frames are not a sequence: --sources takes {', '.join(SOURCES[:3])}")
+        result = check_kitti_dev(a.teacher, a.kitti_dev, sources)
     else:
         if not a.teacher and not a.raw_teacher:
             ap.error("give --teacher MODEL or --raw-teacher MODEL")

@@ -377,9 +377,10 @@ def test_labelcheck_scores_the_teacher_s_labels_against_human_road(tmp_path: Pat
     for images, masks in (("val", "valannot"), ("train", "duskannot")):
         cv2.imwrite(str(camvid / images / "a.png"), image)
         cv2.imwrite(str(camvid / masks / "a.png"), classes)
-    result = labelcheck.check_camvid([tmp_path / "t"], [tmp_path / "r"], camvid)
-    assert sorted(result) == sorted(f"{part}, {name}" for part in ("val", "dusk")
-                                    for name in ("teachers", "raw teachers", "all"))
+    result = labelcheck.check_camvid([tmp_path / "t"], [tmp_path / "r"], camvid, ("confident", "temporal"))
+    assert sorted(result) == sorted(f"{part}, {name}{source}" for part in ("val", "dusk")
+                                    for name in ("teachers", "raw teachers", "all") for source in ("", " / temporal"))
+    assert result["val, all / temporal"] == result["val, all"]  # one frame: nothing to carry
     # rows 6-35 counted (0-5 void); rows 17-18 don't care, 19-35 road (12 of them the human road)
     assert result["val, all"] == {"labelled": pytest.approx(100 * 28 / 30, abs=0.1), "road_as_road": 100.0,
                                   "road_as_not": 0.0, "precision": pytest.approx(100 * 12 / 17, abs=0.1)}
