@@ -125,10 +125,39 @@ def fill_drives(out: Path, names: list[str], sessions: list[tuple[object, tuple[
             "changed": float(np.mean(changed)) if changed else 0.0, "teacher_first": teacher_first}
 
 
+def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int]]], threshold: float = THRESHOLD,
+                  complete: bool = False, carry: bool = False) -> tuple[list[np.ndarray], dict[str, object] | None]:
+    """The teachers' class maps (``uint8 H×W``: 1 road, 0 not road, 255 don't care) of the frames at ``paths``:
+    the confident label, carried along time with ``carry`` (frames grouped into sequences by the name before its
+    last ``_``, CamVid's ``0016E5_07959``, in name order; :func:`freespace.datagen.temporal.carry_along` with
+    labelcheck's settings), then completed by appearance with ``complete``. Also the carrying's record per
+    sequence (``None`` without ``carry``)."""
+    from freespace.datagen.completion import complete_by_appearance, confident_label
+    from freespace.datagen.temporal import CarryOptions, carry_along
+
+    images = [cv2.cvtColor(cv2.imread(str(p), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB) for p in paths]
+    probs = [teacher_probability(image, sessions) for image in images]
+    classes = [confident_label(prob, threshold) for prob in probs]
+    record: dict[str, object] | None = None
+    if carry:
+        record = {}
+        groups: dict[str, list[int]] = {}
+        for i, path in enumerate(paths):
+            groups.setdefault(path.stem.rpartition("_")[0], []).append(i)
+        for key, idx in groups.items():
+            carried, record[key] = carry_along([images[i] for i in idx], [classes[i] for i in idx],
+                                               [probs[i] >= 0.5 for i in idx], CarryOptions(window=24, override=3))
+            for i, label in zip(idx, carried):
+                classes[i] = label
+    if complete:
+        classes = [complete_by_appearance(im, prob, threshold, seeds=c) for im, prob, c in zip(images, probs, classes)]
+    return classes, record
+
+
 def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
           prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
           drive_teachers: list[Path] | None = None, drive_teacher_first: bool = False,
-          complete: bool = False) -> dict[str, object]:
+          complete: bool = False, carry: bool = False) -> dict[str, object]:
     """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
     (a new folder); return the report. ``drive_copies``: each training frame of the drives is listed this many
     times (``<name>-c1``, ...: each copy draws its own augmentation), to weigh the drives against the other
@@ -136,25 +165,20 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
     frames (:func:`fill_drives`; ``drive_teacher_first``: their confident labels win over the autolabels); the
     validation and test frames keep their autolabels. ``complete``: the frames' confident labels are completed by
     appearance (:func:`freespace.datagen.completion.complete_by_appearance`: a graph cut on the frame's colours
-    labels the pixels the teacher is unsure of; issue 70, item 1)."""
+    labels the pixels the teacher is unsure of; issue 70, item 1). ``carry``: the confident labels are first carried
+    along time within each sequence (:func:`frame_classes`)."""
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
     lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}
     link_drives(raw, autolabels, splits, out, lists, drive_copies)
     filled = fill_drives(out, list(lists["train"]), _sessions(drive_teachers), threshold,
                          drive_teacher_first) if drive_teachers else None
-    sessions = _sessions(teachers)
     confident, road = [], []
-    for path in sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png"):
-        image = cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-        if complete:
-            from freespace.datagen.completion import complete_by_appearance
-
-            classes = complete_by_appearance(image, teacher_probability(image, sessions), threshold)
-            label = np.zeros((*classes.shape, 3), np.uint8)
-            label[classes == 1], label[classes == 0] = ROAD_BGR, NON_ROAD_BGR
-        else:
-            label = teacher_labels(image, sessions, threshold)
+    paths = sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png")
+    classes, carried = frame_classes(paths, _sessions(teachers), threshold, complete, carry)
+    for path, frame in zip(paths, classes):
+        label = np.zeros((*frame.shape, 3), np.uint8)
+        label[frame == 1], label[frame == 0] = ROAD_BGR, NON_ROAD_BGR
         name = f"{prefix}-{path.stem}"
         _link(path, out / "left" / f"{name}.png")
         cv2.imwrite(str(out / "label" / f"{name}.png"), label)
@@ -168,7 +192,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
     report = {"teachers": [str(t) for t in teachers], "threshold": threshold, "frames": str(frames),
               "counts": {k: len(v) for k, v in lists.items()}, "teacher_frames": len(road),
               "drive_copies": drive_copies, "drive_teachers": [str(t) for t in drive_teachers or []],
-              "drives_filled": filled, "completed_by_appearance": complete,
+              "drives_filled": filled, "completed_by_appearance": complete, "carried_along_time": carried,
               "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road))}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
@@ -188,11 +212,13 @@ def main() -> None:
                     help="the drive teachers' confident labels win over the autolabels (the whole frame)")
     ap.add_argument("--complete", action="store_true",
                     help="complete the teachers' confident labels of --frames by appearance (a graph cut)")
+    ap.add_argument("--carry", action="store_true",
+                    help="carry the teachers' confident labels of --frames along time within each sequence first")
     a = ap.parse_args()
     if a.drive_teacher_first and not a.drive_teacher:
         ap.error("--drive-teacher-first needs --drive-teacher MODEL")
     print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold,
-                           a.drive_copies, a.drive_teacher, a.drive_teacher_first, a.complete)))
+                           a.drive_copies, a.drive_teacher, a.drive_teacher_first, a.complete, a.carry)))
 
 
 if __name__ == "__main__":
