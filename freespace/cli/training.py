@@ -116,6 +116,7 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
 
 def adapt_parser(p: argparse.ArgumentParser) -> None:
     from freespace.engine import adapt as A
+    from freespace.engine import norm_stats as N
     from freespace.engine.adapt import BOUNDS as B
     from freespace.engine.adapt import AdaptSettings as D
 
@@ -145,6 +146,12 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
                         f"when that share falls below {A.MIN_ROAD_RATIO:g}× or rises above {A.MAX_ROAD_RATIO:g}× the "
                         f"published model's, or when the loss is not finite or its mean over {A.LOSS_WINDOW} steps "
                         f"exceeds {A.LOSS_GROWTH:g}× its first step's (and ln 2)")
+    p.add_argument("--norm-stats", choices=N.NORM_STATS, default=D.norm_stats,
+                   help=f"the batch-norm statistics before self-training (AdaBN): 'frames' re-estimates them on up to "
+                        f"{N.MAX_NORM_FRAMES} of your frames (refused for a checkpoint whose batch norms are folded "
+                        f"into its convolutions, as the published folders' are), 'keep' keeps the checkpoint's, "
+                        f"'auto' re-estimates them when the checkpoint holds a training run's and keeps folded ones "
+                        f"(default {D.norm_stats})")
     p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=WORKERS, help="CPU threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
@@ -158,12 +165,13 @@ def cmd_adapt(args: argparse.Namespace) -> int:
 
     s = adapt(args.model, args.input, args.out, source=args.source, epochs=args.epochs, minutes=args.minutes,
               threshold=args.threshold, lr=args.lr, batch_size=args.batch_size, ema=args.ema,
-              max_drift=args.max_drift, seed=args.seed, progress=not args.no_progress, threads=args.threads)
+              max_drift=args.max_drift, seed=args.seed, norm_stats=args.norm_stats, progress=not args.no_progress,
+              threads=args.threads)
     b, a = s["before"], s["after"]
     print(f"adapted {shown_path(s['model'])} on {s['frames']} frames ({s['skipped']} unreadable skipped) in "
           f"{s['seconds'] / 60:.1f} min, {s['rounds']} rounds; held-out road share {100 * b['road_share']:.1f} % → "
           f"{100 * a['road_share']:.1f} %, mean confidence {100 * b['confidence']:.1f} % → "
-          f"{100 * a['confidence']:.1f} % → {shown_path(args.out)}")
+          f"{100 * a['confidence']:.1f} %; batch-norm statistics {s['norm_stats']} → {shown_path(args.out)}")
     return 0
 
 

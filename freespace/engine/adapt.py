@@ -15,11 +15,21 @@ label, by **mean-teacher self-training in rounds**:
 - the *student* learns those labels on strongly augmented views (random scale and crop of half the frame's
   width, :data:`CROP_WIDTH`; mirror, brightness, contrast, saturation, gamma, blur, noise:
   :func:`strong_views`), with cross entropy on the confident pixels;
-  its batch norms keep the published statistics (frozen: a published model's are folded into its
-  convolutions, and batches of a few frames would give noisy ones);
+  its batch norms keep the statistics the run starts with (frozen: batches of a few strongly augmented views would
+  give noisy ones);
 - with ``source`` (frames of the model's own training drives, which its card names) a quarter of each batch
   comes from those frames, labelled once by the published model: what the model knew is rehearsed, not
   forgotten.
+
+**Batch-norm statistics first** (``norm_stats``; AdaBN, :mod:`freespace.engine.norm_stats`): before the first
+round every batch norm's running mean and variance are estimated again on up to
+:data:`~freespace.engine.norm_stats.MAX_NORM_FRAMES` of the training frames (as they are, at the model's size: what
+the adapted model runs on), so that teacher and student start from the statistics of the user's camera. ``auto``
+(the default) does so when the checkpoint holds the statistics of a training run and keeps them when they are
+folded into the convolutions (the published folders' checkpoints, rebuilt from their ONNX files: every batch norm
+the identity, where new statistics would normalise twice); ``frames`` insists (and refuses such a checkpoint);
+``keep`` keeps them. The held-out measures right after it are recorded beside those before and after, and the
+collapse guard checks it as it checks a round.
 
 **Before training** the published model labels the frames: outputs that are not finite (a damaged checkpoint),
 a confident pixel on less than :data:`MIN_CONFIDENT_SHARE` of them (nothing to learn from), no road or nothing
@@ -71,6 +81,7 @@ from freespace.engine.adapt_io import (
     read_frames,
     write_model_folder,
 )
+from freespace.engine.norm_stats import NORM_STATS, norm_stats_plan, reestimate_norm_stats
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, TrainingError, check_seed, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
 from freespace.io.files import PathLike, check_outputs, check_writable, missing_input
@@ -138,15 +149,20 @@ class AdaptSettings:
     ema: float = 0.99
     max_drift: float = 0.3
     seed: int = 0
+    norm_stats: str = "auto"
 
     def check(self) -> AdaptSettings:
-        """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``).
+        """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``), ``norm_stats``
+        against :data:`~freespace.engine.norm_stats.NORM_STATS`.
 
         Raises:
             InvalidOptionError: an option out of bounds, of another type, or None where a value is needed (named,
-            with its bounds).
+            with its bounds); a ``norm_stats`` that is none of its values.
         """
         check_seed(self.seed)
+        if not (isinstance(self.norm_stats, str) and self.norm_stats in NORM_STATS):
+            raise InvalidOptionError(f"{param('norm_stats')} must be one of {', '.join(NORM_STATS)}, got "
+                                     f"{reprlib.repr(self.norm_stats)}")
         values = {}
         for name, bound in BOUNDS.items():
             value = getattr(self, name)
@@ -362,20 +378,20 @@ def _batch_split(batch_size: int, source: bool) -> tuple[int, int]:
 
 
 def _guard(before: dict[str, float], now: dict[str, float], settings: AdaptSettings, when: str,
-           view_share: float | None = None) -> None:
+           view_share: float | None = None, fix: str | None = None) -> None:
     """Refuse a model that drifted to all road, no road or far from the published one (see the module).
 
     ``view_share``: the published model's road share of the held-out frames in the teacher's view
     (:func:`~freespace.data.photometry.normalise_light`), which the student learns: the share may rise to twice the
     larger of it and the share before (dusk frames, where the light normalisation finds the road the published
-    model misses).
+    model misses). ``fix``: what the message tells the user to change (default: the training's settings).
 
     Raises:
         CollapseError: one line that says what drifted, by how much, and what to change.
     """
     share, start = now["road_share"], before["road_share"]
     top = max(start, view_share or 0.0)
-    fix = f"nothing was written; lower {param('lr')} or {param('epochs')}, or raise {param('threshold')}"
+    fix = fix or f"nothing was written; lower {param('lr')} or {param('epochs')}, or raise {param('threshold')}"
     if share < MIN_ROAD_SHARE or share > MAX_ROAD_SHARE:
         raise CollapseError(f"adapt collapsed {when}: the model marks {share:.1%} of the held-out frames as road "
                             f"({'no road' if share < MIN_ROAD_SHARE else 'all road'}; {start:.1%} before); {fix}")
@@ -424,7 +440,8 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
           epochs: int = AdaptSettings.epochs, minutes: float | None = None,
           threshold: float = AdaptSettings.threshold, lr: float = AdaptSettings.lr,
           batch_size: int = AdaptSettings.batch_size, ema: float = AdaptSettings.ema,
-          max_drift: float = AdaptSettings.max_drift, seed: int = AdaptSettings.seed, progress: bool = True,
+          max_drift: float = AdaptSettings.max_drift, seed: int = AdaptSettings.seed,
+          norm_stats: str = AdaptSettings.norm_stats, progress: bool = True,
           threads: int | None = None) -> dict[str, Any]:
     """Adapt the published model in the folder ``model`` to the unlabelled frames ``inputs``; write the
     adapted model folder ``out`` (see the module's docstring for the method and what is written).
@@ -448,18 +465,25 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
         ema: the teacher's decay per step (0: the teacher is the student). max_drift: the most the held-out
             frames' road share (a fraction) may move before the collapse guard stops the run; whatever it is, a
             share below half or above twice the published model's stops it too.
-        seed: the frame order, hold-out and augmentation draws. threads: CPU threads, 1…
-            :func:`~freespace.limits.max_workers` (None: the cores this process may use). progress: a progress bar
-            on a terminal (one line per round otherwise).
+        seed: the frame order, hold-out and augmentation draws.
+        norm_stats: the batch-norm statistics before the first round (AdaBN, :mod:`freespace.engine.norm_stats`):
+            ``"auto"`` re-estimates them on the frames when the checkpoint holds a training run's and keeps them when
+            they are folded into the convolutions (the published folders'); ``"frames"`` re-estimates them (a
+            checkpoint with folded ones is refused); ``"keep"`` keeps them.
+        threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use).
+        progress: a progress bar on a terminal (one line per round otherwise).
 
     Returns:
         The summary written to ``out/summary.json``: frames, settings, seconds, the road share and mean
-        confidence before and after on the held-out frames, the float16 export's check.
+        confidence before and after on the held-out frames (and ``after_norm_stats``, right after the batch-norm
+        statistics were re-estimated, before self-training), what was done with those statistics (``norm_stats``:
+        ``"re-estimated on N frames (K batch norms)"`` or ``"kept: …"`` and why), the float16 export's check.
 
     Raises:
         InputFileError: no model folder or checkpoint; no frames or none readable. InvalidOptionError: an
         argument of another type or out of bounds, too few frames, frames too small, frames on which the published
-        model is sure of nothing or finds no road, ``out`` inside or equal to ``model`` or among the inputs.
+        model is sure of nothing or finds no road, ``out`` inside or equal to ``model`` or among the inputs,
+        ``norm_stats`` ``"frames"`` for a checkpoint whose batch norms are folded or absent.
         CorruptFileError: a damaged checkpoint (a bad image size, non-finite outputs) or video. CollapseError (a
         TrainingError, exit code 1): the collapse guard stopped the run; TrainingError: the loss became NaN.
     """
@@ -468,12 +492,13 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
 
     _check_arguments(model=model, input=inputs, out=out, source=source, progress=progress)
     threads = check_threads(threads)
-    settings = AdaptSettings(epochs, minutes, threshold, lr, batch_size, ema, max_drift, seed).check()
+    settings = AdaptSettings(epochs, minutes, threshold, lr, batch_size, ema, max_drift, seed, norm_stats).check()
     folder, ckpt = _model_folder(model)
     check_writable(out, folder=True)
     _check_overlap(folder, inputs, source, out)
     net, hp = load_checkpoint(ckpt)
     size = _checkpoint_size(hp, ckpt)
+    kept = norm_stats_plan(net, settings.norm_stats, ckpt)
     most = _check_memory(size, settings, folder)
     frames = read_frames(inputs, size, "input", most)
     if len(frames.names) < MIN_FRAMES:
@@ -482,7 +507,7 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
     src = read_frames(source, size, "source", most) if source is not None else None
     t0 = time.monotonic()
     with claim_folder(out, "adapt") as owned, owned.staged() as stage:
-        run = _self_train(net, frames, src, settings, progress, threads, ckpt)
+        run = _self_train(net, frames, src, settings, progress, threads, ckpt, kept)
         return write_model_folder(stage, run, hp, folder, frames, src, asdict(settings), time.monotonic() - t0,
                                   Path(out))
 
@@ -566,11 +591,13 @@ def _check_memory(size: tuple[int, int], settings: AdaptSettings, folder: Path) 
 
 
 def _self_train(net: Any, frames: Frames, src: Frames | None, settings: AdaptSettings, progress: bool,
-                threads: int | None, checkpoint: Path) -> dict[str, Any]:
+                threads: int | None, checkpoint: Path, kept: str | None = None) -> dict[str, Any]:
     """The self-training loop (module docstring). Returns the adapted network (the teacher), one row per
-    round, the held-out measures before and after, the held-out indices and their road probabilities before
+    round, the held-out measures before and after (and right after the batch-norm statistics were re-estimated),
+    what was done with those statistics (``norm_stats``), the held-out indices and their road probabilities before
     and after (``N×h×w float32``, the frames as they are). ``checkpoint``: the file ``net`` came from (named when
-    it gives non-finite outputs).
+    it gives non-finite outputs). ``kept``: why the batch-norm statistics are kept
+    (:func:`~freespace.engine.norm_stats.norm_stats_plan`), or None to re-estimate them first.
 
     Raises:
         InvalidOptionError, CorruptFileError: the frames or the checkpoint are refused before training
@@ -584,7 +611,7 @@ def _self_train(net: Any, frames: Frames, src: Frames | None, settings: AdaptSet
     previous = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
-        return {**_rounds(net, frames, src, settings, progress, threads, checkpoint), "threads": threads}
+        return {**_rounds(net, frames, src, settings, progress, threads, checkpoint, kept), "threads": threads}
     finally:  # the caller's own setting back
         torch.set_num_threads(previous)
 
@@ -626,7 +653,7 @@ def _check_teacher(data: _Data, before: dict[str, float], held: np.ndarray, sour
 
 
 def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSettings, progress: bool,
-            threads: int, checkpoint: Path) -> dict[str, Any]:
+            threads: int, checkpoint: Path, kept: str | None = None) -> dict[str, Any]:
     """:func:`_self_train`'s loop, on ``threads`` torch and ONNX Runtime threads."""
     import torch
 
@@ -648,6 +675,7 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     view_share = _view_share(data)
     tta = data.probs[data.held].astype(np.float32)  # the published model as predict runs it with tta
     before_tta = {"road_share": view_share, "confidence": float(np.maximum(tta, 1 - tta).mean())}
+    norms = _norm_step(teacher, data, settings, kept, threads, source_masks, before, view_share)
     student = _student(teacher)
     opt = torch.optim.AdamW(student.parameters(), lr=settings.lr, weight_decay=0.0)
     per_step = _batch_split(settings.batch_size, src is not None)[0]
@@ -671,4 +699,40 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
             break
     bar.close()
     return {"net": teacher, "rounds": rows, "before": before, "before_tta": before_tta, "after": now, "held": held,
-            "held_probs": (held_before, held_now), "train_frames": len(train)}
+            "held_probs": (held_before, held_now), "train_frames": len(train), **norms}
+
+
+def _norm_step(net: Any, data: _Data, settings: AdaptSettings, kept: str | None, threads: int,
+               source_masks: np.ndarray | None, before: dict[str, float], view_share: float) -> dict[str, Any]:
+    """AdaBN before the first round (the module's docstring): ``net``'s batch-norm statistics re-estimated in place
+    on up to :data:`~freespace.engine.norm_stats.MAX_NORM_FRAMES` training frames, evenly spread, as they are; then
+    the frames relabelled by it (``data.probs``) and the held-out frames measured (:func:`_measure`) and guarded
+    against ``before`` as a round is (:func:`_guard`). With ``kept`` (why they are kept) nothing changes.
+
+    Returns:
+        ``{"norm_stats": what was done}`` (``"re-estimated on N frames (K batch norms)"`` or ``kept``), and when they
+        were re-estimated ``"after_norm_stats"``: the held-out measures then (road share, confidence, source
+        agreement), as :func:`_measure` gives them.
+
+    Raises:
+        CollapseError: the re-estimated network gives non-finite outputs, or the guard stops it (the message says to
+        keep the statistics: ``norm_stats`` keep).
+    """
+    from freespace.engine.adapt_io import thin
+    from freespace.engine.norm_stats import MAX_NORM_FRAMES, batch_norms
+
+    if kept is not None:
+        log.info("adapt: batch-norm statistics %s", kept)
+        return {"norm_stats": kept}
+    pick = data.train[thin(len(data.train), MAX_NORM_FRAMES)]
+    n = reestimate_norm_stats(net, data.images[pick])
+    note = f"re-estimated on {n} frames ({len(batch_norms(net))} batch norms)"
+    now, held = _measure(_teacher_session(net, data.images.shape[1:3], threads), data, source_masks)
+    fix = f"nothing was written; keep the checkpoint's statistics with {param('norm_stats')} keep"
+    when = "after re-estimating the batch-norm statistics"
+    if not (np.isfinite(held).all() and np.isfinite(data.probs).all()):
+        raise CollapseError(f"adapt diverged {when}: the model gives non-finite outputs (NaN or infinity); {fix}")
+    _guard(before, now, settings, when, view_share, fix)
+    log.info("adapt: batch-norm statistics %s: held-out road share %.1f%% (%.1f%% before)", note,
+             100 * now["road_share"], 100 * before["road_share"])
+    return {"norm_stats": note, "after_norm_stats": now}

@@ -329,15 +329,30 @@ def _frames_line(frames: Frames, what: str) -> str:
             f"sha256 of the files `{frames.sha256}`")
 
 
-def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | None) -> str:
-    """The adapted model's card (Markdown)."""
-    s, b, a = summary["settings"], summary["before"], summary["after"]
-    t = summary.get("before_tta", {})
+def _change_table(summary: dict[str, Any]) -> tuple[str, str]:
+    """The card's table of the held-out measures: its header (two lines) and rows; a column of the measures right
+    after the batch-norm statistics were re-estimated when they were."""
+    b, a, t = summary["before"], summary["after"], summary.get("before_tta", {})
+    n = summary.get("after_norm_stats")
     rows = [("road share (p ≥ 0.5)", "road_share"), ("mean confidence, max(p, 1 − p)", "confidence")]
     if "source_agreement" in a:
         rows.append(("source frames: mask agreement with the published model", "source_agreement"))
-    table = "\n".join(f"| {label} | {b.get(k, 1.0):.1%} | {t[k]:.1%} | {a[k]:.1%} |" if k in t else
-                      f"| {label} | {b.get(k, 1.0):.1%} | — | {a[k]:.1%} |" for label, k in rows)
+    cols = [b, t, *([n] if n else []), a]
+    names = ["before", "before, with tta", *(["batch norms re-estimated, before self-training"] if n else []), "after"]
+    head = f"| | {' | '.join(names)} |\n|{'---|' * (len(names) + 1)}"
+
+    def cell(c: dict[str, float], k: str) -> str:  # the published model agrees with itself on the source frames
+        return f"{c[k]:.1%}" if k in c else f"{1.0:.1%}" if c is b else "—"
+
+    return head, "\n".join(f"| {label} | {' | '.join(cell(c, k) for c in cols)} |" for label, k in rows)
+
+
+def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | None) -> str:
+    """The adapted model's card (Markdown)."""
+    s = summary["settings"]
+    head, table = _change_table(summary)
+    norms = (" and with its batch-norm statistics re-estimated on these frames (before any training)"
+             if summary.get("after_norm_stats") else "")
     size = summary["image_size"]
     limit = f", at most {s['minutes']:g} min" if s["minutes"] else ""
     facts = "\n".join(f"| {k} | {v} |" for k, v in (
@@ -349,6 +364,8 @@ def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | N
         ("adapted on", f"{_frames_line(frames, 'unlabelled')}; {summary['held_out']} of them held out of training "
                        f"for the collapse guard"),
         ("source frames", _frames_line(src, "source") if src is not None else "none (no source frames rehearsed)"),
+        ("batch-norm statistics", f"{_markdown_text(summary['norm_stats'])}, before self-training (AdaBN; "
+                                  f"setting `{s['norm_stats']}`)"),
         ("settings", f"{s['epochs']} rounds{limit}, confidence threshold {s['threshold']:g}, AdamW lr {s['lr']:g}, "
                      f"batch {s['batch_size']}, teacher EMA {s['ema']:g}, max drift {s['max_drift']:g}, "
                      f"seed {s['seed']}"),
@@ -368,10 +385,9 @@ quickstart).
 ## How the prediction changed (the held-out frames)
 
 The published model as it is, as `freespace predict` runs it with test-time augmentation (`tta`: light
-normalised, mirror averaged; what adapt must add to, since its teacher sees frames so), and adapted:
+normalised, mirror averaged; what adapt must add to, since its teacher sees frames so){norms}, and adapted:
 
-| | before | before, with tta | after |
-|---|---|---|---|
+{head}
 {table}
 
 ![held-out frames: the road (magenta) before (left) and after (right) adaptation](before_after.jpg)
@@ -411,7 +427,9 @@ def write_model_folder(stage: Path, run: dict[str, Any], hp: dict[str, Any], fol
                "frame_sizes": [list(s) for s in frames.sizes], "source_frames": len(src.names) if src else 0,
                "held_out": len(run["held"]), "train_frames": run["train_frames"], "settings": config,
                "rounds": len(run["rounds"]), "seconds": round(seconds, 1), "threads": run["threads"],
-               "before": run["before"], "before_tta": run["before_tta"], "after": run["after"],
+               "norm_stats": run["norm_stats"], "before": run["before"], "before_tta": run["before_tta"],
+               **({"after_norm_stats": run["after_norm_stats"]} if "after_norm_stats" in run else {}),
+               "after": run["after"],
                "export": {"fp16": export["fp16"]},
                "record": {"commit": package_commit(), "torch": torch.__version__}}
     atomic_write_text(stage / "README.md", _card(summary, folder, frames, src))
