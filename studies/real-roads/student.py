@@ -146,7 +146,7 @@ def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int
             groups.setdefault(path.stem.rpartition("_")[0], []).append(i)
         for key, idx in groups.items():
             carried, record[key] = carry_along([images[i] for i in idx], [classes[i] for i in idx],
-                                               [probs[i] >= 0.5 for i in idx], CarryOptions(window=24, override=3))
+                                               [probs[i] >= 0.5 for i in idx], CarryOptions())
             for i, label in zip(idx, carried):
                 classes[i] = label
     if complete:
