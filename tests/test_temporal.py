@@ -143,3 +143,35 @@ def test_carried_labels_seed_the_appearance_completion() -> None:
     assert (out[130:] == 1).all() and (out[:110] == 0).all()
     with pytest.raises(ShapeMismatchError, match="seeds"):
         complete_by_appearance(image, prob, seeds=seeds[:-1])
+
+
+def test_adapt_plans_a_sequence_only_where_its_pairs_share_road() -> None:
+    from freespace.engine.adapt_time import plan_sequence
+
+    first = _texture(5)
+    sequence = np.stack([first, _next(first, FORWARD), _next(_next(first, FORWARD), FORWARD)])
+    probs = np.zeros(sequence.shape[:3], np.float32)
+    probs[:, 80:] = 0.9
+    steps, record = plan_sequence(sequence, probs, "auto")
+    assert record == {"setting": "auto", "pairs": 2, "pairs_fitted": 2, "used": True} and len(steps) == 2
+    photos = np.stack([_texture(6), _texture(7), _texture(8)])
+    steps, record = plan_sequence(photos, probs, "auto")
+    assert steps is None and record["pairs_fitted"] == 0 and not record["used"]
+    assert plan_sequence(photos, probs, "on")[1]["used"]
+    assert plan_sequence(sequence, probs, "off") == (None, {"setting": "off", "pairs": 2, "pairs_fitted": 0,
+                                                            "used": False})
+    with pytest.raises(InvalidOptionError, match="across_time"):
+        plan_sequence(sequence, probs, "sometimes")
+
+
+def test_held_out_frames_give_adapt_no_label() -> None:
+    from freespace.engine.adapt_time import carried_labels
+
+    a = _texture(9)
+    images = np.stack([a, _next(a, FORWARD)])
+    labels = np.full((2, *H_W), IGNORE_INDEX, np.uint8)
+    labels[1, -150:] = 1
+    carried, shares = carried_labels(images, labels, [FORWARD], np.array([], int))
+    assert (carried[0] == 1).mean() > 0.2 and shares["gained"] > 0.1
+    kept, shares = carried_labels(images, labels, [FORWARD], np.array([1]))
+    assert (kept[0] == IGNORE_INDEX).all() and shares["gained"] == 0

@@ -116,6 +116,7 @@ def cmd_evaluate_kitti(args: argparse.Namespace) -> int:
 
 def adapt_parser(p: argparse.ArgumentParser) -> None:
     from freespace.engine import adapt as A
+    from freespace.engine import adapt_time as T
     from freespace.engine import norm_stats as N
     from freespace.engine.adapt import BOUNDS as B
     from freespace.engine.adapt import AdaptSettings as D
@@ -152,6 +153,11 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
                         f"into its convolutions, as the published folders' are), 'keep' keeps the checkpoint's, "
                         f"'auto' re-estimates them when the checkpoint holds a training run's and keeps folded ones "
                         f"(default {D.norm_stats})")
+    p.add_argument("--across-time", choices=T.ACROSS_TIME, default=D.across_time,
+                   help=f"carry each round's labels from the next frames along the road plane's homographies (the "
+                        f"far road, the road beside the cars): 'auto' when your frames are a sequence (a video, or "
+                        f"consecutive frames in name order: at least {T.MIN_SEQUENCE_SHARE:.0%} of the consecutive "
+                        f"pairs share a road homography), 'on', 'off' (default {D.across_time})")
     p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=WORKERS, help="CPU threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
@@ -165,7 +171,8 @@ def cmd_adapt(args: argparse.Namespace) -> int:
 
     s = adapt(args.model, args.input, args.out, source=args.source, epochs=args.epochs, minutes=args.minutes,
               threshold=args.threshold, lr=args.lr, batch_size=args.batch_size, ema=args.ema,
-              max_drift=args.max_drift, seed=args.seed, norm_stats=args.norm_stats, progress=not args.no_progress,
+              max_drift=args.max_drift, seed=args.seed, norm_stats=args.norm_stats,
+              across_time=args.across_time, progress=not args.no_progress,
               threads=args.threads)
     b, a = s["before"], s["after"]
     print(f"adapted {shown_path(s['model'])} on {s['frames']} frames ({s['skipped']} unreadable skipped) in "

@@ -31,6 +31,12 @@ the identity, where new statistics would normalise twice); ``frames`` insists (a
 ``keep`` keeps them. The held-out measures right after it are recorded beside those before and after, and the
 collapse guard checks it as it checks a round.
 
+**Labels carried along time** (``across_time``; :mod:`freespace.engine.adapt_time`): when the frames are a sequence
+(a video, or consecutive frames: ``auto`` checks that at least half of the consecutive pairs share a road
+homography), each round's labels are carried from the next frames along the road plane's homographies
+(:mod:`freespace.datagen.temporal`): the far road and the road beside the cars, which the teacher is sure of only
+once the car is nearer, join the labels.
+
 **Before training** the published model labels the frames: outputs that are not finite (a damaged checkpoint),
 a confident pixel on less than :data:`MIN_CONFIDENT_SHARE` of them (nothing to learn from), no road or nothing
 but road (a road share of the held-out frames outside :data:`MIN_ROAD_SHARE`…:data:`MAX_ROAD_SHARE`, or no
@@ -81,6 +87,7 @@ from freespace.engine.adapt_io import (
     read_frames,
     write_model_folder,
 )
+from freespace.engine.adapt_time import carried_labels, check_across_time, plan_sequence
 from freespace.engine.norm_stats import NORM_STATS, norm_stats_plan, reestimate_norm_stats
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, TrainingError, check_seed, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
@@ -150,6 +157,7 @@ class AdaptSettings:
     max_drift: float = 0.3
     seed: int = 0
     norm_stats: str = "auto"
+    across_time: str = "auto"
 
     def check(self) -> AdaptSettings:
         """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``), ``norm_stats``
@@ -160,6 +168,7 @@ class AdaptSettings:
             with its bounds); a ``norm_stats`` that is none of its values.
         """
         check_seed(self.seed)
+        check_across_time(self.across_time)
         if not (isinstance(self.norm_stats, str) and self.norm_stats in NORM_STATS):
             raise InvalidOptionError(f"{param('norm_stats')} must be one of {', '.join(NORM_STATS)}, got "
                                      f"{reprlib.repr(self.norm_stats)}")
@@ -298,6 +307,8 @@ class _Data:
     source_labels: np.ndarray | None = None
     #: the loss of every step so far, over all rounds (the divergence check's record)
     losses: list[float] = field(default_factory=list)
+    #: the round's labels carried along time (``N×h×w uint8``), or None: labels from ``probs`` as they are
+    labels: np.ndarray | None = None
 
 
 def _train_round(student: Any, teacher: Any, opt: Any, data: _Data, settings: AdaptSettings,
@@ -320,7 +331,9 @@ def _train_round(student: Any, teacher: Any, opt: Any, data: _Data, settings: Ad
     losses, confident, stopped = [], [], 0.0
     for start in range(0, len(order), per_step):
         idx = np.sort(order[start:start + per_step])
-        images, labels = data.images[idx], pseudo_labels(data.probs[idx].astype(np.float32), settings.threshold)
+        images = data.images[idx]
+        labels = (data.labels[idx] if data.labels is not None
+                  else pseudo_labels(data.probs[idx].astype(np.float32), settings.threshold))
         if n_src:
             pick = rng.integers(len(data.source), size=n_src)
             images = np.concatenate([images, data.source[pick]])
@@ -441,7 +454,8 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
           threshold: float = AdaptSettings.threshold, lr: float = AdaptSettings.lr,
           batch_size: int = AdaptSettings.batch_size, ema: float = AdaptSettings.ema,
           max_drift: float = AdaptSettings.max_drift, seed: int = AdaptSettings.seed,
-          norm_stats: str = AdaptSettings.norm_stats, progress: bool = True,
+          norm_stats: str = AdaptSettings.norm_stats, across_time: str = AdaptSettings.across_time,
+          progress: bool = True,
           threads: int | None = None) -> dict[str, Any]:
     """Adapt the published model in the folder ``model`` to the unlabelled frames ``inputs``; write the
     adapted model folder ``out`` (see the module's docstring for the method and what is written).
@@ -470,6 +484,8 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
             ``"auto"`` re-estimates them on the frames when the checkpoint holds a training run's and keeps them when
             they are folded into the convolutions (the published folders'); ``"frames"`` re-estimates them (a
             checkpoint with folded ones is refused); ``"keep"`` keeps them.
+        across_time: carry each round's labels from the next frames (:mod:`freespace.engine.adapt_time`): ``"auto"``
+            when the frames are a sequence, ``"on"``, ``"off"``.
         threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use).
         progress: a progress bar on a terminal (one line per round otherwise).
 
@@ -477,7 +493,9 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
         The summary written to ``out/summary.json``: frames, settings, seconds, the road share and mean
         confidence before and after on the held-out frames (and ``after_norm_stats``, right after the batch-norm
         statistics were re-estimated, before self-training), what was done with those statistics (``norm_stats``:
-        ``"re-estimated on N frames (K batch norms)"`` or ``"kept: …"`` and why), the float16 export's check.
+        ``"re-estimated on N frames (K batch norms)"`` or ``"kept: …"`` and why), whether labels were carried along
+        time (``across_time``: the setting, consecutive pairs and those with a road homography), the float16
+        export's check.
 
     Raises:
         InputFileError: no model folder or checkpoint; no frames or none readable. InvalidOptionError: an
@@ -492,7 +510,8 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
 
     _check_arguments(model=model, input=inputs, out=out, source=source, progress=progress)
     threads = check_threads(threads)
-    settings = AdaptSettings(epochs, minutes, threshold, lr, batch_size, ema, max_drift, seed, norm_stats).check()
+    settings = AdaptSettings(epochs, minutes, threshold, lr, batch_size, ema, max_drift, seed, norm_stats,
+                             across_time).check()
     folder, ckpt = _model_folder(model)
     check_writable(out, folder=True)
     _check_overlap(folder, inputs, source, out)
@@ -676,6 +695,7 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     tta = data.probs[data.held].astype(np.float32)  # the published model as predict runs it with tta
     before_tta = {"road_share": view_share, "confidence": float(np.maximum(tta, 1 - tta).mean())}
     norms = _norm_step(teacher, data, settings, kept, threads, source_masks, before, view_share)
+    steps, across = plan_sequence(data.images, data.probs, settings.across_time)
     student = _student(teacher)
     opt = torch.optim.AdamW(student.parameters(), lr=settings.lr, weight_decay=0.0)
     per_step = _batch_split(settings.batch_size, src is not None)[0]
@@ -685,9 +705,13 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     deadline = start + settings.minutes * 60 if settings.minutes else math.inf
     rows, now, held_now = [], before, held_before
     for r in range(1, settings.epochs + 1):
+        carried = {}
+        if steps is not None:
+            labels = pseudo_labels(data.probs.astype(np.float32), settings.threshold)
+            data.labels, carried = carried_labels(data.images, labels, steps, data.held)
         stats = _train_round(student, teacher, opt, data, settings, rng, deadline, bar, f"in round {r}")
         now, held_now = _measure(_teacher_session(teacher, size, threads), data, source_masks)
-        rows.append({"round": r, **stats, **now, "seconds": round(time.monotonic() - start, 1)})
+        rows.append({"round": r, **stats, **now, **carried, "seconds": round(time.monotonic() - start, 1)})
         log.info("adapt round %d/%d: loss %.4f, confident pixels %.1f%%, held-out road share %.1f%% (%.1f%% before)%s",
                  r, settings.epochs, stats["loss"], 100 * stats["confident"], 100 * now["road_share"],
                  100 * before["road_share"], ", time limit reached" if stats["stopped"] else "")
@@ -699,7 +723,7 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
             break
     bar.close()
     return {"net": teacher, "rounds": rows, "before": before, "before_tta": before_tta, "after": now, "held": held,
-            "held_probs": (held_before, held_now), "train_frames": len(train), **norms}
+            "held_probs": (held_before, held_now), "train_frames": len(train), "across_time": across, **norms}
 
 
 def _norm_step(net: Any, data: _Data, settings: AdaptSettings, kept: str | None, threads: int,

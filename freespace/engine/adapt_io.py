@@ -44,7 +44,7 @@ MAX_CARD_BYTES, MAX_TITLE_CHARS = 64 * 1024, 200
 #: the width (pixels) of each panel of ``before_after.jpg``, and how many held-out frames it shows
 PANEL_WIDTH, PICTURE_FRAMES = 480, 4
 _ROUND_FIELDS = ("round", "loss", "confident", "steps", "stopped", "road_share", "confidence", "source_agreement",
-                 "seconds")
+                 "gained", "overridden", "conflicts", "seconds")
 
 
 @dataclass
@@ -347,6 +347,16 @@ def _change_table(summary: dict[str, Any]) -> tuple[str, str]:
     return head, "\n".join(f"| {label} | {' | '.join(cell(c, k) for c in cols)} |" for label, k in rows)
 
 
+def _across_line(across: dict[str, Any]) -> str:
+    """The card's line on labels carried along time (:func:`freespace.engine.adapt_time.plan_sequence`'s record)."""
+    if across["setting"] == "off":
+        return "not carried (setting `off`)"
+    fitted = f"{across['pairs_fitted']} of {across['pairs']} consecutive pairs share a road homography"
+    if not across["used"]:
+        return f"not carried: {fitted}, not a sequence (setting `{across['setting']}`)"
+    return f"carried from the next frames along the road plane's homographies: {fitted} (setting `{across['setting']}`)"
+
+
 def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | None) -> str:
     """The adapted model's card (Markdown)."""
     s = summary["settings"]
@@ -366,6 +376,7 @@ def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | N
         ("source frames", _frames_line(src, "source") if src is not None else "none (no source frames rehearsed)"),
         ("batch-norm statistics", f"{_markdown_text(summary['norm_stats'])}, before self-training (AdaBN; "
                                   f"setting `{s['norm_stats']}`)"),
+        ("labels along time", _across_line(summary["across_time"])),
         ("settings", f"{s['epochs']} rounds{limit}, confidence threshold {s['threshold']:g}, AdamW lr {s['lr']:g}, "
                      f"batch {s['batch_size']}, teacher EMA {s['ema']:g}, max drift {s['max_drift']:g}, "
                      f"seed {s['seed']}"),
@@ -427,7 +438,8 @@ def write_model_folder(stage: Path, run: dict[str, Any], hp: dict[str, Any], fol
                "frame_sizes": [list(s) for s in frames.sizes], "source_frames": len(src.names) if src else 0,
                "held_out": len(run["held"]), "train_frames": run["train_frames"], "settings": config,
                "rounds": len(run["rounds"]), "seconds": round(seconds, 1), "threads": run["threads"],
-               "norm_stats": run["norm_stats"], "before": run["before"], "before_tta": run["before_tta"],
+               "norm_stats": run["norm_stats"], "across_time": run["across_time"], "before": run["before"],
+               "before_tta": run["before_tta"],
                **({"after_norm_stats": run["after_norm_stats"]} if "after_norm_stats" in run else {}),
                "after": run["after"],
                "export": {"fp16": export["fp16"]},

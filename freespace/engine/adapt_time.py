@@ -1,0 +1,85 @@
+"""Adapt's labels carried along time (issue 70, item 1): when adapt's frames are a sequence — a video, or a folder of
+consecutive frames — the teacher's confident labels of each round are carried from the next frames
+(:mod:`freespace.datagen.temporal`: the road plane's homography between frames, from matched road pixels), so the
+student learns the far road and the road beside the cars that the teacher is sure of only once the car is nearer.
+
+The consecutive homographies are fitted once, on the frames at the model's size and the published model's road
+(p ≥ 0.5 in the teacher's view); each round's labels are then carried along them. Held-out frames keep their place
+in the chains but give no label (they stay out of training). NumPy and OpenCV only, never torch.
+"""
+
+from __future__ import annotations
+
+import logging
+import reprlib
+from typing import Any
+
+import numpy as np
+
+from freespace.errors import InvalidOptionError, param
+
+__all__ = ["ACROSS_TIME", "MIN_SEQUENCE_SHARE", "check_across_time", "plan_sequence", "carried_labels"]
+
+log = logging.getLogger(__name__)
+
+#: the values of adapt's ``across_time``: ``auto`` carries labels when the frames are a sequence (at least
+#: :data:`MIN_SEQUENCE_SHARE` of the consecutive pairs share a road homography), ``on`` whatever share, ``off`` never
+ACROSS_TIME = ("auto", "on", "off")
+#: ``auto``'s least share of consecutive pairs with a road homography: frames of one drive a few metres apart give
+#: most pairs (CamVid at 15 frames a second: all; at one a second: a third); unrelated photos none
+MIN_SEQUENCE_SHARE = 0.5
+
+
+def check_across_time(value: Any) -> str:
+    """``value`` if it is one of :data:`ACROSS_TIME`, else :class:`~freespace.errors.InvalidOptionError` naming
+    ``across_time``."""
+    if not (isinstance(value, str) and value in ACROSS_TIME):
+        raise InvalidOptionError(f"{param('across_time')} must be one of {', '.join(ACROSS_TIME)}, got "
+                                 f"{reprlib.repr(value)}")
+    return value
+
+
+def plan_sequence(images: np.ndarray, probs: np.ndarray, setting: str) -> tuple[list | None, dict[str, Any]]:
+    """The consecutive road homographies of adapt's frames, or None when labels are not carried.
+
+    Args:
+        images: ``N×h×w×3 uint8`` RGB frames at the model's size, in the input's order.
+        probs: ``N×h×w`` road probabilities of them (the teacher's view).
+        setting: one of :data:`ACROSS_TIME`.
+
+    Returns:
+        The ``N − 1`` homographies (``None`` entries where a pair shares too little road) or None, and the record:
+        ``setting``, ``pairs``, ``pairs_fitted``, ``used``.
+    """
+    from freespace.datagen.temporal import CarryOptions, sequence_homographies
+
+    record: dict[str, Any] = {"setting": check_across_time(setting), "pairs": max(len(images) - 1, 0),
+                              "pairs_fitted": 0, "used": False}
+    if setting == "off" or len(images) < 2:
+        return None, record
+    steps = sequence_homographies(images, [p >= 0.5 for p in probs], CarryOptions())
+    fitted = sum(H is not None for H in steps)
+    record.update(pairs_fitted=fitted, used=setting == "on" or fitted >= MIN_SEQUENCE_SHARE * len(steps))
+    log.info("adapt: %d of %d consecutive pairs share a road homography; labels %s along time", fitted, len(steps),
+             "carried" if record["used"] else "not carried")
+    return (steps if record["used"] else None), record
+
+
+def carried_labels(images: np.ndarray, labels: np.ndarray, steps: list, held: np.ndarray) -> tuple[np.ndarray,
+                                                                                                  dict[str, float]]:
+    """Each frame's label with the road its next frames' labels saw (:func:`freespace.datagen.temporal.carry_along`
+    with its default settings), the held-out frames giving none.
+
+    Args:
+        images: ``N×h×w×3 uint8`` RGB frames. labels: their ``N×h×w uint8`` pseudo-labels (1 road, 0 not road, 255
+            don't care). steps: :func:`plan_sequence`'s homographies. held: indices of the held-out frames.
+
+    Returns:
+        ``N×h×w uint8`` labels and the carrying's shares (``gained``, ``overridden``, ``conflicts``).
+    """
+    from freespace.datagen.temporal import CarryOptions, carry_along
+
+    given = labels.copy()
+    given[held] = 255
+    out, record = carry_along(list(images), list(given), None, CarryOptions(), steps)
+    return np.stack(out), {k: record[k] for k in ("gained", "overridden", "conflicts")}

@@ -1,0 +1,65 @@
+"""``freespace adapt --across-time`` (issue 70, item 1): each round's labels carried from the next frames when the
+frames are a sequence; recorded in the summary, the rounds and the card; ``off`` and bad values. The carrying itself
+is tested on generated sequences in ``test_temporal.py``; here a tiny model (32×96: too small for road features,
+so ``auto`` finds no sequence) runs the whole command."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from freespace.errors import InvalidOptionError
+from freespace.io.codecs import write_image
+
+from helpers import refused, road_frame, tiny_model_folder
+
+pytest.importorskip("onnxruntime")
+
+SIZE = (32, 96)
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tiny_model_folder(tmp_path_factory.mktemp("models"), SIZE)
+
+
+@pytest.fixture(scope="module")
+def frames(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("frames") / "cam"
+    folder.mkdir()
+    for i in range(24):
+        write_image(folder / f"f{i:03d}.png", road_frame((48, 120), 900 + i)[0])
+    return folder
+
+
+def _adapt(model: Path, frames: Path, out: Path, **kwargs) -> dict:
+    import freespace
+
+    return freespace.adapt(model, frames, out, epochs=1, threads=1, progress=False, **kwargs)
+
+
+@pytest.mark.parametrize("setting", ["auto", "on", "off"])
+def test_the_run_records_whether_labels_were_carried(model: Path, frames: Path, tmp_path: Path,
+                                                     setting: str) -> None:
+    summary = _adapt(model, frames, tmp_path / "out", across_time=setting)
+    across = summary["across_time"]
+    assert across["setting"] == setting and across["pairs"] == 23
+    assert across["used"] == (setting == "on")  # 32×96 frames share no road feature: not a sequence for auto
+    card = (tmp_path / "out" / "README.md").read_text()
+    assert "labels along time" in card
+    assert ("carried from the next frames" in card) == (setting == "on")
+    with open(tmp_path / "out" / "rounds.csv") as f:
+        row = next(csv.DictReader(f))
+    assert (row["gained"] != "") == (setting == "on")
+    assert summary["settings"]["across_time"] == setting
+
+
+def test_a_bad_setting_is_one_line(model: Path, frames: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    refused(capsys, ["adapt", "--model", str(model), "--input", str(frames), "--out", str(tmp_path / "x"),
+                     "--across-time", "sometimes"], match="--across-time")
+    with pytest.raises(InvalidOptionError, match="across_time"):
+        _adapt(model, frames, tmp_path / "y", across_time=np.bool_(True))
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
