@@ -63,3 +63,14 @@ def test_a_bad_setting_is_one_line(model: Path, frames: Path, tmp_path: Path, ca
     with pytest.raises(InvalidOptionError, match="across_time"):
         _adapt(model, frames, tmp_path / "y", across_time=np.bool_(True))
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_completed_labels_are_recorded(model: Path, frames: Path, tmp_path: Path) -> None:
+    summary = _adapt(model, frames, tmp_path / "out", across_time="off", complete=True)
+    assert summary["settings"]["complete"] is True
+    assert "completed: the teacher's unsure pixels" in (tmp_path / "out" / "README.md").read_text()
+    with open(tmp_path / "out" / "rounds.csv") as f:
+        row = next(csv.DictReader(f))
+    assert 0 <= float(row["completed"]) <= 1 and row["gained"] == ""
+    with pytest.raises(InvalidOptionError, match="complete"):
+        _adapt(model, frames, tmp_path / "bad", complete="yes")

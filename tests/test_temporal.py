@@ -175,3 +175,17 @@ def test_held_out_frames_give_adapt_no_label() -> None:
     assert (carried[0] == 1).mean() > 0.2 and shares["gained"] > 0.1
     kept, shares = carried_labels(images, labels, [FORWARD], np.array([1]))
     assert (kept[0] == IGNORE_INDEX).all() and shares["gained"] == 0
+
+
+def test_adapt_completes_the_training_frames_labels_by_appearance() -> None:
+    from freespace.engine.adapt_time import round_labels
+
+    image = np.zeros((*H_W, 3), np.uint8)
+    image[120:], image[:120] = (90, 90, 90), (40, 80, 200)  # grey road below, blue sky above
+    images = np.stack([image, image])
+    probs = np.full((2, *H_W), 0.5, np.float32)
+    probs[:, 200:], probs[:, :40] = 0.99, 0.01
+    assert round_labels(images, probs, 0.9, None, np.array([1]), False) == (None, {})
+    labels, record = round_labels(images, probs, 0.9, None, np.array([1]), True)
+    assert (labels[0, 130:] == 1).all() and (labels[0, :110] == 0).all() and record["completed"] > 0.2
+    assert (labels[1, 40:200] == IGNORE_INDEX).all()  # the held-out frame is left as the teacher labelled it

@@ -158,6 +158,9 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
                         f"far road, the road beside the cars): 'auto' when your frames are a sequence (a video, or "
                         f"consecutive frames in name order: at least {T.MIN_SEQUENCE_SHARE:.0%} of the consecutive "
                         f"pairs share a road homography), 'on', 'off' (default {D.across_time})")
+    p.add_argument("--complete", action="store_true",
+                   help="complete each round's labels by appearance: the pixels the teacher is unsure of take the "
+                        "side of a graph cut on the frame's colours seeded with its confident labels")
     p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=WORKERS, help="CPU threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
@@ -172,7 +175,7 @@ def cmd_adapt(args: argparse.Namespace) -> int:
     s = adapt(args.model, args.input, args.out, source=args.source, epochs=args.epochs, minutes=args.minutes,
               threshold=args.threshold, lr=args.lr, batch_size=args.batch_size, ema=args.ema,
               max_drift=args.max_drift, seed=args.seed, norm_stats=args.norm_stats,
-              across_time=args.across_time, progress=not args.no_progress,
+              across_time=args.across_time, complete=args.complete, progress=not args.no_progress,
               threads=args.threads)
     b, a = s["before"], s["after"]
     print(f"adapted {shown_path(s['model'])} on {s['frames']} frames ({s['skipped']} unreadable skipped) in "

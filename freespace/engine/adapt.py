@@ -35,7 +35,8 @@ collapse guard checks it as it checks a round.
 (a video, or consecutive frames: ``auto`` checks that at least half of the consecutive pairs share a road
 homography), each round's labels are carried from the next frames along the road plane's homographies
 (:mod:`freespace.datagen.temporal`): the far road and the road beside the cars, which the teacher is sure of only
-once the car is nearer, join the labels.
+once the car is nearer, join the labels. With ``complete``, each training frame's label then has its don't care
+decided by a graph cut on the frame's colours (:func:`freespace.datagen.completion.complete_by_appearance`).
 
 **Before training** the published model labels the frames: outputs that are not finite (a damaged checkpoint),
 a confident pixel on less than :data:`MIN_CONFIDENT_SHARE` of them (nothing to learn from), no road or nothing
@@ -87,7 +88,7 @@ from freespace.engine.adapt_io import (
     read_frames,
     write_model_folder,
 )
-from freespace.engine.adapt_time import carried_labels, check_across_time, plan_sequence
+from freespace.engine.adapt_time import check_across_time, plan_sequence, round_labels
 from freespace.engine.norm_stats import NORM_STATS, norm_stats_plan, reestimate_norm_stats
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, TrainingError, check_seed, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
@@ -158,6 +159,7 @@ class AdaptSettings:
     seed: int = 0
     norm_stats: str = "auto"
     across_time: str = "auto"
+    complete: bool = False
 
     def check(self) -> AdaptSettings:
         """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``), ``norm_stats``
@@ -169,6 +171,8 @@ class AdaptSettings:
         """
         check_seed(self.seed)
         check_across_time(self.across_time)
+        if not isinstance(self.complete, bool):
+            raise InvalidOptionError(f"{param('complete')} must be True or False, got {reprlib.repr(self.complete)}")
         if not (isinstance(self.norm_stats, str) and self.norm_stats in NORM_STATS):
             raise InvalidOptionError(f"{param('norm_stats')} must be one of {', '.join(NORM_STATS)}, got "
                                      f"{reprlib.repr(self.norm_stats)}")
@@ -455,7 +459,7 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
           batch_size: int = AdaptSettings.batch_size, ema: float = AdaptSettings.ema,
           max_drift: float = AdaptSettings.max_drift, seed: int = AdaptSettings.seed,
           norm_stats: str = AdaptSettings.norm_stats, across_time: str = AdaptSettings.across_time,
-          progress: bool = True,
+          complete: bool = AdaptSettings.complete, progress: bool = True,
           threads: int | None = None) -> dict[str, Any]:
     """Adapt the published model in the folder ``model`` to the unlabelled frames ``inputs``; write the
     adapted model folder ``out`` (see the module's docstring for the method and what is written).
@@ -486,6 +490,8 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
             checkpoint with folded ones is refused); ``"keep"`` keeps them.
         across_time: carry each round's labels from the next frames (:mod:`freespace.engine.adapt_time`): ``"auto"``
             when the frames are a sequence, ``"on"``, ``"off"``.
+        complete: complete each round's labels by appearance (a graph cut on the frame's colours seeded with them,
+            :mod:`freespace.engine.adapt_time`).
         threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use).
         progress: a progress bar on a terminal (one line per round otherwise).
 
@@ -511,7 +517,7 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
     _check_arguments(model=model, input=inputs, out=out, source=source, progress=progress)
     threads = check_threads(threads)
     settings = AdaptSettings(epochs, minutes, threshold, lr, batch_size, ema, max_drift, seed, norm_stats,
-                             across_time).check()
+                             across_time, complete).check()
     folder, ckpt = _model_folder(model)
     check_writable(out, folder=True)
     _check_overlap(folder, inputs, source, out)
@@ -705,10 +711,8 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     deadline = start + settings.minutes * 60 if settings.minutes else math.inf
     rows, now, held_now = [], before, held_before
     for r in range(1, settings.epochs + 1):
-        carried = {}
-        if steps is not None:
-            labels = pseudo_labels(data.probs.astype(np.float32), settings.threshold)
-            data.labels, carried = carried_labels(data.images, labels, steps, data.held)
+        data.labels, carried = round_labels(data.images, data.probs, settings.threshold, steps, data.held,
+                                            settings.complete)
         stats = _train_round(student, teacher, opt, data, settings, rng, deadline, bar, f"in round {r}")
         now, held_now = _measure(_teacher_session(teacher, size, threads), data, source_masks)
         rows.append({"round": r, **stats, **now, **carried, "seconds": round(time.monotonic() - start, 1)})

@@ -44,7 +44,7 @@ MAX_CARD_BYTES, MAX_TITLE_CHARS = 64 * 1024, 200
 #: the width (pixels) of each panel of ``before_after.jpg``, and how many held-out frames it shows
 PANEL_WIDTH, PICTURE_FRAMES = 480, 4
 _ROUND_FIELDS = ("round", "loss", "confident", "steps", "stopped", "road_share", "confidence", "source_agreement",
-                 "gained", "overridden", "conflicts", "seconds")
+                 "gained", "overridden", "conflicts", "completed", "seconds")
 
 
 @dataclass
@@ -377,6 +377,8 @@ def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | N
         ("batch-norm statistics", f"{_markdown_text(summary['norm_stats'])}, before self-training (AdaBN; "
                                   f"setting `{s['norm_stats']}`)"),
         ("labels along time", _across_line(summary["across_time"])),
+        ("labels by appearance", "completed: the teacher's unsure pixels take a graph cut's side (`complete`)"
+         if s.get("complete") else "not completed"),
         ("settings", f"{s['epochs']} rounds{limit}, confidence threshold {s['threshold']:g}, AdamW lr {s['lr']:g}, "
                      f"batch {s['batch_size']}, teacher EMA {s['ema']:g}, max drift {s['max_drift']:g}, "
                      f"seed {s['seed']}"),

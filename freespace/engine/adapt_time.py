@@ -1,11 +1,19 @@
-"""Adapt's labels carried along time (issue 70, item 1): when adapt's frames are a sequence — a video, or a folder of
+"""Adapt's labels that reach the whole road (issue 70, item 1): carried along time, and completed by appearance.
+
+**Along time**: when adapt's frames are a sequence — a video, or a folder of
 consecutive frames — the teacher's confident labels of each round are carried from the next frames
 (:mod:`freespace.datagen.temporal`: the road plane's homography between frames, from matched road pixels), so the
 student learns the far road and the road beside the cars that the teacher is sure of only once the car is nearer.
 
 The consecutive homographies are fitted once, on the frames at the model's size and the published model's road
 (p ≥ 0.5 in the teacher's view); each round's labels are then carried along them. Held-out frames keep their place
-in the chains but give no label (they stay out of training). NumPy and OpenCV only, never torch.
+in the chains but give no label (they stay out of training).
+
+**By appearance** (``complete``): each training frame's label, after the carrying, has its don't care decided by a
+graph cut on the frame's colours seeded with it (:func:`freespace.datagen.completion.complete_by_appearance`): road
+grows up to the image's edges where it looks like the confident road.
+
+NumPy and OpenCV only, never torch.
 """
 
 from __future__ import annotations
@@ -18,7 +26,8 @@ import numpy as np
 
 from freespace.errors import InvalidOptionError, param
 
-__all__ = ["ACROSS_TIME", "MIN_SEQUENCE_SHARE", "check_across_time", "plan_sequence", "carried_labels"]
+__all__ = ["ACROSS_TIME", "MIN_SEQUENCE_SHARE", "check_across_time", "plan_sequence", "carried_labels",
+           "round_labels"]
 
 log = logging.getLogger(__name__)
 
@@ -83,3 +92,38 @@ def carried_labels(images: np.ndarray, labels: np.ndarray, steps: list, held: np
     given[held] = 255
     out, record = carry_along(list(images), list(given), None, CarryOptions(), steps)
     return np.stack(out), {k: record[k] for k in ("gained", "overridden", "conflicts")}
+
+
+def round_labels(images: np.ndarray, probs: np.ndarray, threshold: float, steps: list | None, held: np.ndarray,
+                 complete: bool) -> tuple[np.ndarray | None, dict[str, float]]:
+    """A round's labels of adapt's frames: the teacher's confident label, carried along ``steps`` (when not None)
+    and completed by appearance on the training frames (with ``complete``); None when neither applies (adapt then
+    takes the confident label as it is).
+
+    Args:
+        images: ``N×h×w×3 uint8`` RGB frames. probs: their ``N×h×w`` road probabilities (the teacher's view).
+        threshold: road above it, not road below 1 − it. steps: :func:`plan_sequence`'s homographies or None.
+        held: indices of the held-out frames (no label given, none completed).
+        complete: complete the labels by appearance.
+
+    Returns:
+        ``N×h×w uint8`` labels (1 road, 0 not road, 255 don't care) or None, and the round's record: the carrying's
+        shares (:func:`carried_labels`) and ``completed``, the share of the training frames' pixels the completion
+        labelled.
+    """
+    if steps is None and not complete:
+        return None, {}
+    probs = probs.astype(np.float32)
+    labels = np.where(probs > threshold, 1, np.where(probs < 1 - threshold, 0, 255)).astype(np.uint8)
+    record: dict[str, float] = {}
+    if steps is not None:
+        labels, record = carried_labels(images, labels, steps, held)
+    if complete:
+        from freespace.datagen.completion import complete_by_appearance
+
+        train = np.setdiff1d(np.arange(len(images)), held)
+        before = int((labels[train] == 255).sum())
+        for i in train:
+            labels[i] = complete_by_appearance(images[i], probs[i], threshold, seeds=labels[i])
+        record["completed"] = round((before - int((labels[train] == 255).sum())) / max(labels[train].size, 1), 4)
+    return labels, record
