@@ -488,10 +488,8 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
             ``"auto"`` re-estimates them on the frames when the checkpoint holds a training run's and keeps them when
             they are folded into the convolutions (the published folders'); ``"frames"`` re-estimates them (a
             checkpoint with folded ones is refused); ``"keep"`` keeps them.
-        across_time: carry each round's labels from the next frames (:mod:`freespace.engine.adapt_time`): ``"auto"``
-            when the frames are a sequence, ``"on"``, ``"off"``.
-        complete: complete each round's labels by appearance (a graph cut on the frame's colours seeded with them,
-            :mod:`freespace.engine.adapt_time`).
+        across_time, complete: each round's labels carried from the next frames (``"auto"`` when the frames are a
+            sequence, ``"on"``, ``"off"``) and completed by appearance (:mod:`freespace.engine.adapt_time`).
         threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use).
         progress: a progress bar on a terminal (one line per round otherwise).
 
