@@ -116,6 +116,8 @@ def test_a_diverged_student_ends_the_run_with_exit_1_and_no_folder(case: str, mo
     else:
         monkeypatch.setattr(adapt_module, "pseudo_labels",
                             lambda probs, threshold: np.full(probs.shape, adapt_module.IGNORE, np.uint8))
+        monkeypatch.setattr(adapt_module, "round_labels",  # the default: the labels completed by appearance
+                            lambda images, *_: (np.full(images.shape[:3], adapt_module.IGNORE, np.uint8), {}))
         needles = ("sure of no pixel", "nothing was written", "--threshold")
     out = tmp_path / "out"
     assert main(_argv(model, frames, out, *extra)) == 1

@@ -158,9 +158,10 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
                         f"far road, the road beside the cars): 'auto' when your frames are a sequence (a video, or "
                         f"consecutive frames in name order: at least {T.MIN_SEQUENCE_SHARE:.0%} of the consecutive "
                         f"pairs share a road homography), 'on', 'off' (default {D.across_time})")
-    p.add_argument("--complete", action="store_true",
+    p.add_argument("--complete", action=argparse.BooleanOptionalAction, default=D.complete,
                    help="complete each round's labels by appearance: the pixels the teacher is unsure of take the "
-                        "side of a graph cut on the frame's colours seeded with its confident labels")
+                        "side of a graph cut on the frame's colours seeded with its confident labels (default on; "
+                        "--no-complete: the confident labels alone)")
     p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=WORKERS, help="CPU threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")

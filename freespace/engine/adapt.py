@@ -159,7 +159,7 @@ class AdaptSettings:
     seed: int = 0
     norm_stats: str = "auto"
     across_time: str = "auto"
-    complete: bool = False
+    complete: bool = True
 
     def check(self) -> AdaptSettings:
         """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``), ``norm_stats``

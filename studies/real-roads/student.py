@@ -154,6 +154,17 @@ def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int
     return classes, record
 
 
+def labels_sha256(label: Path) -> str:
+    """The content hash of a dataset's label folder (``out/label``): SHA-256 over each file's name and bytes in name
+    order (links read through), so a rebuilt dataset can be checked against the published recipe's."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for path in sorted(label.iterdir()):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
 def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
           prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
           drive_teachers: list[Path] | None = None, drive_teacher_first: bool = False,
@@ -193,7 +204,8 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
               "counts": {k: len(v) for k, v in lists.items()}, "teacher_frames": len(road),
               "drive_copies": drive_copies, "drive_teachers": [str(t) for t in drive_teachers or []],
               "drives_filled": filled, "completed_by_appearance": complete, "carried_along_time": carried,
-              "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road))}
+              "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road)),
+              "labels_sha256": labels_sha256(out / "label")}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
 
