@@ -240,13 +240,13 @@ PUBLISHED = {"real-road-fast": ("contextnet", [192, 640]), "real-road-unet": ("u
 @pytest.mark.parametrize("name", sorted(PUBLISHED))
 def test_the_published_models_carry_their_checkpoint(name: str) -> None:
     """``models/<name>/model.ckpt`` loads without running code and rebuilds the card's network; the whole folder
-    stays well under 25 MB."""
+    stays under 25 MB (a float32 training checkpoint beside the float16 ONNX file)."""
     from freespace.inference.predictor import load_checkpoint
 
     folder = ROOT / "models" / name
     net, hp = load_checkpoint(folder / "model.ckpt")
     assert (hp["model"], hp["image_size"]) == PUBLISHED[name]
-    assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) < 20e6
+    assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) < 25e6
 
 
 @pytest.mark.slow

@@ -9,6 +9,7 @@ checkpoints), and generated road frames darker than the ones it was trained on.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,16 @@ DARK = 0.45
 
 def _dark(size: tuple[int, int], n: int, seed: int = 700) -> np.ndarray:
     return np.stack([(road_frame(size, seed + i)[0] * DARK).astype(np.uint8) for i in range(n)])
+
+
+@pytest.fixture(autouse=True)
+def _threads_back() -> Iterator[None]:
+    """Torch's thread count as it was before each test: a test that sets it must not change later tests' numbers."""
+    import torch
+
+    threads = torch.get_num_threads()
+    yield
+    torch.set_num_threads(threads)
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +97,7 @@ def test_reestimated_statistics_are_the_frames_own(model: Path) -> None:
     from freespace.engine.norm_stats import batch_norms, folded_norms, norm_stats_plan, reestimate_norm_stats
     from freespace.inference.predictor import load_checkpoint
 
-    torch.set_num_threads(1)
+    torch.set_num_threads(1)  # put back by _threads_back
     net, _ = load_checkpoint(model / "model.ckpt")
     net.eval()
     assert norm_stats_plan(net, "auto") is None and not folded_norms(net)  # a training run's: re-estimated

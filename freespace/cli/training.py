@@ -150,7 +150,7 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--norm-stats", choices=N.NORM_STATS, default=D.norm_stats,
                    help=f"the batch-norm statistics before self-training (AdaBN): 'frames' re-estimates them on up to "
                         f"{N.MAX_NORM_FRAMES} of your frames (refused for a checkpoint whose batch norms are folded "
-                        f"into its convolutions, as the published folders' are), 'keep' keeps the checkpoint's, "
+                        f"into its convolutions, as models/real-road-unet's are), 'keep' keeps the checkpoint's, "
                         f"'auto' re-estimates them when the checkpoint holds a training run's and keeps folded ones "
                         f"(default {D.norm_stats})")
     p.add_argument("--across-time", choices=T.ACROSS_TIME, default=D.across_time,

@@ -26,7 +26,7 @@ round every batch norm's running mean and variance are estimated again on up to
 :data:`~freespace.engine.norm_stats.MAX_NORM_FRAMES` of the training frames (as they are, at the model's size: what
 the adapted model runs on), so that teacher and student start from the statistics of the user's camera. ``auto``
 (the default) does so when the checkpoint holds the statistics of a training run and keeps them when they are
-folded into the convolutions (the published folders' checkpoints, rebuilt from their ONNX files: every batch norm
+folded into the convolutions (a checkpoint rebuilt from an ONNX file, as ``models/real-road-unet``'s: every batch norm
 the identity, where new statistics would normalise twice); ``frames`` insists (and refuses such a checkpoint);
 ``keep`` keeps them. The held-out measures right after it are recorded beside those before and after, and the
 collapse guard checks it as it checks a round.
@@ -486,7 +486,7 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
         seed: the frame order, hold-out and augmentation draws.
         norm_stats: the batch-norm statistics before the first round (AdaBN, :mod:`freespace.engine.norm_stats`):
             ``"auto"`` re-estimates them on the frames when the checkpoint holds a training run's and keeps them when
-            they are folded into the convolutions (the published folders'); ``"frames"`` re-estimates them (a
+            they are folded into the convolutions (``models/real-road-unet``'s); ``"frames"`` re-estimates them (a
             checkpoint with folded ones is refused); ``"keep"`` keeps them.
         across_time, complete: each round's labels carried from the next frames (``"auto"`` when the frames are a
             sequence, ``"on"``, ``"off"``) and completed by appearance (:mod:`freespace.engine.adapt_time`).

@@ -3,9 +3,9 @@ weights that are checked to load (:func:`check_encoder`).
 
 ``init`` names a model folder (``models/real-road-fast``: its ``model.ckpt``) or a training checkpoint. The run
 takes the init's network, its options and its input size (:func:`resolve_init`: an explicit other network or
-size is refused), and starts from every one of its weights, batch-norm statistics included (a published folder's
-are the identity: its ``model.ckpt`` is rebuilt from the float16 ONNX file, whose convolutions hold the folded
-normalisation; ``freeze`` ``norm`` keeps them so).
+size is refused), and starts from every one of its weights, batch-norm statistics included (``models/real-road-fast``
+ships its training checkpoint's; a checkpoint rebuilt from an ONNX file, as ``models/real-road-unet``'s, has them the
+identity, the normalisation folded into its convolutions; ``freeze`` ``norm`` keeps them as they are).
 """
 
 from __future__ import annotations

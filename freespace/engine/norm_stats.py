@@ -7,10 +7,11 @@ estimated again as a cumulative average (``momentum=None``) over forward passes 
 training mode and everything else as it runs (eval: no dropout, no auxiliary head), without a gradient; nothing else
 of the network changes. It needs no label and takes seconds.
 
-It only makes sense where the batch norms hold the statistics the network was trained with. The published
-model folders' checkpoints were rebuilt from their ONNX files (:func:`freespace.engine.adapt_io.checkpoint_from_onnx`),
-whose export folded each batch norm into the convolution before it: their batch norms are the identity (running mean
-0, running variance 1) and the statistics live inside the convolutions' weights. Statistics estimated there would
+It only makes sense where the batch norms hold the statistics the network was trained with. A checkpoint rebuilt
+from an ONNX file (:func:`freespace.engine.adapt_io.checkpoint_from_onnx`; ``models/real-road-unet``'s, and
+``models/real-road-fast``'s before its rebuild) has each batch norm folded into the convolution before it by the
+export: the batch norms are the identity (running mean 0, running variance 1) and the statistics live inside the
+convolutions' weights. Statistics estimated there would
 normalise activations a second time: such a checkpoint is detected (:func:`folded_norms`) and kept
 (:func:`norm_stats_plan`).
 """
