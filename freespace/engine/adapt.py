@@ -35,8 +35,8 @@ collapse guard checks it as it checks a round.
 (a video, or consecutive frames: ``auto`` checks that at least half of the consecutive pairs share a road
 homography), each round's labels are carried from the next frames along the road plane's homographies
 (:mod:`freespace.datagen.temporal`): the far road and the road beside the cars, which the teacher is sure of only
-once the car is nearer, join the labels. With ``complete``, each training frame's label then has its don't care
-decided by a graph cut on the frame's colours (:func:`freespace.datagen.completion.complete_by_appearance`).
+once the car is nearer, join the labels. With ``complete`` (the default), each training frame's label then has its
+don't care decided by a graph cut on the frame's colours (:func:`freespace.datagen.completion.complete_by_appearance`).
 
 **Before training** the published model labels the frames: outputs that are not finite (a damaged checkpoint),
 a confident pixel on less than :data:`MIN_CONFIDENT_SHARE` of them (nothing to learn from), no road or nothing
@@ -163,11 +163,13 @@ class AdaptSettings:
 
     def check(self) -> AdaptSettings:
         """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``), ``norm_stats``
-        against :data:`~freespace.engine.norm_stats.NORM_STATS`.
+        against :data:`~freespace.engine.norm_stats.NORM_STATS`, ``across_time`` against
+        :data:`~freespace.engine.adapt_time.ACROSS_TIME`, ``complete`` a bool.
 
         Raises:
             InvalidOptionError: an option out of bounds, of another type, or None where a value is needed (named,
-            with its bounds); a ``norm_stats`` that is none of its values.
+            with its bounds); a ``norm_stats`` or ``across_time`` that is none of its values, a ``complete`` that is
+            no bool.
         """
         check_seed(self.seed)
         check_across_time(self.across_time)
@@ -311,7 +313,8 @@ class _Data:
     source_labels: np.ndarray | None = None
     #: the loss of every step so far, over all rounds (the divergence check's record)
     losses: list[float] = field(default_factory=list)
-    #: the round's labels carried along time (``N×h×w uint8``), or None: labels from ``probs`` as they are
+    #: the round's labels carried along time and/or completed by appearance (``N×h×w uint8``), or None: the
+    #: confident labels of ``probs``
     labels: np.ndarray | None = None
 
 
