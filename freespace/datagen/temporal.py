@@ -7,9 +7,10 @@ near the camera, well labelled, and the road a car stood on is free. Between two
 pixels move by a homography (a plane's image under any camera motion), which matched road pixels give without depth:
 
 1. **The homography** (:func:`road_homography`): ORB features inside the earlier frame's road (the teacher's road,
-   where the camera sees texture: lane marks, the asphalt's grain, patches) and inside the later frame's, matched
-   (mutual nearest neighbours, Lowe's ratio), then a RANSAC homography. Its inliers are road points of both frames;
-   too few, or a homography that flips or folds the image, gives ``None`` (the pair is skipped).
+   where the camera sees texture: lane marks, the asphalt's grain, patches; after a contrast equalisation, CLAHE)
+   and inside the later frame's, matched (nearest neighbours that pass Lowe's ratio test), then a RANSAC homography.
+   Its inliers are road points of both frames; too few, or a homography that flips or folds the image, gives
+   ``None`` (the pair is skipped).
 2. **Chains**: the homography from frame ``t`` to ``t + k`` is the product of the consecutive ones
    (:func:`chain_homographies`), so a frame reaches sources further than one pair's features would.
 3. **Votes** (:func:`carried_votes`): each source frame's labelled pixels are warped onto frame ``t`` by the chained
