@@ -128,6 +128,8 @@ def test_bad_options_and_mismatched_inputs_are_refused() -> None:
         carry_along([_texture(0)] * 2, [np.zeros(H_W, np.uint8)] * 2, [_bottom(10)])
     with pytest.raises(ShapeMismatchError, match="consecutive pair"):
         carry_along([_texture(0)] * 2, [np.zeros(H_W, np.uint8)] * 2, None, steps=[])
+    with pytest.raises(ShapeMismatchError, match="voter flags"):
+        carry_along([_texture(0)] * 2, [np.zeros(H_W, np.uint8)] * 2, None, steps=[FORWARD], voters=[True])
     with pytest.raises(ShapeMismatchError, match="votes on"):
         carried_votes(_texture(0), [(_texture(1), np.zeros((10, 10), np.uint8), np.eye(3))])
 
@@ -175,6 +177,8 @@ def test_held_out_frames_give_adapt_no_label() -> None:
     assert (carried[0] == 1).mean() > 0.2 and shares["gained"] > 0.1
     kept, shares = carried_labels(images, labels, [FORWARD], np.array([1]))
     assert (kept[0] == IGNORE_INDEX).all() and shares["gained"] == 0
+    alone, shares = carried_labels(images, labels, [FORWARD], np.array([0]))  # held frame 0: shares of frame 1 only
+    assert (alone[1] == labels[1]).all() and shares["gained"] == 0
 
 
 def test_adapt_completes_the_training_frames_labels_by_appearance() -> None:

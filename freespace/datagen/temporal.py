@@ -193,8 +193,8 @@ def sequence_homographies(images: Sequence[np.ndarray], roads: Sequence[np.ndarr
 
 
 def carry_along(images: Sequence[np.ndarray], labels: Sequence[np.ndarray], roads: Sequence[np.ndarray] | None,
-                options: CarryOptions = CarryOptions(),
-                steps: Sequence[np.ndarray | None] | None = None) -> tuple[list[np.ndarray], dict[str, float]]:
+                options: CarryOptions = CarryOptions(), steps: Sequence[np.ndarray | None] | None = None,
+                voters: Sequence[bool] | None = None) -> tuple[list[np.ndarray], dict[str, float]]:
     """Every frame's label with the road its neighbours saw (the module docstring's steps 1–4).
 
     Args:
@@ -205,11 +205,13 @@ def carry_along(images: Sequence[np.ndarray], labels: Sequence[np.ndarray], road
             ``steps`` are given.
         options: :class:`CarryOptions`.
         steps: the consecutive homographies (:func:`sequence_homographies`), when already known.
+        voters: per frame, whether its label may vote on other frames (None: every frame's); e.g. adapt's held-out
+            frames give no label.
 
     Returns:
         The new labels (class maps) and a record: ``pairs`` (consecutive pairs), ``pairs_fitted`` (with a
-        homography), ``gained`` (don't care → road, share of all pixels), ``overridden`` (not road → road),
-        ``conflicts`` (→ don't care).
+        homography), and over the voting frames' pixels ``gained`` (don't care → road), ``overridden`` (not road →
+        road), ``conflicts`` (→ don't care).
     """
     options = options.check()
     n = len(images)
@@ -219,19 +221,26 @@ def carry_along(images: Sequence[np.ndarray], labels: Sequence[np.ndarray], road
         steps = sequence_homographies(images, roads if roads is not None else [], options)
     elif len(steps) != max(n - 1, 0):
         raise ShapeMismatchError(f"{n} frames and {len(steps)} homographies: give one a consecutive pair")
+    if voters is None:
+        voters = [True] * n
+    elif len(voters) != n:
+        raise ShapeMismatchError(f"{n} frames and {len(voters)} voter flags: give one a frame")
     inverse = [None if H is None else np.linalg.inv(H) for H in steps]
     out, totals = [], np.zeros(3)
     for t in range(n):
         ahead = chain_homographies(steps[t:t + options.window])
-        sources = [(images[t + k + 1], labels[t + k + 1], H) for k, H in enumerate(ahead) if H is not None]
+        sources = [(images[t + k + 1], labels[t + k + 1], H) for k, H in enumerate(ahead)
+                   if H is not None and voters[t + k + 1]]
         if options.both_ways:
             behind = chain_homographies(inverse[max(t - options.window, 0):t][::-1])
-            sources += [(images[t - k - 1], labels[t - k - 1], H) for k, H in enumerate(behind) if H is not None]
+            sources += [(images[t - k - 1], labels[t - k - 1], H) for k, H in enumerate(behind)
+                        if H is not None and voters[t - k - 1]]
         road_votes, other_votes = carried_votes(images[t], sources, options.max_grey_difference)
         label, change = _decide(labels[t], road_votes, other_votes, options.override)
         out.append(label)
-        totals += [np.mean(change == k) for k in (1, 3, 2)]
-    shares = totals / max(n, 1)
+        if voters[t]:
+            totals += [np.mean(change == k) for k in (1, 3, 2)]
+    shares = totals / max(sum(bool(v) for v in voters), 1)
     return out, {"pairs": max(n - 1, 0), "pairs_fitted": sum(H is not None for H in steps),
                  "gained": round(float(shares[0]), 4), "overridden": round(float(shares[1]), 4),
                  "conflicts": round(float(shares[2]), 4)}

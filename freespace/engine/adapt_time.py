@@ -77,7 +77,8 @@ def plan_sequence(images: np.ndarray, probs: np.ndarray, setting: str) -> tuple[
 def carried_labels(images: np.ndarray, labels: np.ndarray, steps: list, held: np.ndarray) -> tuple[np.ndarray,
                                                                                                   dict[str, float]]:
     """Each frame's label with the road its next frames' labels saw (:func:`freespace.datagen.temporal.carry_along`
-    with its default settings), the held-out frames giving none.
+    with its default settings), the held-out frames giving none (their own labels are carried too, and not trained
+    on; the shares count the training frames).
 
     Args:
         images: ``N×h×w×3 uint8`` RGB frames. labels: their ``N×h×w uint8`` pseudo-labels (1 road, 0 not road, 255
@@ -88,9 +89,9 @@ def carried_labels(images: np.ndarray, labels: np.ndarray, steps: list, held: np
     """
     from freespace.datagen.temporal import CarryOptions, carry_along
 
-    given = labels.copy()
-    given[held] = 255
-    out, record = carry_along(list(images), list(given), None, CarryOptions(), steps)
+    voters = np.ones(len(images), bool)
+    voters[held] = False
+    out, record = carry_along(list(images), list(labels), None, CarryOptions(), steps, voters=list(voters))
     return np.stack(out), {k: record[k] for k in ("gained", "overridden", "conflicts")}
 
 
