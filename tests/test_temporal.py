@@ -189,7 +189,8 @@ def test_adapt_completes_the_training_frames_labels_by_appearance() -> None:
     images = np.stack([image, image])
     probs = np.full((2, *H_W), 0.5, np.float32)
     probs[:, 200:], probs[:, :40] = 0.99, 0.01
-    assert round_labels(images, probs, 0.9, None, np.array([1]), False) == (None, {})
-    labels, record = round_labels(images, probs, 0.9, None, np.array([1]), True)
+    sure = np.where(probs > 0.9, 1, np.where(probs < 0.1, 0, IGNORE_INDEX)).astype(np.uint8)
+    assert round_labels(images, probs, sure, None, np.array([1]), False) == (None, {})
+    labels, record = round_labels(images, probs, sure, None, np.array([1]), True)
     assert (labels[0, 130:] == 1).all() and (labels[0, :110] == 0).all() and record["completed"] > 0.2
     assert (labels[1, 40:200] == IGNORE_INDEX).all()  # the held-out frame is left as the teacher labelled it

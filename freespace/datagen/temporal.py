@@ -105,8 +105,13 @@ def road_homography(earlier: np.ndarray, later: np.ndarray, road_earlier: np.nda
     if earlier.shape[:2] != later.shape[:2]:
         raise ShapeMismatchError(f"frames of {earlier.shape[1]}×{earlier.shape[0]} and {later.shape[1]}×"
                                  f"{later.shape[0]} pixels (W×H): carry labels between frames of one camera")
-    kp_a, des_a = _features(_grey(earlier), road_earlier)
-    kp_b, des_b = _features(_grey(later), road_later)
+    return _fit(_features(_grey(earlier), road_earlier), _features(_grey(later), road_later), earlier.shape[:2],
+                options)
+
+
+def _fit(a_features: tuple, b_features: tuple, shape: tuple[int, int], options: CarryOptions) -> np.ndarray | None:
+    """:func:`road_homography` from the two frames' ORB keypoints and descriptors (:func:`_features`)."""
+    (kp_a, des_a), (kp_b, des_b) = a_features, b_features
     if des_a is None or des_b is None or len(kp_a) < options.min_inliers or len(kp_b) < options.min_inliers:
         return None
     pairs = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(des_a, des_b, k=2)
@@ -116,7 +121,7 @@ def road_homography(earlier: np.ndarray, later: np.ndarray, road_earlier: np.nda
     a = np.float32([kp_a[m.queryIdx].pt for m in good])
     b = np.float32([kp_b[m.trainIdx].pt for m in good])
     H, inliers = cv2.findHomography(a, b, cv2.RANSAC, options.ransac_pixels, maxIters=2000, confidence=0.999)
-    if H is None or int(inliers.sum()) < options.min_inliers or not _plausible(H, earlier.shape[:2]):
+    if H is None or int(inliers.sum()) < options.min_inliers or not _plausible(H, shape):
         return None
     return H / H[2, 2]
 
@@ -185,11 +190,15 @@ def sequence_homographies(images: Sequence[np.ndarray], roads: Sequence[np.ndarr
                           options: CarryOptions = CarryOptions()) -> list[np.ndarray | None]:
     """The road homographies of consecutive frames: ``out[i]`` maps frame ``i``'s pixels to frame ``i + 1``'s
     (:func:`road_homography`; ``None`` where the pair shares too little road). ``images``: ``H×W×3 uint8`` RGB
-    frames of one camera in time order; ``roads``: each frame's road region (``bool H×W``)."""
+    frames of one camera in time order; ``roads``: each frame's road region (``bool H×W``). Each frame's features
+    are found once and matched with both its neighbours'."""
     if len(roads) != len(images):
         raise ShapeMismatchError(f"{len(images)} frames and {len(roads)} road maps: give one road map a frame")
-    return [road_homography(images[i], images[i + 1], roads[i], roads[i + 1], options)
-            for i in range(len(images) - 1)]
+    shapes = {image.shape[:2] for image in images}
+    if len(shapes) > 1:
+        raise ShapeMismatchError(f"frames of {len(shapes)} sizes: carry labels between frames of one camera")
+    features = [_features(_grey(image), road) for image, road in zip(images, roads)]
+    return [_fit(features[i], features[i + 1], images[i].shape[:2], options) for i in range(len(images) - 1)]
 
 
 def carry_along(images: Sequence[np.ndarray], labels: Sequence[np.ndarray], roads: Sequence[np.ndarray] | None,

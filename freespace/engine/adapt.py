@@ -89,7 +89,7 @@ from freespace.engine.adapt_io import (
     write_model_folder,
 )
 from freespace.engine.adapt_time import check_across_time, plan_sequence, round_labels
-from freespace.engine.norm_stats import NORM_STATS, norm_stats_plan, reestimate_norm_stats
+from freespace.engine.norm_stats import check_norm_stats, norm_stats_plan, reestimate_norm_stats
 from freespace.errors import CorruptFileError, InputFileError, InvalidOptionError, TrainingError, check_seed, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
 from freespace.io.files import PathLike, check_outputs, check_writable, missing_input
@@ -175,9 +175,7 @@ class AdaptSettings:
         check_across_time(self.across_time)
         if not isinstance(self.complete, bool):
             raise InvalidOptionError(f"{param('complete')} must be True or False, got {reprlib.repr(self.complete)}")
-        if not (isinstance(self.norm_stats, str) and self.norm_stats in NORM_STATS):
-            raise InvalidOptionError(f"{param('norm_stats')} must be one of {', '.join(NORM_STATS)}, got "
-                                     f"{reprlib.repr(self.norm_stats)}")
+        check_norm_stats(self.norm_stats)
         values = {}
         for name, bound in BOUNDS.items():
             value = getattr(self, name)
@@ -712,8 +710,8 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     deadline = start + settings.minutes * 60 if settings.minutes else math.inf
     rows, now, held_now = [], before, held_before
     for r in range(1, settings.epochs + 1):
-        data.labels, carried = round_labels(data.images, data.probs, settings.threshold, steps, data.held,
-                                            settings.complete)
+        confident = pseudo_labels(data.probs.astype(np.float32), settings.threshold)
+        data.labels, carried = round_labels(data.images, data.probs, confident, steps, data.held, settings.complete)
         stats = _train_round(student, teacher, opt, data, settings, rng, deadline, bar, f"in round {r}")
         now, held_now = _measure(_teacher_session(teacher, size, threads), data, source_masks)
         rows.append({"round": r, **stats, **now, **carried, "seconds": round(time.monotonic() - start, 1)})

@@ -95,7 +95,7 @@ def carried_labels(images: np.ndarray, labels: np.ndarray, steps: list, held: np
     return np.stack(out), {k: record[k] for k in ("gained", "overridden", "conflicts")}
 
 
-def round_labels(images: np.ndarray, probs: np.ndarray, threshold: float, steps: list | None, held: np.ndarray,
+def round_labels(images: np.ndarray, probs: np.ndarray, labels: np.ndarray, steps: list | None, held: np.ndarray,
                  complete: bool) -> tuple[np.ndarray | None, dict[str, float]]:
     """A round's labels of adapt's frames: the teacher's confident label, carried along ``steps`` (when not None)
     and completed by appearance on the training frames (with ``complete``); None when neither applies (adapt then
@@ -103,7 +103,8 @@ def round_labels(images: np.ndarray, probs: np.ndarray, threshold: float, steps:
 
     Args:
         images: ``N×h×w×3 uint8`` RGB frames. probs: their ``N×h×w`` road probabilities (the teacher's view).
-        threshold: road above it, not road below 1 − it. steps: :func:`plan_sequence`'s homographies or None.
+        labels: the teacher's confident labels of them (``N×h×w uint8``: 1 road, 0 not road, 255 don't care; adapt's
+            ``pseudo_labels``). steps: :func:`plan_sequence`'s homographies or None.
         held: indices of the held-out frames (no label given, none completed).
         complete: complete the labels by appearance.
 
@@ -114,8 +115,7 @@ def round_labels(images: np.ndarray, probs: np.ndarray, threshold: float, steps:
     """
     if steps is None and not complete:
         return None, {}
-    probs = probs.astype(np.float32)
-    labels = np.where(probs > threshold, 1, np.where(probs < 1 - threshold, 0, 255)).astype(np.uint8)
+    labels = labels.copy()
     record: dict[str, float] = {}
     if steps is not None:
         labels, record = carried_labels(images, labels, steps, held)
@@ -125,6 +125,6 @@ def round_labels(images: np.ndarray, probs: np.ndarray, threshold: float, steps:
         train = np.setdiff1d(np.arange(len(images)), held)
         before = int((labels[train] == 255).sum())
         for i in train:
-            labels[i] = complete_by_appearance(images[i], probs[i], threshold, seeds=labels[i])
+            labels[i] = complete_by_appearance(images[i], probs[i], seeds=labels[i])
         record["completed"] = round((before - int((labels[train] == 255).sum())) / max(labels[train].size, 1), 4)
     return labels, record

@@ -27,7 +27,7 @@ import numpy as np
 from freespace.errors import InvalidOptionError, param
 
 __all__ = ["NORM_STATS", "MAX_NORM_FRAMES", "NORM_BATCH", "NORM_BATCH_PIXELS", "batch_norms", "folded_norms",
-           "norm_stats_plan", "reestimate_norm_stats"]
+           "check_norm_stats", "norm_stats_plan", "reestimate_norm_stats"]
 
 #: the values of adapt's ``norm_stats``: ``auto`` re-estimates when the checkpoint holds real statistics and keeps
 #: folded ones, ``frames`` re-estimates (a checkpoint with folded statistics is refused), ``keep`` keeps them
@@ -61,6 +61,15 @@ def folded_norms(net: Any) -> list[str]:
             if bool(torch.all(m.running_mean == 0)) and bool(torch.all(m.running_var == 1))]
 
 
+def check_norm_stats(value: Any) -> str:
+    """``value`` if it is one of :data:`NORM_STATS`, else :class:`~freespace.errors.InvalidOptionError` naming
+    ``norm_stats``."""
+    if not (isinstance(value, str) and value in NORM_STATS):
+        raise InvalidOptionError(f"{param('norm_stats')} must be one of {', '.join(NORM_STATS)}, got "
+                                 f"{reprlib.repr(value)}")
+    return value
+
+
 def norm_stats_plan(net: Any, setting: str, checkpoint: Any = None) -> str | None:
     """What adapt does with ``net``'s batch-norm statistics under ``setting`` (one of :data:`NORM_STATS`): None to
     re-estimate them on the frames, else why they are kept, as the run's record says it (``"kept: …"``).
@@ -73,10 +82,7 @@ def norm_stats_plan(net: Any, setting: str, checkpoint: Any = None) -> str | Non
         InvalidOptionError: ``setting`` is none of :data:`NORM_STATS`; ``frames`` and the network has no batch norm
             or folded ones (one line naming ``norm_stats``).
     """
-    if not (isinstance(setting, str) and setting in NORM_STATS):
-        raise InvalidOptionError(f"{param('norm_stats')} must be one of {', '.join(NORM_STATS)}, got "
-                                 f"{reprlib.repr(setting)}")
-    if setting == "keep":
+    if check_norm_stats(setting) == "keep":
         return "kept: as asked (norm_stats keep)"
     norms, folded = batch_norms(net), folded_norms(net)
     where = f"{checkpoint}" if checkpoint is not None else "the network"
