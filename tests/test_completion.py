@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from freespace.datagen.completion import balanced_label, complete_by_appearance, confident_label
+from freespace.datagen.completion import balanced_label, complete_by_appearance, confident_label, released_seeds
 from freespace.errors import InvalidOptionError, ShapeMismatchError
 from freespace.labels import IGNORE_INDEX
 
@@ -37,6 +37,24 @@ def test_appearance_completes_the_far_road_and_keeps_the_seeds() -> None:
     assert (completed[20:40] == 0).mean() > 0.95  # the verge does not
     one_class = complete_by_appearance(image, np.full((80, 120), 0.97, np.float32))
     assert (one_class == 1).all()  # no seed of not road: the confident label as it is
+
+
+def test_released_seeds_let_the_cut_take_back_a_far_road_the_teacher_is_sure_of() -> None:
+    image, prob, road = _scene()
+    prob = prob.copy()
+    prob[40:60] = 0.02  # the far road: the teacher is sure it is not road
+    assert (complete_by_appearance(image, prob)[40:60] == 0).all()  # completion alone cannot reach it
+    released = released_seeds(confident_label(prob), prob, 0.3)
+    assert released[40:60].all() and not released[:40].any() and not released[60:].any()  # the seeds within 24 rows
+    completed = complete_by_appearance(image, prob, release=0.3)
+    assert (completed[40:60] == 1).mean() > 0.95  # grey like the near road: road
+    assert (completed[20:40] == 0).mean() > 0.95 and (completed[:20] == 0).all()  # the green verge, the sky stay
+    prob[70:, :30] = 0.02  # not road beside the car's own road (a pavement), near the bottom
+    near = released_seeds(confident_label(prob), prob, 0.3)
+    far = released_seeds(confident_label(prob), prob, 0.3, far=0.5)  # above row 60 + 0.5 × 20 only
+    assert near[70:, :30].any() and not far[70:].any() and far[40:60].all()
+    with pytest.raises(InvalidOptionError, match="release must be in"):
+        released_seeds(confident_label(prob), prob, 1.5)
 
 
 def test_balanced_thresholds_keep_each_band_labelled() -> None:

@@ -9,7 +9,10 @@ less sure there, two ways label more of them.
 - :func:`complete_by_appearance`: from the confident seeds, road grows into the uncertain pixels that look like it:
   a graph cut (OpenCV's GrabCut: colour models of road and not road, a smoothness term along the image's edges)
   seeded with the confident labels as certain and the rest as probable by the teacher's side of 0.5; an uncertain
-  pixel takes the cut's side, and the seeds stay as they were.
+  pixel takes the cut's side, and the seeds stay as they were. With ``release`` the teacher's confident not-road
+  pixels near its road are released to the cut as well (:func:`released_seeds`): a teacher that stops the road a
+  band short of its far end, or leaves out the lane beyond the cars, is sure of it, so completing only its uncertain
+  pixels cannot reach them.
 
 Labels are class maps: 1 road, 0 not road, :data:`~freespace.labels.IGNORE_INDEX` don't care. Torch-free.
 """
@@ -22,7 +25,7 @@ import numpy as np
 from freespace.errors import InvalidOptionError, ShapeMismatchError
 from freespace.labels import IGNORE_INDEX
 
-__all__ = ["confident_label", "balanced_label", "complete_by_appearance"]
+__all__ = ["confident_label", "balanced_label", "released_seeds", "complete_by_appearance"]
 
 
 def _check(prob: np.ndarray, image: np.ndarray | None = None) -> np.ndarray:
@@ -81,8 +84,42 @@ def balanced_label(prob: np.ndarray, share: float = 0.8, bands: int = 8, min_con
     return out
 
 
+def released_seeds(seeds: np.ndarray, prob: np.ndarray, release: float, far: float = 1.0) -> np.ndarray:
+    """Which not-road seeds a graph cut may relabel: those within ``release`` × H pixels (Euclidean) of the
+    teacher's road (``prob`` ≥ 0.5) and, with ``far`` < 1, in the far part of it: above the row ``top + far ×
+    (H − top)``, ``top`` the road's highest row (the far road and the lanes beside it, not the pavements by the car).
+
+    Args:
+        seeds: ``uint8 H×W`` class map (1 road, 0 not road, :data:`~freespace.labels.IGNORE_INDEX` don't care).
+        prob: the teacher's road probability, ``float H×W`` in [0, 1].
+        release: the distance as a share of the image height, in [0, 1] (0: none released).
+        far: the share of the road's rows, from its top, where seeds are released, in (0, 1].
+
+    Returns:
+        ``bool H×W``: the released not-road seeds.
+
+    Example:
+        >>> prob = np.zeros((10, 4), np.float32); prob[6:] = 1
+        >>> seeds = confident_label(prob)
+        >>> released_seeds(seeds, prob, 0.2).any(1).tolist()  # the two rows above the road
+        [False, False, False, False, True, True, False, False, False, False]
+    """
+    if not 0 <= release <= 1 or not 0 < far <= 1:
+        raise InvalidOptionError(f"release must be in [0, 1] and far in (0, 1], got {release} and {far}")
+    road = prob >= 0.5
+    if release == 0 or not road.any():
+        return np.zeros(prob.shape, bool)
+    distance = cv2.distanceTransform((~road).astype(np.uint8), cv2.DIST_L2, 5)
+    near = (seeds == 0) & (distance <= release * prob.shape[0])
+    if far < 1:
+        top = int(np.argmax(road.any(1)))
+        near[int(top + far * (prob.shape[0] - top)):] = False
+    return near
+
+
 def complete_by_appearance(image: np.ndarray, prob: np.ndarray, threshold: float = 0.9,
-                           iterations: int = 3, seeds: np.ndarray | None = None) -> np.ndarray:
+                           iterations: int = 3, seeds: np.ndarray | None = None, release: float = 0.0,
+                           far: float = 1.0) -> np.ndarray:
     """The confident label (:func:`confident_label`) with its uncertain pixels completed by a graph cut on the
     image's colours (see the module docstring).
 
@@ -92,6 +129,8 @@ def complete_by_appearance(image: np.ndarray, prob: np.ndarray, threshold: float
         iterations: GrabCut's iterations (each re-fits the colour models).
         seeds: a class map (``uint8 H×W``) to complete instead of the confident label, e.g. labels carried along
             time (:mod:`freespace.datagen.temporal`).
+        release, far: the not-road seeds near the teacher's road that the cut may relabel too
+            (:func:`released_seeds`; ``release`` 0: none).
 
     Returns:
         ``uint8 H×W``: 1 road, 0 not road (every pixel labelled, unless a class has no seed: then the confident
@@ -108,6 +147,7 @@ def complete_by_appearance(image: np.ndarray, prob: np.ndarray, threshold: float
     mask = np.where(prob >= 0.5, cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)
     mask[seeds == 1] = cv2.GC_FGD
     mask[seeds == 0] = cv2.GC_BGD
+    mask[released_seeds(seeds, prob, release, far)] = cv2.GC_PR_BGD
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     cv2.grabCut(cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2BGR), mask, None, bgd, fgd, iterations,
                 cv2.GC_INIT_WITH_MASK)

@@ -126,12 +126,14 @@ def fill_drives(out: Path, names: list[str], sessions: list[tuple[object, tuple[
 
 
 def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int]]], threshold: float = THRESHOLD,
-                  complete: bool = False, carry: bool = False) -> tuple[list[np.ndarray], dict[str, object] | None]:
+                  complete: bool = False, carry: bool = False,
+                  release: tuple[float, float] = (0.0, 1.0)) -> tuple[list[np.ndarray], dict[str, object] | None]:
     """The teachers' class maps (``uint8 H×W``: 1 road, 0 not road, 255 don't care) of the frames at ``paths``:
     the confident label, carried along time with ``carry`` (frames grouped into sequences by the name before its
     last ``_``, CamVid's ``0016E5_07959``, in name order; :func:`freespace.datagen.temporal.carry_along` with
-    labelcheck's settings), then completed by appearance with ``complete``. Also the carrying's record per
-    sequence (``None`` without ``carry``)."""
+    labelcheck's settings), then completed by appearance with ``complete`` (``release``: the distance and far
+    share of :func:`freespace.datagen.completion.released_seeds`, the confident not road near the road the graph cut
+    may relabel). Also the carrying's record per sequence (``None`` without ``carry``)."""
     from freespace.datagen.completion import complete_by_appearance, confident_label
     from freespace.datagen.temporal import CarryOptions, carry_along
 
@@ -150,7 +152,8 @@ def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int
             for i, label in zip(idx, carried):
                 classes[i] = label
     if complete:
-        classes = [complete_by_appearance(im, prob, threshold, seeds=c) for im, prob, c in zip(images, probs, classes)]
+        classes = [complete_by_appearance(im, prob, threshold, seeds=c, release=release[0], far=release[1])
+                   for im, prob, c in zip(images, probs, classes)]
     return classes, record
 
 
@@ -168,7 +171,7 @@ def labels_sha256(label: Path) -> str:
 def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
           prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
           drive_teachers: list[Path] | None = None, drive_teacher_first: bool = False,
-          complete: bool = False, carry: bool = False) -> dict[str, object]:
+          complete: bool = False, carry: bool = False, release: tuple[float, float] = (0.0, 1.0)) -> dict[str, object]:
     """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
     (a new folder); return the report. ``drive_copies``: each training frame of the drives is listed this many
     times (``<name>-c1``, ...: each copy draws its own augmentation), to weigh the drives against the other
@@ -176,7 +179,8 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
     frames (:func:`fill_drives`; ``drive_teacher_first``: their confident labels win over the autolabels); the
     validation and test frames keep their autolabels. ``complete``: the frames' confident labels are completed by
     appearance (:func:`freespace.datagen.completion.complete_by_appearance`: a graph cut on the frame's colours
-    labels the pixels the teacher is unsure of; issue 70, item 1). ``carry``: the confident labels are first carried
+    labels the pixels the teacher is unsure of; issue 70, item 1; ``release``: also the confident not road near
+    the road, :func:`frame_classes`). ``carry``: the confident labels are first carried
     along time within each sequence (:func:`frame_classes`)."""
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
@@ -186,7 +190,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
                          drive_teacher_first) if drive_teachers else None
     confident, road = [], []
     paths = sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png")
-    classes, carried = frame_classes(paths, _sessions(teachers), threshold, complete, carry)
+    classes, carried = frame_classes(paths, _sessions(teachers), threshold, complete, carry, release)
     for path, frame in zip(paths, classes):
         label = np.zeros((*frame.shape, 3), np.uint8)
         label[frame == 1], label[frame == 0] = ROAD_BGR, NON_ROAD_BGR
@@ -203,7 +207,8 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
     report = {"teachers": [str(t) for t in teachers], "threshold": threshold, "frames": str(frames),
               "counts": {k: len(v) for k, v in lists.items()}, "teacher_frames": len(road),
               "drive_copies": drive_copies, "drive_teachers": [str(t) for t in drive_teachers or []],
-              "drives_filled": filled, "completed_by_appearance": complete, "carried_along_time": carried,
+              "drives_filled": filled, "completed_by_appearance": complete,
+              "released": list(release) if complete else None, "carried_along_time": carried,
               "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road)),
               "labels_sha256": labels_sha256(out / "label")}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
@@ -226,11 +231,19 @@ def main() -> None:
                     help="complete the teachers' confident labels of --frames by appearance (a graph cut)")
     ap.add_argument("--carry", action="store_true",
                     help="carry the teachers' confident labels of --frames along time within each sequence first")
+    ap.add_argument("--release", type=float, default=0.0, metavar="R",
+                    help="with --complete, the graph cut may relabel the confident not road within R × the image "
+                         "height of the teacher's road (0: none)")
+    ap.add_argument("--release-far", type=float, default=1.0, metavar="F",
+                    help="... only in the top F share of the road's rows (1: all)")
     a = ap.parse_args()
+    if a.release and not a.complete:
+        ap.error("--release needs --complete")
     if a.drive_teacher_first and not a.drive_teacher:
         ap.error("--drive-teacher-first needs --drive-teacher MODEL")
     print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold,
-                           a.drive_copies, a.drive_teacher, a.drive_teacher_first, a.complete, a.carry)))
+                           a.drive_copies, a.drive_teacher, a.drive_teacher_first, a.complete, a.carry,
+                           (a.release, a.release_far))))
 
 
 if __name__ == "__main__":
