@@ -102,9 +102,12 @@ def _kitti_colours(classes: np.ndarray) -> np.ndarray:
     return label
 
 
-def labels_of(source: str, images: list[np.ndarray], probs: list[np.ndarray]) -> list[np.ndarray]:
+def labels_of(source: str, images: list[np.ndarray], probs: list[np.ndarray],
+              release: tuple[float, float] = (0.0, 1.0)) -> list[np.ndarray]:
     """The KITTI-colour labels (BGR) that ``source`` (:data:`SOURCES`) makes of the road probabilities ``probs`` of
-    ``images`` (RGB frames of one camera, consecutive and in time order for the temporal sources)."""
+    ``images`` (RGB frames of one camera, consecutive and in time order for the temporal sources); ``release``: the
+    distance and far share of the confident not road the graph cut may relabel (the appearance sources;
+    :func:`freespace.datagen.completion.released_seeds`)."""
     if source == "confident":
         return [student.label_from(prob) for prob in probs]
     if source == "balanced":
@@ -113,17 +116,18 @@ def labels_of(source: str, images: list[np.ndarray], probs: list[np.ndarray]) ->
     if source.startswith("temporal"):
         seeds = carry_along(images, seeds, [prob >= 0.5 for prob in probs], CarryOptions())[0]
     if source.endswith("appearance"):
-        seeds = [complete_by_appearance(image, prob, student.THRESHOLD, seeds=seed)
+        seeds = [complete_by_appearance(image, prob, student.THRESHOLD, seeds=seed, release=release[0], far=release[1])
                  for image, prob, seed in zip(images, probs, seeds)]
     return [_kitti_colours(seed) for seed in seeds]
 
 
 def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
-                 sources: tuple[str, ...] = ("confident",)) -> dict[str, dict[str, float]]:
+                 sources: tuple[str, ...] = ("confident",),
+                 release: tuple[float, float] = (0.0, 1.0)) -> dict[str, dict[str, float]]:
     """The CamVid labels of ``teachers`` (light normalised), ``raw_teachers`` (as they are) and the mean of all
     models, on ``val`` and the dusk frames under ``camvid`` (``make.sh``'s layout; each set one sequence in time
     order: ``val`` 15 frames a second, dusk one), each made by every label ``sources`` (:data:`SOURCES`; other than
-    ``confident``, named ``name / source``)."""
+    ``confident``, named ``name / source``; ``release``: :func:`labels_of`'s)."""
     normalised, raw = student._sessions(teachers), student._sessions(raw_teachers)
     sums: dict[str, np.ndarray] = {}
     for part, folder, masks in (("val", "val", "valannot"), ("dusk", "train", "duskannot")):
@@ -141,16 +145,17 @@ def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
         for name, probs in named.items():
             for source in sources:
                 key = f"{part}, {name}" + ("" if source == "confident" else f" / {source}")
-                for label, human in zip(labels_of(source, images, probs), classes):
+                for label, human in zip(labels_of(source, images, probs, release), classes):
                     sums[key] = sums.get(key, 0) + count(label, human == CAMVID_ROAD, human != CAMVID_VOID)
     return {name: summary(s) for name, s in sums.items()}
 
 
-def check_kitti_dev(teachers: list[Path], kitti_dev: Path,
-                    sources: tuple[str, ...] = ("confident",)) -> dict[str, dict[str, float]]:
+def check_kitti_dev(teachers: list[Path], kitti_dev: Path, sources: tuple[str, ...] = ("confident",),
+                    release: tuple[float, float] = (0.0, 1.0)) -> dict[str, dict[str, float]]:
     """The labels ``teachers`` (frames as they are) make on the 22 KITTI frames of other streets under
     ``kitti_dev`` (``images/``, ``masks/``: Cityscapes colours, road within 8 levels of (128, 64, 128)), by every
-    label ``sources``, pooled over all 22 and over the 9 with the most road (the wide streets)."""
+    label ``sources`` (``release``: :func:`labels_of`'s), pooled over all 22 and over the 9 with the most road (the
+    wide streets)."""
     sessions = student._sessions(teachers)
     frames = []
     for path in sorted((kitti_dev / "masks").glob("*.png")):
@@ -163,7 +168,7 @@ def check_kitti_dev(teachers: list[Path], kitti_dev: Path,
         image = _rgb(kitti_dev / "images" / name)
         prob = student.teacher_probability(image, sessions, normalise=False)
         for source in sources:
-            counts = count(labels_of(source, [image], [prob])[0], human, np.ones_like(human))
+            counts = count(labels_of(source, [image], [prob], release)[0], human, np.ones_like(human))
             for group in ("all 22",) + (("9 wide",) if name in wide else ()):
                 key = f"{group} / {source}"
                 sums[key] = sums.get(key, 0) + counts
@@ -186,6 +191,12 @@ def main() -> None:
     d.add_argument("--kitti-dev", type=Path, required=True, help="make.sh's kitti_dev folder")
     d.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder, frames as they are")
     d.add_argument("--sources", default="confident", help=f"label sources, comma-separated: {', '.join(SOURCES)}")
+    for parser in (c, d):
+        parser.add_argument("--release", type=float, default=0.0, metavar="R",
+                            help="the appearance sources may relabel the confident not road within R × the image "
+                                 "height of the road (student.py --release)")
+        parser.add_argument("--release-far", type=float, default=1.0, metavar="F",
+                            help="... only in the top F share of the road's rows")
     a = ap.parse_args()
     if a.check == "kitti2015":
         result = check_kitti2015(a.teacher, a.autolabels, a.kitti2015)
@@ -193,14 +204,14 @@ def main() -> None:
         sources = tuple(a.sources.split(","))
         if not set(sources) <= set(SOURCES[:3]):  # single frames: nothing to carry along time
             ap.error(f"kittidev's frames are not a sequence: --sources takes {', '.join(SOURCES[:3])}")
-        result = check_kitti_dev(a.teacher, a.kitti_dev, sources)
+        result = check_kitti_dev(a.teacher, a.kitti_dev, sources, (a.release, a.release_far))
     else:
         if not a.teacher and not a.raw_teacher:
             ap.error("give --teacher MODEL or --raw-teacher MODEL")
         sources = tuple(a.sources.split(","))
         if not set(sources) <= set(SOURCES):
             ap.error(f"--sources takes {', '.join(SOURCES)}")
-        result = check_camvid(a.teacher, a.raw_teacher, a.camvid, sources)
+        result = check_camvid(a.teacher, a.raw_teacher, a.camvid, sources, (a.release, a.release_far))
     print(json.dumps(result, indent=1))
 
 

@@ -384,3 +384,20 @@ def test_labelcheck_scores_the_teacher_s_labels_against_human_road(tmp_path: Pat
     # rows 6-35 counted (0-5 void); rows 17-18 don't care, 19-35 road (12 of them the human road)
     assert result["val, all"] == {"labelled": pytest.approx(100 * 28 / 30, abs=0.1), "road_as_road": 100.0,
                                   "road_as_not": 0.0, "precision": pytest.approx(100 * 12 / 17, abs=0.1)}
+
+
+def test_labelcheck_s_appearance_source_takes_release() -> None:
+    """``labels_of`` passes ``release`` to the graph cut: a grey far road the teacher is sure is not road is
+    relabelled road only with it (the green verge above stays not road)."""
+    import numpy as np
+
+    labelcheck = _load("labelcheck")
+    rng = np.random.default_rng(0)
+    image = np.empty((80, 120, 3), np.uint8)
+    image[:40], image[40:] = (60, 140, 60), (110, 110, 110)
+    image = np.clip(image.astype(int) + rng.integers(-8, 9, image.shape), 0, 255).astype(np.uint8)
+    prob = np.zeros((80, 120), np.float32)
+    prob[60:] = 0.97  # the teacher: road only in the near half of the grey road
+    road = [(label == labelcheck.student.ROAD_BGR).all(2) for label in
+            (labelcheck.labels_of("appearance", [image], [prob], release)[0] for release in ((0.0, 1.0), (0.3, 1.0)))]
+    assert not road[0][40:60].any() and road[1][40:60].mean() > 0.95 and not road[1][:36].any()
