@@ -74,3 +74,15 @@ def test_completed_labels_are_recorded(model: Path, frames: Path, tmp_path: Path
     assert 0 <= float(row["completed"]) <= 1 and row["gained"] == ""
     with pytest.raises(InvalidOptionError, match="complete"):
         _adapt(model, frames, tmp_path / "bad", complete="yes")
+
+
+def test_released_labels_are_recorded_and_need_the_completion(model: Path, frames: Path, tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture) -> None:
+    summary = _adapt(model, frames, tmp_path / "out", across_time="off", release=0.1)
+    assert summary["settings"]["release"] == pytest.approx(0.1)
+    assert "within 0.1 × the frame's height of the road (`release`)" in (tmp_path / "out" / "README.md").read_text()
+    with pytest.raises(InvalidOptionError, match="release.*complete"):
+        _adapt(model, frames, tmp_path / "bad", complete=False, release=0.1)
+    refused(capsys, ["adapt", "--model", str(model), "--input", str(frames), "--out", str(tmp_path / "x"),
+                     "--release", "2"], match="--release")
+    assert not (tmp_path / "bad").exists() and not (tmp_path / "x").exists()

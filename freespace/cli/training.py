@@ -162,6 +162,10 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
                    help="complete each round's labels by appearance: the pixels the teacher is unsure of take the "
                         "side of a graph cut on the frame's colours seeded with its confident labels (default on; "
                         "--no-complete: the confident labels alone)")
+    p.add_argument("--release", type=float, default=D.release, metavar="R",
+                   help="with --complete, the graph cut may also relabel what the teacher is sure is not road within "
+                        "R × the frame's height of its road: the far road and the lanes beside the cars that a "
+                        f"teacher stops short of (0…1, default {D.release:g}: none)")
     p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=WORKERS, help="CPU threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
@@ -176,7 +180,8 @@ def cmd_adapt(args: argparse.Namespace) -> int:
     s = adapt(args.model, args.input, args.out, source=args.source, epochs=args.epochs, minutes=args.minutes,
               threshold=args.threshold, lr=args.lr, batch_size=args.batch_size, ema=args.ema,
               max_drift=args.max_drift, seed=args.seed, norm_stats=args.norm_stats,
-              across_time=args.across_time, complete=args.complete, progress=not args.no_progress,
+              across_time=args.across_time, complete=args.complete, release=args.release,
+              progress=not args.no_progress,
               threads=args.threads)
     b, a = s["before"], s["after"]
     print(f"adapted {shown_path(s['model'])} on {s['frames']} frames ({s['skipped']} unreadable skipped) in "

@@ -137,7 +137,7 @@ CROP_WIDTH = 0.5
 BOUNDS = {"epochs": bounded_int(1, MAX_EPOCHS), "minutes": bounded_float(0, 10_000, low_open=True),
           "threshold": bounded_float(0.5, 0.999), "lr": bounded_float(0, 1, low_open=True),
           "batch_size": bounded_int(2, MAX_ADAPT_BATCH), "ema": bounded_float(0, 0.9999),
-          "max_drift": bounded_float(0, 1, low_open=True)}
+          "max_drift": bounded_float(0, 1, low_open=True), "release": bounded_float(0, 1)}
 
 
 class CollapseError(TrainingError):
@@ -160,6 +160,7 @@ class AdaptSettings:
     norm_stats: str = "auto"
     across_time: str = "auto"
     complete: bool = True
+    release: float = 0.0
 
     def check(self) -> AdaptSettings:
         """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``), ``norm_stats``
@@ -176,6 +177,9 @@ class AdaptSettings:
         if not isinstance(self.complete, bool):
             raise InvalidOptionError(f"{param('complete')} must be True or False, got {reprlib.repr(self.complete)}")
         check_norm_stats(self.norm_stats)
+        if self.release and not self.complete:
+            raise InvalidOptionError(f"{param('release')} acts in the completion by appearance; leave "
+                                     f"{param('complete')} on or {param('release')} at 0")
         values = {}
         for name, bound in BOUNDS.items():
             value = getattr(self, name)
@@ -460,7 +464,7 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
           batch_size: int = AdaptSettings.batch_size, ema: float = AdaptSettings.ema,
           max_drift: float = AdaptSettings.max_drift, seed: int = AdaptSettings.seed,
           norm_stats: str = AdaptSettings.norm_stats, across_time: str = AdaptSettings.across_time,
-          complete: bool = AdaptSettings.complete, progress: bool = True,
+          complete: bool = AdaptSettings.complete, release: float = AdaptSettings.release, progress: bool = True,
           threads: int | None = None) -> dict[str, Any]:
     """Adapt the published model in the folder ``model`` to the unlabelled frames ``inputs``; write the
     adapted model folder ``out`` (see the module's docstring for the method and what is written).
@@ -491,6 +495,9 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
             checkpoint with folded ones is refused); ``"keep"`` keeps them.
         across_time, complete: each round's labels carried from the next frames (``"auto"`` when the frames are a
             sequence, ``"on"``, ``"off"``) and completed by appearance (:mod:`freespace.engine.adapt_time`).
+        release: with ``complete``, the graph cut may also relabel the teacher's confident not road within this
+            share of the frame's height of its road (the far road and the lanes beside the cars that the teacher is
+            sure of and wrong about; :func:`freespace.datagen.completion.released_seeds`), in [0, 1]; 0: none.
         threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use).
         progress: a progress bar on a terminal (one line per round otherwise).
 
@@ -516,7 +523,7 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
     _check_arguments(model=model, input=inputs, out=out, source=source, progress=progress)
     threads = check_threads(threads)
     settings = AdaptSettings(epochs, minutes, threshold, lr, batch_size, ema, max_drift, seed, norm_stats,
-                             across_time, complete).check()
+                             across_time, complete, release).check()
     folder, ckpt = _model_folder(model)
     check_writable(out, folder=True)
     _check_overlap(folder, inputs, source, out)
@@ -711,7 +718,8 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     rows, now, held_now = [], before, held_before
     for r in range(1, settings.epochs + 1):
         confident = pseudo_labels(data.probs.astype(np.float32), settings.threshold)
-        data.labels, carried = round_labels(data.images, data.probs, confident, steps, data.held, settings.complete)
+        data.labels, carried = round_labels(data.images, data.probs, confident, steps, data.held, settings.complete,
+                                            settings.release)
         stats = _train_round(student, teacher, opt, data, settings, rng, deadline, bar, f"in round {r}")
         now, held_now = _measure(_teacher_session(teacher, size, threads), data, source_masks)
         rows.append({"round": r, **stats, **now, **carried, "seconds": round(time.monotonic() - start, 1)})

@@ -357,6 +357,16 @@ def _across_line(across: dict[str, Any]) -> str:
     return f"carried from the next frames along the road plane's homographies: {fitted} (setting `{across['setting']}`)"
 
 
+def _completion_line(settings: dict[str, Any]) -> str:
+    """The card's line on labels completed by appearance (``complete`` and ``release`` of the settings)."""
+    if not settings.get("complete"):
+        return "not completed"
+    release = settings.get("release", 0.0)
+    also = (f"; so may the confident not road within {release:g} × the frame's height of the road (`release`)"
+            if release else "")
+    return f"completed: the teacher's unsure pixels take a graph cut's side (`complete`){also}"
+
+
 def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | None) -> str:
     """The adapted model's card (Markdown)."""
     s = summary["settings"]
@@ -377,8 +387,7 @@ def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | N
         ("batch-norm statistics", f"{_markdown_text(summary['norm_stats'])}, before self-training (AdaBN; "
                                   f"setting `{s['norm_stats']}`)"),
         ("labels along time", _across_line(summary["across_time"])),
-        ("labels by appearance", "completed: the teacher's unsure pixels take a graph cut's side (`complete`)"
-         if s.get("complete") else "not completed"),
+        ("labels by appearance", _completion_line(s)),
         ("settings", f"{s['epochs']} rounds{limit}, confidence threshold {s['threshold']:g}, AdamW lr {s['lr']:g}, "
                      f"batch {s['batch_size']}, teacher EMA {s['ema']:g}, max drift {s['max_drift']:g}, "
                      f"seed {s['seed']}"),
