@@ -488,26 +488,23 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
         ema: the teacher's decay per step (0: the teacher is the student). max_drift: the most the held-out
             frames' road share (a fraction) may move before the collapse guard stops the run; whatever it is, a
             share below half or above twice the published model's stops it too.
-        seed: the frame order, hold-out and augmentation draws.
-        norm_stats: the batch-norm statistics before the first round (AdaBN, :mod:`freespace.engine.norm_stats`):
-            ``"auto"`` re-estimates them on the frames when the checkpoint holds a training run's and keeps them when
-            they are folded into the convolutions (``models/real-road-unet``'s); ``"frames"`` re-estimates them (a
-            checkpoint with folded ones is refused); ``"keep"`` keeps them.
-        across_time, complete: each round's labels carried from the next frames (``"auto"`` when the frames are a
-            sequence, ``"on"``, ``"off"``) and completed by appearance (:mod:`freespace.engine.adapt_time`).
-        release: with ``complete``, the graph cut may also relabel the teacher's confident not road within this
-            share of the frame's height of its road (the far road and the lanes beside the cars that the teacher is
-            sure of and wrong about; :func:`freespace.datagen.completion.released_seeds`), in [0, 1]; 0: none.
-        threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use).
-        progress: a progress bar on a terminal (one line per round otherwise).
+        seed: the frame order, hold-out and augmentation draws. norm_stats: the batch-norm statistics before the
+            first round (AdaBN, :mod:`freespace.engine.norm_stats`): ``"auto"`` re-estimates them on the frames when
+            the checkpoint holds a training run's and keeps them when they are folded into the convolutions
+            (``models/real-road-unet``'s); ``"frames"`` re-estimates them (folded ones refused); ``"keep"`` keeps them.
+        across_time, complete, release: each round's labels carried from the next frames (``"auto"`` when the
+            frames are a sequence, ``"on"``, ``"off"``), completed by appearance (:mod:`freespace.engine.adapt_time`),
+            and with ``release`` in (0, 1] also the confident not road within that share of the frame's height of
+            the road (:func:`freespace.datagen.completion.released_seeds`).
+        threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use);
+            ``progress``: a progress bar on a terminal (one line per round otherwise).
 
     Returns:
-        The summary written to ``out/summary.json``: frames, settings, seconds, the road share and mean
-        confidence before and after on the held-out frames (and ``after_norm_stats``, right after the batch-norm
-        statistics were re-estimated, before self-training), what was done with those statistics (``norm_stats``:
-        ``"re-estimated on N frames (K batch norms)"`` or ``"kept: …"`` and why), whether labels were carried along
-        time (``across_time``: the setting, consecutive pairs and those with a road homography), the float16
-        export's check.
+        The summary written to ``out/summary.json``: frames, settings, seconds, the held-out frames' road share and
+        mean confidence before and after (``after_norm_stats``: right after the batch-norm statistics were
+        re-estimated), what was done with those statistics (``norm_stats``: ``"re-estimated on N frames (K batch
+        norms)"`` or ``"kept: …"`` and why), whether labels were carried along time (``across_time``: the setting,
+        consecutive pairs and those with a road homography), the float16 export's check.
 
     Raises:
         InputFileError: no model folder or checkpoint; no frames or none readable. InvalidOptionError: an
