@@ -162,7 +162,7 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
                    help="complete each round's labels by appearance: the pixels the teacher is unsure of take the "
                         "side of a graph cut on the frame's colours seeded with its confident labels (default on; "
                         "--no-complete: the confident labels alone)")
-    p.add_argument("--release", type=float, default=D.release, metavar="R",
+    p.add_argument("--release", type=B["release"], default=D.release, metavar="R",
                    help="with --complete, the graph cut may also relabel what the teacher is sure is not road within "
                         "R × the frame's height of its road: the far road and the lanes beside the cars that a "
                         f"teacher stops short of (0…1, default {D.release:g}: none)")
