@@ -81,8 +81,13 @@ def test_released_labels_are_recorded_and_need_the_completion(model: Path, frame
     summary = _adapt(model, frames, tmp_path / "out", across_time="off", release=0.1)
     assert summary["settings"]["release"] == pytest.approx(0.1)
     assert "within 0.1 × the frame's height of the road (`release`)" in (tmp_path / "out" / "README.md").read_text()
+    far = _adapt(model, frames, tmp_path / "far", across_time="off", release=0.1, release_far=0.4)
+    assert far["settings"]["release_far"] == pytest.approx(0.4)
+    assert "in its top 0.4 of rows" in (tmp_path / "far" / "README.md").read_text()
     with pytest.raises(InvalidOptionError, match="release.*complete"):
         _adapt(model, frames, tmp_path / "bad", complete=False, release=0.1)
     refused(capsys, ["adapt", "--model", str(model), "--input", str(frames), "--out", str(tmp_path / "x"),
                      "--release", "2"], match="--release")
+    refused(capsys, ["adapt", "--model", str(model), "--input", str(frames), "--out", str(tmp_path / "x"),
+                     "--release", "0.1", "--release-far", "0"], match="--release-far")
     assert not (tmp_path / "bad").exists() and not (tmp_path / "x").exists()

@@ -166,6 +166,9 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
                    help="with --complete, the graph cut may also relabel what the teacher is sure is not road within "
                         "R × the frame's height of its road: the far road and the lanes beside the cars that a "
                         f"teacher stops short of (0…1, default {D.release:g}: none)")
+    p.add_argument("--release-far", type=B["release_far"], default=D.release_far, metavar="F",
+                   help=f"with --release, only in the top F share of the road's rows: the far road, not the "
+                        f"pavements beside the car (0…1, default {D.release_far:g}: every row)")
     p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=WORKERS, help="CPU threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
@@ -181,8 +184,8 @@ def cmd_adapt(args: argparse.Namespace) -> int:
               threshold=args.threshold, lr=args.lr, batch_size=args.batch_size, ema=args.ema,
               max_drift=args.max_drift, seed=args.seed, norm_stats=args.norm_stats,
               across_time=args.across_time, complete=args.complete, release=args.release,
-              progress=not args.no_progress,
-              threads=args.threads)
+              release_far=args.release_far,
+              progress=not args.no_progress, threads=args.threads)
     b, a = s["before"], s["after"]
     print(f"adapted {shown_path(s['model'])} on {s['frames']} frames ({s['skipped']} unreadable skipped) in "
           f"{s['seconds'] / 60:.1f} min, {s['rounds']} rounds; held-out road share {100 * b['road_share']:.1f} % → "

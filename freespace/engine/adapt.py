@@ -137,7 +137,8 @@ CROP_WIDTH = 0.5
 BOUNDS = {"epochs": bounded_int(1, MAX_EPOCHS), "minutes": bounded_float(0, 10_000, low_open=True),
           "threshold": bounded_float(0.5, 0.999), "lr": bounded_float(0, 1, low_open=True),
           "batch_size": bounded_int(2, MAX_ADAPT_BATCH), "ema": bounded_float(0, 0.9999),
-          "max_drift": bounded_float(0, 1, low_open=True), "release": bounded_float(0, 1)}
+          "max_drift": bounded_float(0, 1, low_open=True), "release": bounded_float(0, 1),
+          "release_far": bounded_float(0, 1, low_open=True)}
 
 
 class CollapseError(TrainingError):
@@ -161,6 +162,7 @@ class AdaptSettings:
     across_time: str = "auto"
     complete: bool = True
     release: float = 0.0
+    release_far: float = 1.0
 
     def check(self) -> AdaptSettings:
         """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``), ``norm_stats``
@@ -464,7 +466,8 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
           batch_size: int = AdaptSettings.batch_size, ema: float = AdaptSettings.ema,
           max_drift: float = AdaptSettings.max_drift, seed: int = AdaptSettings.seed,
           norm_stats: str = AdaptSettings.norm_stats, across_time: str = AdaptSettings.across_time,
-          complete: bool = AdaptSettings.complete, release: float = AdaptSettings.release, progress: bool = True,
+          complete: bool = AdaptSettings.complete, release: float = AdaptSettings.release,
+          release_far: float = AdaptSettings.release_far, progress: bool = True,
           threads: int | None = None) -> dict[str, Any]:
     """Adapt the published model in the folder ``model`` to the unlabelled frames ``inputs``; write the
     adapted model folder ``out`` (see the module's docstring for the method and what is written).
@@ -492,10 +495,10 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
             first round (AdaBN, :mod:`freespace.engine.norm_stats`): ``"auto"`` re-estimates them on the frames when
             the checkpoint holds a training run's and keeps them when they are folded into the convolutions
             (``models/real-road-unet``'s); ``"frames"`` re-estimates them (folded ones refused); ``"keep"`` keeps them.
-        across_time, complete, release: each round's labels carried from the next frames (``"auto"`` when the
-            frames are a sequence, ``"on"``, ``"off"``), completed by appearance (:mod:`freespace.engine.adapt_time`),
-            and with ``release`` in (0, 1] also the confident not road within that share of the frame's height of
-            the road (:func:`freespace.datagen.completion.released_seeds`).
+        across_time, complete, release, release_far: each round's labels carried from the next frames (``"auto"``
+            when the frames are a sequence, ``"on"``, ``"off"``), completed by appearance, and with ``release`` in
+            (0, 1] also the confident not road within that share of the frame's height of the road, in the top
+            ``release_far`` share of its rows (:func:`freespace.datagen.completion.released_seeds`).
         threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use);
             ``progress``: a progress bar on a terminal (one line per round otherwise).
 
@@ -520,7 +523,7 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
     _check_arguments(model=model, input=inputs, out=out, source=source, progress=progress)
     threads = check_threads(threads)
     settings = AdaptSettings(epochs, minutes, threshold, lr, batch_size, ema, max_drift, seed, norm_stats,
-                             across_time, complete, release).check()
+                             across_time, complete, release, release_far).check()
     folder, ckpt = _model_folder(model)
     check_writable(out, folder=True)
     _check_overlap(folder, inputs, source, out)
@@ -528,16 +531,27 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
     size = _checkpoint_size(hp, ckpt)
     kept = norm_stats_plan(net, settings.norm_stats, ckpt)
     most = _check_memory(size, settings, folder)
-    frames = read_frames(inputs, size, "input", most)
-    if len(frames.names) < MIN_FRAMES:
-        raise InvalidOptionError(f"{param('input')} {inputs}: {len(frames.names)} readable frames ({frames.skipped} "
-                                 f"unreadable); adapt needs at least {MIN_FRAMES}: give more frames of the camera")
-    src = read_frames(source, size, "source", most) if source is not None else None
+    frames, src = _read_inputs(inputs, source, size, most)
     t0 = time.monotonic()
     with claim_folder(out, "adapt") as owned, owned.staged() as stage:
         run = _self_train(net, frames, src, settings, progress, threads, ckpt, kept)
         return write_model_folder(stage, run, hp, folder, frames, src, asdict(settings), time.monotonic() - t0,
                                   Path(out))
+
+
+def _read_inputs(inputs: PathLike, source: PathLike | None, size: tuple[int, int], most: int
+                 ) -> tuple[Frames, Frames | None]:
+    """The user's frames and the source frames (or None), read at the network's ``size`` (``h, w``), at most
+    ``most`` each.
+
+    Raises:
+        InvalidOptionError: fewer than :data:`MIN_FRAMES` readable frames of the user's.
+    """
+    frames = read_frames(inputs, size, "input", most)
+    if len(frames.names) < MIN_FRAMES:
+        raise InvalidOptionError(f"{param('input')} {inputs}: {len(frames.names)} readable frames ({frames.skipped} "
+                                 f"unreadable); adapt needs at least {MIN_FRAMES}: give more frames of the camera")
+    return frames, read_frames(source, size, "source", most) if source is not None else None
 
 
 def _check_arguments(**paths: Any) -> None:
@@ -716,7 +730,7 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
     for r in range(1, settings.epochs + 1):
         confident = pseudo_labels(data.probs.astype(np.float32), settings.threshold)
         data.labels, carried = round_labels(data.images, data.probs, confident, steps, data.held, settings.complete,
-                                            settings.release)
+                                            (settings.release, settings.release_far))
         stats = _train_round(student, teacher, opt, data, settings, rng, deadline, bar, f"in round {r}")
         now, held_now = _measure(_teacher_session(teacher, size, threads), data, source_masks)
         rows.append({"round": r, **stats, **now, **carried, "seconds": round(time.monotonic() - start, 1)})

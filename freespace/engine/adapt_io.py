@@ -362,7 +362,8 @@ def _completion_line(settings: dict[str, Any]) -> str:
     if not settings.get("complete"):
         return "not completed"
     release = settings.get("release", 0.0)
-    also = (f"; so may the confident not road within {release:g} × the frame's height of the road (`release`)"
+    rows = "" if settings.get("release_far", 1.0) == 1 else f", in its top {settings['release_far']:g} of rows"
+    also = (f"; so may the confident not road within {release:g} × the frame's height of the road{rows} (`release`)"
             if release else "")
     return f"completed: the teacher's unsure pixels take a graph cut's side (`complete`){also}"
 

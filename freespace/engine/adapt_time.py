@@ -96,7 +96,8 @@ def carried_labels(images: np.ndarray, labels: np.ndarray, steps: list, held: np
 
 
 def round_labels(images: np.ndarray, probs: np.ndarray, labels: np.ndarray, steps: list | None, held: np.ndarray,
-                 complete: bool, release: float = 0.0) -> tuple[np.ndarray | None, dict[str, float]]:
+                 complete: bool,
+                 release: tuple[float, float] = (0.0, 1.0)) -> tuple[np.ndarray | None, dict[str, float]]:
     """A round's labels of adapt's frames: the teacher's confident label, carried along ``steps`` (when not None)
     and completed by appearance on the training frames (with ``complete``); None when neither applies (adapt then
     takes the confident label as it is).
@@ -106,9 +107,8 @@ def round_labels(images: np.ndarray, probs: np.ndarray, labels: np.ndarray, step
         labels: the teacher's confident labels of them (``N×h×w uint8``: 1 road, 0 not road, 255 don't care; adapt's
             ``pseudo_labels``). steps: :func:`plan_sequence`'s homographies or None.
         held: indices of the held-out frames (no label given, none completed).
-        complete: complete the labels by appearance. release: the completion may also relabel the confident not
-            road within this share of the frame's height of the teacher's road
-            (:func:`freespace.datagen.completion.released_seeds`).
+        complete: complete the labels by appearance. release: the distance and far share of the confident not road
+            the completion may also relabel (:func:`freespace.datagen.completion.released_seeds`; 0: none).
 
     Returns:
         ``N×h×w uint8`` labels (1 road, 0 not road, 255 don't care) or None, and the round's record: the carrying's
@@ -127,6 +127,7 @@ def round_labels(images: np.ndarray, probs: np.ndarray, labels: np.ndarray, step
         train = np.setdiff1d(np.arange(len(images)), held)
         before = int((labels[train] == 255).sum())
         for i in train:
-            labels[i] = complete_by_appearance(images[i], probs[i], seeds=labels[i], release=release)
+            labels[i] = complete_by_appearance(images[i], probs[i], seeds=labels[i], release=release[0],
+                                               far=release[1])
         record["completed"] = round((before - int((labels[train] == 255).sum())) / max(labels[train].size, 1), 4)
     return labels, record
