@@ -132,8 +132,8 @@ def test_the_collapse_guard_ends_in_one_line_and_writes_nothing(model: Path, fra
 
 def test_the_guard_measures_drift_from_the_start(model: Path, frames: Path, tmp_path: Path, capsys) -> None:
     """A drift limit below any change the round makes stops the run (the bound that holds real runs near the
-    published model's road share; lr 1e-3, not so high that the loss diverges first; the batch-norm statistics kept, whose re-estimation the guard checks first:
-    tests/test_adapt_norm_stats.py)."""
+    published model's road share; lr 1e-3, not so high that the loss diverges first; the batch-norm statistics
+    kept, whose re-estimation the guard checks first: tests/test_adapt_norm_stats.py)."""
     out = tmp_path / "drifted"
     assert _adapt(model, frames, out, "--max-drift", "1e-9", "--lr", "0.001", "--ema", "0", "--norm-stats", "keep") == 1
     _one_line_error(capsys, "adapt drifted in round 1", "--max-drift")
