@@ -13,6 +13,7 @@ that set it (``freespace train --image-size`` for ``image_size``, :meth:`Freespa
 from __future__ import annotations
 
 import re
+import reprlib
 from typing import Callable
 
 #: a parameter's name inside a message: NUL-delimited, as no path, argument or option value can hold a NUL
@@ -90,6 +91,14 @@ def check_seed(seed: int, name: str = "seed") -> int:
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise InvalidOptionError(f"{param(name)} must be an integer in 0…{MAX_SEED}, got {seed!r}")
     return seed
+
+
+def check_choice(value: object, choices: tuple[str, ...], name: str) -> str:
+    """``value`` if it is one of the strings ``choices``, else an :class:`InvalidOptionError` naming the parameter
+    ``name`` and listing them."""
+    if not (isinstance(value, str) and value in choices):
+        raise InvalidOptionError(f"{param(name)} must be one of {', '.join(choices)}, got {reprlib.repr(value)}")
+    return value
 
 
 class PretrainedWeightsError(FreespaceError, RuntimeError):

@@ -19,12 +19,11 @@ NumPy and OpenCV only, never torch.
 from __future__ import annotations
 
 import logging
-import reprlib
 from typing import Any
 
 import numpy as np
 
-from freespace.errors import InvalidOptionError, param
+from freespace.errors import check_choice
 
 __all__ = ["ACROSS_TIME", "MIN_SEQUENCE_SHARE", "check_across_time", "plan_sequence", "carried_labels",
            "round_labels"]
@@ -42,10 +41,7 @@ MIN_SEQUENCE_SHARE = 0.5
 def check_across_time(value: Any) -> str:
     """``value`` if it is one of :data:`ACROSS_TIME`, else :class:`~freespace.errors.InvalidOptionError` naming
     ``across_time``."""
-    if not (isinstance(value, str) and value in ACROSS_TIME):
-        raise InvalidOptionError(f"{param('across_time')} must be one of {', '.join(ACROSS_TIME)}, got "
-                                 f"{reprlib.repr(value)}")
-    return value
+    return check_choice(value, ACROSS_TIME, "across_time")
 
 
 def plan_sequence(images: np.ndarray, probs: np.ndarray, setting: str) -> tuple[list | None, dict[str, Any]]:

@@ -19,12 +19,11 @@ normalise activations a second time: such a checkpoint is detected (:func:`folde
 from __future__ import annotations
 
 import math
-import reprlib
 from typing import Any
 
 import numpy as np
 
-from freespace.errors import InvalidOptionError, param
+from freespace.errors import InvalidOptionError, check_choice, param
 
 __all__ = ["NORM_STATS", "MAX_NORM_FRAMES", "NORM_BATCH", "NORM_BATCH_PIXELS", "batch_norms", "folded_norms",
            "check_norm_stats", "norm_stats_plan", "reestimate_norm_stats"]
@@ -64,10 +63,7 @@ def folded_norms(net: Any) -> list[str]:
 def check_norm_stats(value: Any) -> str:
     """``value`` if it is one of :data:`NORM_STATS`, else :class:`~freespace.errors.InvalidOptionError` naming
     ``norm_stats``."""
-    if not (isinstance(value, str) and value in NORM_STATS):
-        raise InvalidOptionError(f"{param('norm_stats')} must be one of {', '.join(NORM_STATS)}, got "
-                                 f"{reprlib.repr(value)}")
-    return value
+    return check_choice(value, NORM_STATS, "norm_stats")
 
 
 def norm_stats_plan(net: Any, setting: str, checkpoint: Any = None) -> str | None:
