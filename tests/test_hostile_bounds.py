@@ -260,6 +260,37 @@ def test_a_signal_during_a_loader_fork_is_not_lost(tmp_path: Path) -> None:
     assert "Traceback" not in res.stderr and "Exception ignored" not in res.stderr, res.stderr
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forked loader workers")
+def test_a_loader_worker_thread_is_quiet_when_the_trainer_hangs_up() -> None:
+    """When the trainer stops half-way through taking a batch's shared memory, the worker's resource-sharer
+    thread fails on the lost connection: that stays silent (the command's one line is the report); any other
+    failure of a worker's thread is still printed."""
+    script = textwrap.dedent("""
+        import threading
+        from freespace.engine.data import loader_context
+
+        def fail(exc):
+            def run():
+                raise exc
+            return run
+
+        def work():
+            for exc in (ConnectionResetError(104, "Connection reset by peer"), EOFError(), ValueError("kept")):
+                thread = threading.Thread(target=fail(exc))
+                thread.start()
+                thread.join()
+
+        worker = loader_context().Process(target=work)
+        worker.start()
+        worker.join(30)
+        print("worker", worker.exitcode)
+    """)
+    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert res.stdout.strip() == "worker 0", res.stdout + res.stderr
+    assert res.stderr.count("Traceback") == 1 and "ValueError: kept" in res.stderr, res.stderr
+    assert "ConnectionResetError" not in res.stderr and "EOFError" not in res.stderr, res.stderr
+
+
 # ---------------------------------------------------------------------------------------------- E. weights
 @pytest.fixture(scope="module")
 def resnet18_state() -> dict:

@@ -10,6 +10,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +50,9 @@ class _LoaderProcess(multiprocessing.context.ForkProcess):
     the signal reaches the trainer just after the fork. In the worker, ``SIGTERM`` ends the process at once and
     silently (the default action: a forked worker would otherwise run the command's handler and print a
     traceback), the worker ends with its parent even on ``SIGKILL``
-    (:func:`~freespace.runtime.parallel.die_with_parent`), and then the signals are unblocked."""
+    (:func:`~freespace.runtime.parallel.die_with_parent`), and then the signals are unblocked. A thread of the
+    worker that fails because the trainer hung up (the thread that hands batches' shared memory to the trainer,
+    when the trainer stopped half-way through taking one) ends silently too (:func:`_quiet_when_trainer_gone`)."""
 
     def start(self) -> None:
         self._freespace_parent = os.getpid()
@@ -63,9 +66,18 @@ class _LoaderProcess(multiprocessing.context.ForkProcess):
         from freespace.runtime.parallel import die_with_parent
 
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        threading.excepthook = _quiet_when_trainer_gone
         die_with_parent(self._freespace_parent)
         signal.pthread_sigmask(signal.SIG_UNBLOCK, _FORK_BLOCKED)
         super().run()
+
+
+def _quiet_when_trainer_gone(args: threading.ExceptHookArgs) -> None:
+    """A loader worker's thread hook: a lost connection (the trainer stopped, on Ctrl-C or ``SIGTERM``, while it
+    took a batch's shared memory from the worker's ``multiprocessing`` resource sharer) is not reported: the
+    worker ends with the trainer, and the command's one-line message is the report. Anything else is."""
+    if not issubclass(args.exc_type, (ConnectionError, EOFError)):
+        threading.__excepthook__(args)
 
 
 class _LoaderContext(multiprocessing.context.ForkContext):
