@@ -271,5 +271,9 @@ def test_every_option_has_help_and_the_help_speaks_to_users() -> None:
     bare = [(name, a.option_strings[0]) for name, p in sub.choices.items() for a in p._actions
             if a.option_strings and not a.help and a.dest != "help"]
     assert bare == []
-    for name, command in sub.choices.items():  # argparse expands `%` in help: a bare one breaks `--help`
-        assert command.format_help().startswith("usage: "), name
+    parsers = [parser]  # argparse expands `%` in help: a bare one breaks `--help` of its command
+    while parsers:
+        command = parsers.pop()
+        assert command.format_help().startswith("usage: "), command.prog
+        parsers += [sub for a in command._actions if isinstance(a, argparse._SubParsersAction)
+                    for sub in a.choices.values()]

@@ -156,8 +156,8 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--across-time", choices=T.ACROSS_TIME, default=D.across_time,
                    help=f"carry each round's labels from the next frames along the road plane's homographies (the "
                         f"far road, the road beside the cars): 'auto' when your frames are a sequence (a video, or "
-                        f"consecutive frames in name order: at least {100 * T.MIN_SEQUENCE_SHARE:.0f} %% of the consecutive "
-                        f"pairs share a road homography), 'on', 'off' (default {D.across_time})")
+                        f"consecutive frames in name order: at least {100 * T.MIN_SEQUENCE_SHARE:.0f} %% of the "
+                        f"consecutive pairs share a road homography), 'on', 'off' (default {D.across_time})")
     p.add_argument("--complete", action=argparse.BooleanOptionalAction, default=D.complete,
                    help="complete each round's labels by appearance: the pixels the teacher is unsure of take the "
                         "side of a graph cut on the frame's colours seeded with its confident labels (default on; "
