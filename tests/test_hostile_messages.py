@@ -275,5 +275,5 @@ def test_every_option_has_help_and_the_help_speaks_to_users() -> None:
     while parsers:
         command = parsers.pop()
         assert command.format_help().startswith("usage: "), command.prog
-        parsers += [sub for a in command._actions if isinstance(a, argparse._SubParsersAction)
-                    for sub in a.choices.values()]
+        parsers += [child for a in command._actions if isinstance(a, argparse._SubParsersAction)
+                    for child in a.choices.values()]
