@@ -2,7 +2,7 @@
 model's speed against the published one's.
 
     .venv/bin/python bench/adapt.py [--model models/real-road-fast] [--frames DIR] [--out DIR]
-        [--threads 2] [--write-benchmarks]
+        [--threads 2] [--keep DIR] [--write-benchmarks]
 
 - ``--frames``: a folder of real frames (CamVid's 367 training frames, 480×360: the issue's case); they are
   repeated in order up to 400. Left out (or absent), 400 frames of 480×360 are generated (a dark road band
@@ -10,7 +10,8 @@ model's speed against the published one's.
 - Runs ``freespace.adapt`` with its defaults and ``threads`` (2: the issue's two cores; its wall time and its
   CPU time, which a busy machine does not inflate as much), then times the
   network of the published and the adapted ``model.onnx`` (ONNX Runtime, the same threads, median of 20
-  calls on a 192×640 batch of one), alternated twice.
+  calls on a batch of one at the model's size), alternated twice.
+- ``--keep``: a new folder the adapted model is kept in (to score it); by default it is thrown away.
 
 Writes ``adapt.json`` to ``--out`` (default ``bench/out/``) and, with ``--write-benchmarks``, the section
 "Adapting to a new camera (bench/adapt.py)" of BENCHMARKS.md (``--section-from adapt.json`` writes it from
@@ -57,7 +58,7 @@ def make_frames(folder: Path, source: Path | None) -> str:
 
 
 def network_ms(onnx: Path, threads: int) -> float:
-    """Median milliseconds of one 192×640 frame through ``onnx`` (ONNX Runtime, ``threads``)."""
+    """Median milliseconds of one frame at the model's size through ``onnx`` (ONNX Runtime, ``threads``)."""
     from freespace.inference.predictor import Predictor
 
     predictor = Predictor(onnx=onnx, threads=threads)
@@ -68,6 +69,7 @@ def network_ms(onnx: Path, threads: int) -> float:
 def section_body(result: dict, model: str) -> str:
     """BENCHMARKS.md's section for one ``adapt.json`` result."""
     published, adapted = result["network_ms_published"], result["network_ms_adapted"]
+    h, w = result.get("image_size", (192, 640))
     return f"""`freespace adapt --model {model}` with its defaults ({result['rounds']} rounds) on {result['frames']},
 480×360, {result['threads']} threads; {result['machine']}.
 
@@ -75,7 +77,7 @@ def section_body(result: dict, model: str) -> str:
 |---|---|
 | adapt, 400 frames, wall time | **{result['wall_seconds'] / 60:.1f} min** (target: at most 15 on two cores) |
 | its CPU time (all threads), halved: two idle cores at best | {result['cpu_seconds'] / 120:.1f} min |
-| network, published `model.onnx` (ms per 192×640 frame, two runs) | {', '.join(f'{p:.1f}' for p in published)} |
+| network, published `model.onnx` (ms per {h}×{w} frame, two runs) | {', '.join(f'{p:.1f}' for p in published)} |
 | network, adapted `model.onnx` (ms, alternated with the above) | {', '.join(f'{a:.1f}' for a in adapted)} |
 
 A load average above 2 at the start means that other jobs shared the two cores: the wall time then overstates
@@ -91,9 +93,12 @@ def main() -> None:
     parser.add_argument("--frames", type=Path, default=Path("/work/data/real_dev/camvid/train"))
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--keep", type=Path, help="a new folder to keep the adapted model in")
     parser.add_argument("--write-benchmarks", action="store_true")
     parser.add_argument("--section-from", type=Path, help="write BENCHMARKS.md's section from this adapt.json")
     args = parser.parse_args()
+    if args.keep is not None and args.keep.exists():
+        parser.error(f"--keep {args.keep} exists; give a new folder")
     if args.section_from is not None:
         write_section(SECTION, section_body(json.loads(args.section_from.read_text()), args.model.name))
         return
@@ -111,9 +116,11 @@ def main() -> None:
         wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
         pairs = [(network_ms(args.model / "model.onnx", args.threads),
                   network_ms(Path(tmp) / "adapted" / "model.onnx", args.threads)) for _ in range(2)]
+        if args.keep is not None:
+            shutil.copytree(Path(tmp) / "adapted", args.keep)
     result = {"machine": where, "frames": what, "threads": args.threads, "wall_seconds": round(wall, 1),
               "cpu_seconds": round(cpu, 1),
-              "rounds": summary["rounds"], "settings": summary["settings"],
+              "rounds": summary["rounds"], "settings": summary["settings"], "image_size": summary["image_size"],
               "network_ms_published": [round(p, 2) for p, _ in pairs],
               "network_ms_adapted": [round(a, 2) for _, a in pairs]}
     args.out.mkdir(parents=True, exist_ok=True)
