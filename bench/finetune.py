@@ -11,9 +11,9 @@ only human labels that may be trained on, for this benchmark only; no model trai
 Each run is ``freespace train --images FIRST_N --labels THEIR_LABELS --labels-like camvid`` with the defaults
 (validation: the last fifth of the N frames by name) and
 
-- ``published``: ``--init models/real-road-fast`` (its network, 192×640, weights; batch norms frozen);
+- ``published``: ``--init models/real-road-fast`` (its network at its size, weights; batch norms frozen);
 - ``imagenet``: ``--model contextnet --encoder-name efficientnet-lite0 --encoder-weights imagenet --image-size
-  192x640``: the same network, its context branch from ImageNet, the rest random;
+  HxW`` (the published model's size): the same network, its context branch from ImageNet, the rest random;
 
 then ``freespace evaluate`` of its best checkpoint on
 
@@ -43,11 +43,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, machine, write_section
 
 PUBLISHED = ROOT / "models" / "real-road-fast"
-STARTS = {
-    "published": ["--init", str(PUBLISHED)],
-    "imagenet": ["--model", "contextnet", "--encoder-name", "efficientnet-lite0", "--encoder-weights", "imagenet",
-                 "--image-size", "192x640"],
-}
+
+
+def start_options() -> dict[str, list[str]]:
+    """``freespace train``'s options of each start: the published model, and its network (at its size) from
+    ImageNet weights."""
+    from freespace.inference.predictor import load_checkpoint
+
+    h, w = load_checkpoint(PUBLISHED / "model.ckpt")[1]["image_size"]
+    return {"published": ["--init", str(PUBLISHED)],
+            "imagenet": ["--model", "contextnet", "--encoder-name", "efficientnet-lite0", "--encoder-weights",
+                         "imagenet", "--image-size", f"{h}x{w}"]}
 
 
 def _link_folder(folder: Path, images: list[Path], labels: Path) -> tuple[Path, Path]:
@@ -92,7 +98,8 @@ def run_cell(camvid: Path, out: Path, n: int, start: str, train_args: list[str])
     cell = out / f"{start}-{n}"
     cell.mkdir(parents=True, exist_ok=True)
     seconds = _run(["train", "--images", str(train_imgs), "--labels", str(train_labels), "--labels-like", "camvid",
-                    "--out", str(cell / "run"), "--no-progress", *STARTS[start], *train_args], cell / "train.log")
+                    "--out", str(cell / "run"), "--no-progress", *start_options()[start], *train_args],
+                   cell / "train.log")
     result = {"frames": n, "start": start, "train_seconds": round(seconds, 1),
               "best_epoch": json.loads((cell / "run" / "metrics.json").read_text()).get("best_epoch")}
     ckpt = cell / "run" / "checkpoints" / "best.ckpt"

@@ -234,7 +234,7 @@ def test_checkpoint_from_onnx_rebuilds_the_exported_weights(model: Path, tmp_pat
         assert np.allclose(numpy_helper.to_array(x), numpy_helper.to_array(y), rtol=1e-3, atol=1e-5), x.name
 
 
-PUBLISHED = {"real-road-fast": ("contextnet", [192, 640]), "real-road-unet": ("unet", [128, 416])}
+PUBLISHED = {"real-road-fast": ("contextnet", [288, 960]), "real-road-unet": ("unet", [128, 416])}
 
 
 @pytest.mark.parametrize("name", sorted(PUBLISHED))

@@ -275,7 +275,11 @@ def test_threads_batch_and_source_frames_are_bounded(model: Path, frames: Path, 
         assert flag in refused(capsys, _argv(model, frames, tmp_path / "out", flag, value))
     assert max(A._batch_split(b, True)[1] for b in range(2, A.MAX_ADAPT_BATCH + 1)) == A.MAX_ADAPT_BATCH // 4
     settings = A.AdaptSettings(batch_size=64)
-    assert A._check_memory((192, 640), settings, Path("m")) == A.MAX_FRAMES  # the published model: every bound met
+    assert A._check_memory((192, 640), settings, Path("m")) == A.MAX_FRAMES  # every bound met
+    # the published model (288×960): views of 288×480, at most 30 a step; every frame bound met
+    assert A._check_memory((288, 960), A.AdaptSettings(batch_size=30), Path("m")) == A.MAX_FRAMES
+    with pytest.raises(InvalidOptionError, match="at most 30 a step"):
+        A._check_memory((288, 960), settings, Path("m"))
     with pytest.raises(InvalidOptionError, match="at most 17 a step"):
         A._check_memory((384, 1248), settings, Path("m"))
     with pytest.raises(InvalidOptionError, match="runs at 4096×4096"):
