@@ -234,7 +234,8 @@ def test_checkpoint_from_onnx_rebuilds_the_exported_weights(model: Path, tmp_pat
         assert np.allclose(numpy_helper.to_array(x), numpy_helper.to_array(y), rtol=1e-3, atol=1e-5), x.name
 
 
-PUBLISHED = {"real-road-fast": ("contextnet", [288, 960]), "real-road-unet": ("unet", [128, 416])}
+PUBLISHED = {"real-road-fast": ("contextnet", [288, 960]), "real-road-unet": ("unet", [128, 416]),
+             "real-road-accurate": ("unet", [192, 640])}
 
 
 @pytest.mark.parametrize("name", sorted(PUBLISHED))

@@ -164,9 +164,30 @@ def test_a_model_folder_from_a_run_is_a_start_and_a_predictor(folder_run: dict[s
     ckpt = torch.load(folder / "model.ckpt", weights_only=True)
     assert ckpt["hyper_parameters"]["image_size"] == list(SIZE)
     assert all(v.dtype != torch.float16 for v in ckpt["state_dict"].values())  # as trained
+    refused(capsys, ["export", "--checkpoint", str(run / "checkpoints" / "best.ckpt"), "--format", "onnx", "--out",
+                     str(tmp_path / "m.onnx"), "--kernels", "float16"], match="--kernels is for --format folder")
+    assert not (tmp_path / "m.onnx").exists()
+    half = tmp_path / "half"
+    assert main(["export", "--checkpoint", str(run / "checkpoints" / "best.ckpt"), "--format", "folder", "--out",
+                 str(half), "--licence", "CC BY 4.0", "--kernels", "float16"]) == 0
+    small = torch.load(half / "model.ckpt", weights_only=True)["state_dict"]
+    kernels = {k for k, v in small.items() if v.dtype == torch.float16}
+    assert kernels and all(small[k].dim() == 4 or k.endswith("classifier.weight") for k in kernels)
+    assert all(v.dtype == ckpt["state_dict"][k].dtype for k, v in small.items() if k not in kernels)
+    assert all(torch.equal(small[k].float(), ckpt["state_dict"][k].half().float()) for k in kernels)
+    assert (half / "model.ckpt").stat().st_size < 0.75 * (folder / "model.ckpt").stat().st_size
+    assert "convolution kernels in float16" in (half / "README.md").read_text()
+    import onnx
+    from onnx import numpy_helper
+
+    from freespace.inference.export import export_model
+
+    export_model(half / "model.ckpt", "onnx", tmp_path / "again.onnx", fp16=True)  # the folder's ONNX, bit for bit
+    for a, b in zip(*(onnx.load(str(p)).graph.initializer for p in (half / "model.onnx", tmp_path / "again.onnx"))):
+        assert np.array_equal(numpy_helper.to_array(a), numpy_helper.to_array(b)), a.name
     out = tmp_path / "ft"
     assert _train(folder_run["images"], folder_run["labels"], out, "--labels-like", "camvid", "--init",
-                  str(folder)) == 0
+                  str(half)) == 0
     assert main(["predict", "--onnx", str(folder / "model.onnx"), "--input", str(folder_run["images"]), "--out",
                  str(tmp_path / "masks"), "--no-overlays"]) == 0
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from freespace.cli.shared import SEED, WORKERS
+from freespace.engine.model_folder import KERNELS
 from freespace.errors import InvalidOptionError
 from freespace.limits import MAX_BATCH_SIZE, MAX_EPOCHS, bounded_int
 
@@ -59,6 +60,9 @@ def export_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--measured", action="append", metavar="EVAL_DIR", default=[],
                    help="folder: an output folder of `freespace evaluate` with this model, whose figures go into the "
                         "card (repeat for several sets)")
+    p.add_argument("--kernels", choices=KERNELS, help="folder: model.ckpt's convolution kernels in float32 (the "
+                                                      "weights as trained; the default) or float16 (as model.onnx "
+                                                      "holds them; about half the size, for a big network)")
     p.add_argument("--int8", action="store_true", help="onnx: int8 static quantisation (QDQ, per channel), "
                                                        "calibrated on --calibration's frames")
     p.add_argument("--calibration", metavar="DIR", help="with --int8: a folder (or glob, or video) of real frames "
@@ -86,11 +90,13 @@ def cmd_export(args: argparse.Namespace) -> int:
             raise InvalidOptionError("--format folder needs --licence: the model's licence, from its training "
                                      "data's terms (a card names it)")
         print(model_folder_report(export_model_folder(args.checkpoint, args.out, licence=args.licence,
-                                                      measured=args.measured)))
+                                                      measured=args.measured, kernels=args.kernels or "float32")))
         return 0
-    if args.licence is not None or args.measured:
-        raise InvalidOptionError(f"{'--licence' if args.licence is not None else '--measured'} is for --format "
-                                 f"folder (a model folder's card)")
+    folder_only = [f for f, v in (("--licence", args.licence is not None), ("--measured", args.measured),
+                                  ("--kernels", args.kernels)) if v]
+    if folder_only:
+        raise InvalidOptionError(f"{folder_only[0]} is for --format folder (a model folder), not {args.fmt}; "
+                                 f"leave it out")
 
     if args.fp16 and args.int8:
         raise InvalidOptionError("--fp16 and --int8 exclude each other: a model is exported in float16 or in int8; "

@@ -174,14 +174,15 @@ def read_frames(spec: PathLike, size: tuple[int, int], what: str = "input",
     return Frames(np.stack(images), names, sorted(sizes), skipped, total, digest.hexdigest()[:16])
 
 
-def save_checkpoint(net: Any, hyper_parameters: dict[str, Any], path: PathLike) -> None:
+def save_checkpoint(net: Any, hyper_parameters: dict[str, Any], path: PathLike, *, half_kernels: bool = True) -> None:
     """Write ``net``'s weights as a weights-only checkpoint (``{"state_dict": {"net.<name>": tensor},
-    "hyper_parameters": ...}``, what :func:`freespace.inference.predictor.load_checkpoint` reads): the
-    convolution kernels in float16, as the published float16 ONNX holds them, the rest (biases, batch norms,
-    the input normalisation) in float32, so that an export folds them back exactly."""
+    "hyper_parameters": ...}``, what :func:`freespace.inference.predictor.load_checkpoint` reads). With
+    ``half_kernels`` (adapt's folders) the convolution kernels are float16, as the published float16 ONNX holds
+    them, and the rest (biases, batch norms, the input normalisation) float32, so that an export folds them back
+    exactly: about half the size. Without, every tensor as it is (float32 as trained)."""
     import torch
 
-    kernels = {k for k, v in net.named_parameters() if v.dim() > 1}
+    kernels = {k for k, v in net.named_parameters() if v.dim() > 1} if half_kernels else set()
     state = {f"net.{k}": (v.detach().half() if k in kernels else v.detach().clone())
              for k, v in net.state_dict().items()}
     buf = _io.BytesIO()

@@ -3,7 +3,8 @@
 A *model folder* is what ``freespace predict`` (its ``model.onnx``), ``freespace adapt`` (``model``) and
 ``freespace train`` (``init``) take: ``model.onnx`` (float16, as ``freespace export`` writes it in float16: the
 published models' speed and size), ``model.ckpt`` (the weights as trained, float32, batch-norm statistics
-included; weights only: ``torch.load(weights_only=True)``), ``README.md`` (the card: the network and its input,
+included, or with its convolution kernels in float16 for a smaller folder; weights only:
+``torch.load(weights_only=True)``), ``README.md`` (the card: the network and its input,
 the data it was trained on, its licence, what was measured) and ``metrics.json`` (the run's figures and those of
 every ``freespace evaluate`` folder given). It is written all or nothing (:mod:`freespace.io.outdir`).
 """
@@ -11,7 +12,6 @@ every ``freespace evaluate`` folder given). It is written all or nothing (:mod:`
 from __future__ import annotations
 
 import html
-import io as _io
 import json
 import tempfile
 from pathlib import Path
@@ -27,10 +27,12 @@ from freespace.io.files import (
     write_json,
 )
 
-__all__ = ["export_model_folder", "model_folder_report", "CHECKPOINT", "MAX_LICENCE_CHARS"]
+__all__ = ["export_model_folder", "model_folder_report", "CHECKPOINT", "KERNELS", "MAX_LICENCE_CHARS"]
 
 #: the checkpoint of a model folder
 CHECKPOINT = "model.ckpt"
+#: the precisions ``model.ckpt``'s convolution kernels may be written in
+KERNELS = ("float32", "float16")
 #: the longest licence text a card takes (one line)
 MAX_LICENCE_CHARS = 300
 #: what an evaluation folder's figures give the card
@@ -91,7 +93,8 @@ def _data_lines(config: dict[str, Any], metrics: dict[str, Any]) -> list[tuple[s
 
 
 def _card(name: str, checkpoint: Path, hp: dict[str, Any], export: dict[str, Any], config: dict[str, Any],
-          run_metrics: dict[str, Any], figures: dict[str, dict[str, Any]], licence: str) -> str:
+          run_metrics: dict[str, Any], figures: dict[str, dict[str, Any]], licence: str,
+          kernels: str = "float32") -> str:
     """The model folder's card (Markdown): what it is, the data and start, the licence, the figures."""
     size = hp.get("image_size")
     rows = ([_figures_row("the run's validation frames (chose its checkpoint)", run_metrics)]
@@ -101,7 +104,10 @@ def _card(name: str, checkpoint: Path, hp: dict[str, Any], export: dict[str, Any
     facts = [("network", f"{hp['model']} {_plain(json.dumps(hp.get('model_options', {})))}"),
              ("input", f"any RGB frame, resized to **{size[0]}×{size[1]}** (H×W)" if size else "its own size"),
              ("files", f"`model.onnx` float16 (largest road probability difference from the checkpoint "
-                       f"{export['fp16']['max_prob_diff']:.4f}); `{CHECKPOINT}` float32, the weights as trained"),
+                       f"{export['fp16']['max_prob_diff']:.4f}); `{CHECKPOINT}` "
+                       + ("float32, the weights as trained" if kernels == "float32" else
+                          "the weights as trained, convolution kernels in float16 (as `model.onnx` holds them), "
+                          "batch norms and biases float32")),
              *_data_lines(config, run_metrics), ("licence", _plain(licence, MAX_LICENCE_CHARS))]
     table = "\n".join(f"| {k} | {v} |" for k, v in facts)
     measured = "\n".join(rows) or "| (nothing measured: export with folders of `freespace evaluate`) | | | | |"
@@ -126,7 +132,8 @@ Pooled over each set's frames (road where p ≥ 0.5); F with its 95 % frame-leve
 
 
 def export_model_folder(checkpoint: PathLike, out: PathLike, *, licence: str,
-                        measured: list[PathLike] | tuple[PathLike, ...] = ()) -> dict[str, Any]:
+                        measured: list[PathLike] | tuple[PathLike, ...] = (),
+                        kernels: str = "float32") -> dict[str, Any]:
     """Write the model folder ``out`` (see the module docstring) from the training checkpoint ``checkpoint``
     (``RUN/checkpoints/best.ckpt``: the run folder around it gives the card its data and figures).
 
@@ -137,6 +144,10 @@ def export_model_folder(checkpoint: PathLike, out: PathLike, *, licence: str,
         licence: the licence of the model: the data's terms (e.g. "CC BY-NC-SA 3.0, from KITTI"); one line.
         measured: folders written by ``freespace evaluate`` with this model (on frames apart from its training
             frames): their figures go into the card and ``metrics.json``.
+        kernels: ``"float32"``: ``model.ckpt`` holds every weight as trained; ``"float16"``: its convolution
+            kernels in float16 (as ``model.onnx`` holds them; the batch norms, biases and statistics float32), about
+            half the size, for a big network whose folder must stay small. ``model.onnx`` is exported from the
+            checkpoint written, so the two agree bit for bit either way.
 
     Returns:
         ``{"out", "onnx": the float16 export's check, "figures": {name: metrics}}``.
@@ -145,13 +156,14 @@ def export_model_folder(checkpoint: PathLike, out: PathLike, *, licence: str,
         InvalidOptionError: an empty or too long licence, ``out`` among the inputs. InputFileError,
             CorruptFileError: a missing or damaged checkpoint or evaluation folder.
     """
-    import torch
-
+    from freespace.engine.adapt_io import save_checkpoint
     from freespace.inference.export import export_model
     from freespace.inference.predictor import load_checkpoint
     from freespace.io.codecs import load_yaml
     from freespace.io.outdir import claim_folder
 
+    if kernels not in KERNELS:
+        raise InvalidOptionError(f"{param('kernels')} is one of {', '.join(KERNELS)}, got {kernels!r}")
     licence = " ".join(str(licence or "").split())
     if not licence or len(licence) > MAX_LICENCE_CHARS:
         raise InvalidOptionError(f"{param('licence')} must state the model's licence in one line of at most "
@@ -166,19 +178,19 @@ def export_model_folder(checkpoint: PathLike, out: PathLike, *, licence: str,
     config = load_yaml(run / "config.yaml") if run else {}
     run_metrics = json.loads((run / "metrics.json").read_text()) if run else {}
     size = hp.get("image_size")
-    buf = _io.BytesIO()
-    torch.save({"state_dict": {f"net.{k}": v.detach().clone() for k, v in net.state_dict().items()},
-                "hyper_parameters": {"model": hp["model"], "model_options": hp.get("model_options", {}),
-                                     "image_size": size, "resize": hp.get("resize", "stretch")}}, buf)
     with claim_folder(out, "export") as owned, owned.staged() as stage:
-        atomic_write_bytes(stage / CHECKPOINT, buf.getvalue())
+        save_checkpoint(net, {"model": hp["model"], "model_options": hp.get("model_options", {}),
+                              "image_size": size, "resize": hp.get("resize", "stretch")}, stage / CHECKPOINT,
+                        half_kernels=kernels == "float16")
         with tempfile.TemporaryDirectory() as tmp:  # export refuses a path inside the stage's .freespace folder
             export = export_model(stage / CHECKPOINT, "onnx", Path(tmp) / "model.onnx", fp16=True)
             atomic_write_bytes(stage / "model.onnx", (Path(tmp) / "model.onnx").read_bytes())
-        card = _card(Path(out).resolve().name, checkpoint, hp, export, config, run_metrics, figures, licence)
+        card = _card(Path(out).resolve().name, checkpoint, hp, export, config, run_metrics, figures, licence,
+                     kernels)
         atomic_write_text(stage / "README.md", card)
         write_json(stage / "metrics.json", {"run": run_metrics, "measured": figures, "licence": licence,
-                                            "checkpoint": str(checkpoint.resolve()), "fp16": export["fp16"]})
+                                            "checkpoint": str(checkpoint.resolve()), "kernels": kernels,
+                                            "fp16": export["fp16"]})
     return {"out": str(out), "onnx": export["fp16"], "figures": figures}
 
 
