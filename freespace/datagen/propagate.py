@@ -62,19 +62,25 @@ __all__ = ["PropagateOptions", "Motion", "ego_motion", "compose", "source_frames
 # --- a whole dataset: an autolabel tree in, a propagated tree out ---------------------------------------------------
 
 
-def _read_tree_settings(tree: Path, dataset: StereoRoadDataset) -> dict[str, Any]:
-    """The settings of the autolabel tree ``tree``, checked to label ``dataset`` and not to be propagated already."""
-    check_label_tree(tree, dataset.name, dataset.root, dataset.split, option="propagate_from")
+#: what a tree is called once a pass has made it (the key of the pass's settings in settings.json)
+_DONE = {"propagation": "propagated", "look": "look-checked"}
+
+
+def read_tree_settings(tree: Path, dataset: StereoRoadDataset, option: str = "propagate_from",
+                       done: str = "propagation") -> dict[str, Any]:
+    """The settings of the autolabel tree ``tree`` (given as ``option``), checked to label ``dataset`` and not to
+    have been through the pass whose settings key is ``done`` already (``propagation``, or ``look``)."""
+    check_label_tree(tree, dataset.name, dataset.root, dataset.split, option=option)
     try:
         made = json.loads((tree / "settings.json").read_text())
     except (OSError, UnicodeDecodeError, ValueError):
         made = None
     if not isinstance(made, dict):
-        raise DatasetError(f"{param('propagate_from')} {tree} has no readable settings.json, so it is no tree that "
+        raise DatasetError(f"{param(option)} {tree} has no readable settings.json, so it is no tree that "
                            f"`freespace autolabel` wrote; label the dataset first (`freespace autolabel --out TREE`)")
-    if "propagation" in made:
-        raise DatasetError(f"{param('propagate_from')} {tree} is already propagated; give the single-frame tree it "
-                           f"was made from ({made.get('source_labels')})")
+    if done in made:
+        raise DatasetError(f"{param(option)} {tree} is already {_DONE[done]}; give the tree it was made from "
+                           f"({made.get('source_labels')})")
     return made
 
 
@@ -88,8 +94,8 @@ def _size(array: np.ndarray) -> str:
     return "×".join(str(n) for n in (array.shape[1], array.shape[0], *array.shape[2:]))
 
 
-def _frame_label(tree: Path, name: str, image: np.ndarray, image_path: Path
-                 ) -> tuple[RoadLabel, RoadModel, dict[str, Any], np.ndarray] | None:
+def frame_label(tree: Path, name: str, image: np.ndarray, image_path: Path, option: str = "propagate_from"
+                ) -> tuple[RoadLabel, RoadModel, dict[str, Any], np.ndarray] | None:
     """A frame's autolabel, road model, report and confidence (``uint8 H×W``; zeros when the tree has none) from
     ``tree``, or None when the tree has no label for it; ``image`` is the frame's left image (``image_path``).
 
@@ -104,11 +110,11 @@ def _frame_label(tree: Path, name: str, image: np.ndarray, image_path: Path
         report = json.loads(report_path.read_text())
         model = RoadModel.from_affine(*report["affine"])
     except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
-        raise CorruptFileError(f"the report {report_path} of {param('propagate_from')} is unreadable; label the "
+        raise CorruptFileError(f"the report {report_path} of {param(option)} is unreadable; label the "
                                f"dataset again with `freespace autolabel`") from None
     label = read_road_label(label_path)
     if label.shape != image.shape[:2]:
-        raise ShapeMismatchError(f"{param('propagate_from')} {tree}: the label {label_path} is {_size(label.road)} but "
+        raise ShapeMismatchError(f"{param(option)} {tree}: the label {label_path} is {_size(label.road)} but "
                                  f"the frame's image {image_path} is {_size(image)}; label the dataset again with "
                                  f"`freespace autolabel` (a tree's labels are the size of its images)")
     conf_path = confidence_path(tree, name)
@@ -116,11 +122,11 @@ def _frame_label(tree: Path, name: str, image: np.ndarray, image_path: Path
         return label, model, report, np.zeros(label.shape, np.uint8)
     confidence = read_image(conf_path, what="confidence")
     if confidence.ndim != 2:
-        raise CorruptFileError(f"{param('propagate_from')} {tree}: the confidence map {conf_path} is a colour image "
+        raise CorruptFileError(f"{param(option)} {tree}: the confidence map {conf_path} is a colour image "
                                f"({_size(confidence)}), not a grey one; label the dataset again with `freespace "
                                f"autolabel`")
     if confidence.shape != label.shape:
-        raise ShapeMismatchError(f"{param('propagate_from')} {tree}: the confidence map {conf_path} is "
+        raise ShapeMismatchError(f"{param(option)} {tree}: the confidence map {conf_path} is "
                                  f"{_size(confidence)} but the label {label_path} is {_size(label.road)}; label the "
                                  f"dataset again with `freespace autolabel` (or remove the confidence map)")
     return label, model, report, confidence
@@ -150,7 +156,7 @@ def _propagate_drive(dataset: StereoRoadDataset, indices: list[int], tree: Path,
     """Propagate one drive's frames (``indices``, in time order) from ``tree`` into ``staging``; the rows.
 
     Raises:
-        ShapeMismatchError: a label or confidence map of another size than its frame (:func:`_frame_label`), or two
+        ShapeMismatchError: a label or confidence map of another size than its frame (:func:`frame_label`), or two
         frames of the drive with images of other sizes.
     """
     motions, K, baseline = _drive_motions(dataset, indices, options)
@@ -167,7 +173,7 @@ def _propagate_drive(dataset: StereoRoadDataset, indices: list[int], tree: Path,
                 raise ShapeMismatchError(f"{ref.left} is {_size(image)} but {first[0][0]}, of the same drive "
                                          f"{ref.scenario}, is {_size(first[0][1])}; propagation carries labels "
                                          f"between the frames of one camera: give frames of one size")
-            cache[k] = (image, _frame_label(tree, ref.name, image, ref.left))
+            cache[k] = (image, frame_label(tree, ref.name, image, ref.left))
         return cache[k]
 
     rows = []
@@ -212,7 +218,7 @@ def propagate_dataset(dataset: StereoRoadDataset, labels: PathLike, out: PathLik
 
     options.check()
     tree, out = Path(labels), Path(out)
-    settings = _read_tree_settings(tree, dataset)
+    settings = read_tree_settings(tree, dataset)
     check_writable(out, folder=True)
     check_outputs({"out": out}, {"propagate_from": tree, "root": dataset.root})
     drives: dict[str, list[int]] = {}
