@@ -4,6 +4,9 @@
   two KITTI stereo 2015 frames: the autolabel alone, filled where it leaves don't care, and with the teacher's
   confident labels first (``--drive-teacher-first``). ``--autolabels`` holds ``<frame>.png`` KITTI-colour
   labels of ``000000_10`` and ``000001_10`` (``freespace autolabel`` on those pairs).
+- ``look``: the road-look veto (``freespace autolabel --look-from``, :mod:`freespace.datagen.road_look`) of
+  single-frame autolabels of the two KITTI stereo 2015 frames from SGBM, LiDAR (``disp_occ_0``) and both fused;
+  the classifier learns from the two frames' own autolabels (a drive gives it a hundred).
 - ``camvid``: the CamVid labellers of ``student.py`` on CamVid ``val`` (101 frames, ``valannot``) and the dusk
   frames (62 of ``train``, ``duskannot``): the ``--teacher`` models (light normalised, as ``freespace adapt``'s
   teachers), the ``--raw-teacher`` models (frames as they are, e.g. a teacher trained on the drives), and the
@@ -14,6 +17,7 @@ threshold), don't care between. Reported, pooled over each set's pixels (CamVid'
 the labelled share, the human road labelled road and labelled not road, and the precision of the road label.
 
     python studies/real-roads/labelcheck.py kitti2015 --teacher MODEL --autolabels DIR [--kitti2015 DIR]
+    python studies/real-roads/labelcheck.py look [--kitti2015 DIR]
     python studies/real-roads/labelcheck.py camvid --camvid DIR --teacher MODEL ... [--raw-teacher MODEL ...]
 """
 
@@ -85,6 +89,47 @@ def check_kitti2015(teachers: list[Path], autolabels: Path, kitti2015: Path) -> 
         for name, label in labels.items():
             sums[name] = sums.get(name, 0) + count(label, human, np.ones_like(human))
     return {name: summary(s) for name, s in sums.items()}
+
+
+def check_look(kitti2015: Path) -> dict[str, dict[str, float]]:
+    """Single-frame autolabels of the two KITTI 2015 frames under ``kitti2015`` (``image_2/``, ``image_3/``,
+    ``disp_occ_0/``, ``road_mask/``) from each disparity source, before and after the road-look veto."""
+    from freespace.data.disparity import fuse_disparities
+    from freespace.datagen.autolabel import autolabel
+    from freespace.datagen.options import LookOptions
+    from freespace.datagen.road_look import (
+        cell_examples,
+        fit_road_look,
+        look_encoder,
+        look_features,
+        road_probability,
+        veto_label,
+    )
+    from freespace.geometry import compute_disparity
+    from freespace.io.codecs import read_disparity
+
+    encoder, options, result = look_encoder(), LookOptions(), {}
+    images = [_rgb(kitti2015 / "image_2" / f"{frame}.png") for frame in KITTI2015_FRAMES]
+    humans = [cv2.imread(str(kitti2015 / "road_mask" / f"{f}.png"), cv2.IMREAD_GRAYSCALE) > 0 for f in KITTI2015_FRAMES]
+    features = [look_features(image, encoder) for image in images]
+    for source in ("sgbm", "lidar", "fused"):
+        labels = []
+        for frame, image in zip(KITTI2015_FRAMES, images):
+            sgbm = compute_disparity(image, _rgb(kitti2015 / "image_3" / f"{frame}.png"))
+            lidar = read_disparity(kitti2015 / "disp_occ_0" / f"{frame}.png")
+            disparity = {"sgbm": sgbm, "lidar": lidar, "fused": fuse_disparities(lidar, sgbm)}[source]
+            labels.append(autolabel(disparity, baseline=0.54).label)
+        examples = [cell_examples(label, options) for label in labels]
+        weights, bias = fit_road_look(np.concatenate([f[r] for f, (r, _) in zip(features, examples)]),
+                                      np.concatenate([f[n] for f, (_, n) in zip(features, examples)]))
+        sums = {"autolabel": 0, "look-checked": 0}
+        for label, f, human in zip(labels, features, humans):
+            checked, _ = veto_label(label, road_probability(f, weights, bias, label.shape), options.veto)
+            for name, x in (("autolabel", label), ("look-checked", checked)):
+                sums[name] = sums[name] + count(_kitti_colours(np.where(x.valid, x.road, 255).astype(np.uint8)),
+                                                human, np.ones_like(human))
+        result.update({f"{source} {name}": summary(s) for name, s in sums.items()})
+    return result
 
 
 #: the label sources of a teacher's probability (issue 70, item 1): one global confidence (student.py's), class-
@@ -182,6 +227,8 @@ def main() -> None:
     k.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder (model.onnx)")
     k.add_argument("--autolabels", type=Path, required=True)
     k.add_argument("--kitti2015", type=Path, default=SHARED / "kitti_stereo_2015")
+    g = sub.add_parser("look", help="the road-look veto of the KITTI 2015 frames' autolabels")
+    g.add_argument("--kitti2015", type=Path, default=SHARED / "kitti_stereo_2015")
     c = sub.add_parser("camvid", help="the CamVid labellers on val and the dusk frames")
     c.add_argument("--camvid", type=Path, required=True, help="make.sh's camvid folder")
     c.add_argument("--teacher", type=Path, action="append", default=[], help="a model folder, light normalised")
@@ -200,6 +247,8 @@ def main() -> None:
     a = ap.parse_args()
     if a.check == "kitti2015":
         result = check_kitti2015(a.teacher, a.autolabels, a.kitti2015)
+    elif a.check == "look":
+        result = check_look(a.kitti2015)
     elif a.check == "kittidev":
         sources = tuple(a.sources.split(","))
         if not set(sources) <= set(SOURCES[:3]):  # single frames: nothing to carry along time
