@@ -13,6 +13,7 @@ from freespace.datagen.road_look import (
     fit_road_look,
     look_encoder,
     look_features,
+    look_veto_frames,
     road_probability,
     veto_label,
 )
@@ -67,6 +68,14 @@ def test_the_look_vetoes_gravel_on_the_road_and_keeps_the_asphalt() -> None:
     asphalt = label.road & ~strip
     assert vetoed[strip].mean() > 0.8 and vetoed[asphalt].mean() < 0.05
     assert not (new.road & ~label.road).any() and not new.valid[vetoed].any()
+
+
+def test_a_sequence_in_memory_is_vetoed_by_its_own_look() -> None:
+    frames = [_frame(seed) for seed in range(4)]
+    vetoed, row = look_veto_frames([f[0] for f in frames], [f[1] for f in frames], LookOptions(band=(0.25, 0.5)))
+    assert row["road_examples"] > 0 and row["not_road_recall"] > 0.9
+    for (_, label, strip), new in zip(frames, vetoed):
+        assert new.road[strip].mean() < 0.2 and new.road[label.road & ~strip].mean() > 0.95
 
 
 def test_frame_sizes_that_fill_no_whole_cell_take_the_nearest_cell() -> None:

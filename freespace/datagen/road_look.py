@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -142,55 +143,69 @@ def veto_label(label: RoadLabel, probability: np.ndarray, veto: float = 0.5) -> 
     return RoadLabel(label.road & ~vetoed, label.valid & ~vetoed), vetoed
 
 
+def learn_look(frames: Iterable[tuple[np.ndarray, RoadLabel]], encoder: Any, options: LookOptions = LookOptions(),
+               count: int = 1) -> tuple[np.ndarray, float, dict[str, Any]]:
+    """Learn one sequence's road look from its ``frames`` (``count`` of them: image ``H×W×3 uint8`` RGB, label),
+    at most :attr:`LookOptions.most_examples` cells of each class (drawn with a fixed seed); returns the
+    classifier's weights and bias and its row: the examples of each class and the share of each it gets right.
+
+    Raises:
+        DatasetError: fewer than 10 cells of a class.
+    """
+    rng = np.random.default_rng(0)
+    per_frame = -(-2 * options.most_examples // max(count, 1))
+    parts: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
+    for image, label in frames:
+        features = look_features(image, encoder)
+        for mask, into in zip(cell_examples(label, options), parts):
+            cells = features[mask]
+            into.append(cells[rng.permutation(len(cells))[:per_frame]])
+    road, not_road = (np.concatenate(p)[rng.permutation(sum(map(len, p)))[: options.most_examples]] if p
+                      else np.zeros((0, 1), np.float32) for p in parts)
+    weights, bias = fit_road_look(road, not_road, options.l2)
+    scores = (np.concatenate([road, not_road]).astype(np.float64) @ weights + bias) > 0
+    truth = np.r_[np.ones(len(road), bool), np.zeros(len(not_road), bool)]
+    row = {"road_examples": len(road), "not_road_examples": len(not_road),
+           "road_recall": round(float(scores[truth].mean()), 4),
+           "not_road_recall": round(float((~scores[~truth]).mean()), 4)}
+    return weights, bias, row
+
+
+def look_veto_frames(images: list[np.ndarray], labels: list[RoadLabel], options: LookOptions = LookOptions(),
+                     encoder: Any = None) -> tuple[list[RoadLabel], dict[str, Any]]:
+    """The road-look veto of one sequence held in memory: ``labels`` (one per image of ``images``) with their
+    road of another look made don't care, and the classifier's row (:func:`learn_look`). ``encoder``: a
+    :func:`look_encoder` to reuse (default: :attr:`LookOptions.encoder`'s)."""
+    options.check()
+    encoder = encoder if encoder is not None else look_encoder(options.encoder)
+    weights, bias, row = learn_look(zip(images, labels), encoder, options, len(images))
+    vetoed = [veto_label(label, road_probability(look_features(image, encoder), weights, bias, label.shape),
+                         options.veto)[0] for image, label in zip(images, labels)]
+    return vetoed, row
+
+
 # --- a whole dataset: a label tree in, a look-checked tree out -------------------------------------------------------
 
 #: the option that names the tree in messages
 _OPTION = "look_from"
 
 
-def _drive_examples(dataset: StereoRoadDataset, indices: list[int], tree: Path, encoder: Any,
-                    options: LookOptions, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """The road and not-road example cells (``N×C``, ``M×C``) of one drive's labelled frames, at most
-    :attr:`LookOptions.most_examples` of each, drawn with ``rng``."""
-    per_frame = -(-2 * options.most_examples // max(len(indices), 1))
-    road, not_road = [], []
-    for i in indices:
-        ref = dataset.frames[i]
-        image = dataset.load(i, right=False, label=False, disparity=False).left
-        own = frame_label(tree, ref.name, image, ref.left, option=_OPTION)
-        if own is None:
-            continue
-        features = look_features(image, encoder)
-        for mask, into in zip(cell_examples(own[0], options), (road, not_road)):
-            cells = features[mask]
-            into.append(cells[rng.permutation(len(cells))[:per_frame]])
-
-    def capped(parts: list[np.ndarray]) -> np.ndarray:
-        cells = np.concatenate(parts) if parts else np.zeros((0, 1), np.float32)
-        return cells[rng.permutation(len(cells))[: options.most_examples]]
-
-    return capped(road), capped(not_road)
-
-
 def _check_drive(dataset: StereoRoadDataset, indices: list[int], tree: Path, staging: Path, encoder: Any,
                  options: LookOptions) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Learn one drive's road look from ``tree`` and write its vetoed labels into ``staging``; the frames' rows
     and the drive's classifier row."""
-    road, not_road = _drive_examples(dataset, indices, tree, encoder, options, np.random.default_rng(0))
-    weights, bias = fit_road_look(road, not_road, options.l2)
-    scores = (np.concatenate([road, not_road]).astype(np.float64) @ weights + bias) > 0
-    truth = np.r_[np.ones(len(road), bool), np.zeros(len(not_road), bool)]
-    drive = {"road_examples": len(road), "not_road_examples": len(not_road),
-             "road_recall": round(float(scores[truth].mean()), 4),
-             "not_road_recall": round(float((~scores[~truth]).mean()), 4)}
+
+    def frames() -> Iterator[tuple[Any, np.ndarray, tuple[RoadLabel, Any, dict[str, Any], np.ndarray]]]:
+        for i in indices:
+            ref = dataset.frames[i]
+            image = dataset.load(i, right=False, label=False, disparity=False).left
+            own = frame_label(tree, ref.name, image, ref.left, option=_OPTION)
+            if own is not None:
+                yield ref, image, own
+
+    weights, bias, drive = learn_look(((image, own[0]) for _, image, own in frames()), encoder, options, len(indices))
     rows = []
-    for i in indices:
-        ref = dataset.frames[i]
-        image = dataset.load(i, right=False, label=False, disparity=False).left
-        own = frame_label(tree, ref.name, image, ref.left, option=_OPTION)
-        if own is None:
-            continue
-        label, _, report, confidence = own
+    for ref, image, (label, _, report, confidence) in frames():
         probability = road_probability(look_features(image, encoder), weights, bias, label.shape)
         new, vetoed = veto_label(label, probability, options.veto)
         row = {"frame": ref.name, "road_before": round(float(label.road.mean()), 4),

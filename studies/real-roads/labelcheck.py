@@ -168,11 +168,13 @@ def labels_of(source: str, images: list[np.ndarray], probs: list[np.ndarray],
 
 def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
                  sources: tuple[str, ...] = ("confident",),
-                 release: tuple[float, float] = (0.0, 1.0)) -> dict[str, dict[str, float]]:
+                 release: tuple[float, float] = (0.0, 1.0),
+                 look: tuple[float, float] | None = None) -> dict[str, dict[str, float]]:
     """The CamVid labels of ``teachers`` (light normalised), ``raw_teachers`` (as they are) and the mean of all
     models, on ``val`` and the dusk frames under ``camvid`` (``make.sh``'s layout; each set one sequence in time
     order: ``val`` 15 frames a second, dusk one), each made by every label ``sources`` (:data:`SOURCES`; other than
-    ``confident``, named ``name / source``; ``release``: :func:`labels_of`'s)."""
+    ``confident``, named ``name / source``; ``release``: :func:`labels_of`'s; ``look``: each also after the
+    road-look veto with the lane ahead in that band of columns, named ``... + look``)."""
     normalised, raw = student._sessions(teachers), student._sessions(raw_teachers)
     sums: dict[str, np.ndarray] = {}
     for part, folder, masks in (("val", "val", "valannot"), ("dusk", "train", "duskannot")):
@@ -190,9 +192,27 @@ def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
         for name, probs in named.items():
             for source in sources:
                 key = f"{part}, {name}" + ("" if source == "confident" else f" / {source}")
-                for label, human in zip(labels_of(source, images, probs, release), classes):
-                    sums[key] = sums.get(key, 0) + count(label, human == CAMVID_ROAD, human != CAMVID_VOID)
+                made = {key: labels_of(source, images, probs, release)}
+                if look is not None:
+                    made[f"{key} + look"] = looked(images, made[key], look)
+                for k, labels in made.items():
+                    for label, human in zip(labels, classes):
+                        sums[k] = sums.get(k, 0) + count(label, human == CAMVID_ROAD, human != CAMVID_VOID)
     return {name: summary(s) for name, s in sums.items()}
+
+
+def looked(images: list[np.ndarray], labels: list[np.ndarray], band: tuple[float, float]) -> list[np.ndarray]:
+    """KITTI-colour ``labels`` (BGR) of one sequence's ``images`` after the road-look veto
+    (:func:`freespace.datagen.road_look.look_veto_frames`, the lane ahead in ``band``): its road of another look
+    made don't care."""
+    from freespace.datagen.options import LookOptions
+    from freespace.datagen.road_look import look_veto_frames
+    from freespace.labels import RoadLabel
+
+    road = [(label == student.ROAD_BGR).all(2) for label in labels]
+    valid = [r | (label == student.NON_ROAD_BGR).all(2) for r, label in zip(road, labels)]
+    vetoed, _ = look_veto_frames(images, [RoadLabel(r, v) for r, v in zip(road, valid)], LookOptions(band=band))
+    return [_kitti_colours(np.where(x.valid, x.road, 255).astype(np.uint8)) for x in vetoed]
 
 
 def check_kitti_dev(teachers: list[Path], kitti_dev: Path, sources: tuple[str, ...] = ("confident",),
@@ -234,6 +254,9 @@ def main() -> None:
     c.add_argument("--teacher", type=Path, action="append", default=[], help="a model folder, light normalised")
     c.add_argument("--raw-teacher", type=Path, action="append", default=[], help="a model folder, frames as they are")
     c.add_argument("--sources", default="confident", help=f"label sources, comma-separated: {', '.join(SOURCES)}")
+    c.add_argument("--look", type=lambda t: tuple(float(x) for x in t.split(",")), metavar="LO,HI",
+                   help="also each source after the road-look veto, the lane ahead in columns LO–HI (fractions of "
+                        "the width; CamVid drives on the left: 0.45,0.70)")
     d = sub.add_parser("kittidev", help="a teacher's labels on the 22 KITTI frames of other streets")
     d.add_argument("--kitti-dev", type=Path, required=True, help="make.sh's kitti_dev folder")
     d.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder, frames as they are")
@@ -260,7 +283,7 @@ def main() -> None:
         sources = tuple(a.sources.split(","))
         if not set(sources) <= set(SOURCES):
             ap.error(f"--sources takes {', '.join(SOURCES)}")
-        result = check_camvid(a.teacher, a.raw_teacher, a.camvid, sources, (a.release, a.release_far))
+        result = check_camvid(a.teacher, a.raw_teacher, a.camvid, sources, (a.release, a.release_far), a.look)
     print(json.dumps(result, indent=1))
 
 

@@ -127,13 +127,16 @@ def fill_drives(out: Path, names: list[str], sessions: list[tuple[object, tuple[
 
 def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int]]], threshold: float = THRESHOLD,
                   complete: bool = False, carry: bool = False,
-                  release: tuple[float, float] = (0.0, 1.0)) -> tuple[list[np.ndarray], dict[str, object] | None]:
+                  release: tuple[float, float] = (0.0, 1.0), look: tuple[float, float] | None = None
+                  ) -> tuple[list[np.ndarray], dict[str, object] | None]:
     """The teachers' class maps (``uint8 H×W``: 1 road, 0 not road, 255 don't care) of the frames at ``paths``:
     the confident label, carried along time with ``carry`` (frames grouped into sequences by the name before its
     last ``_``, CamVid's ``0016E5_07959``, in name order; :func:`freespace.datagen.temporal.carry_along` with
     labelcheck's settings), then completed by appearance with ``complete`` (``release``: the distance and far
     share of :func:`freespace.datagen.completion.released_seeds`, the confident not road near the road the graph cut
-    may relabel). Also the carrying's record per sequence (``None`` without ``carry``)."""
+    may relabel), then with ``look`` the road of another look made don't care (each sequence's road look learnt from
+    its own labels, the lane ahead in that band of columns: :func:`freespace.datagen.road_look.look_veto_frames`).
+    Also the carrying's record per sequence (``None`` without ``carry``)."""
     from freespace.datagen.completion import complete_by_appearance, confident_label
     from freespace.datagen.temporal import CarryOptions, carry_along
 
@@ -141,11 +144,11 @@ def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int
     probs = [teacher_probability(image, sessions) for image in images]
     classes = [confident_label(prob, threshold) for prob in probs]
     record: dict[str, object] | None = None
+    groups: dict[str, list[int]] = {}
+    for i, path in enumerate(paths):
+        groups.setdefault(path.stem.rpartition("_")[0], []).append(i)
     if carry:
         record = {}
-        groups: dict[str, list[int]] = {}
-        for i, path in enumerate(paths):
-            groups.setdefault(path.stem.rpartition("_")[0], []).append(i)
         for key, idx in groups.items():
             carried, record[key] = carry_along([images[i] for i in idx], [classes[i] for i in idx],
                                                [probs[i] >= 0.5 for i in idx], CarryOptions())
@@ -154,7 +157,23 @@ def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int
     if complete:
         classes = [complete_by_appearance(im, prob, threshold, seeds=c, release=release[0], far=release[1])
                    for im, prob, c in zip(images, probs, classes)]
+    if look is not None:
+        for idx in groups.values():
+            for i, c in zip(idx, _looked([images[i] for i in idx], [classes[i] for i in idx], look)):
+                classes[i] = c
     return classes, record
+
+
+def _looked(images: list[np.ndarray], classes: list[np.ndarray], band: tuple[float, float]) -> list[np.ndarray]:
+    """Class maps (1 road, 0 not road, 255 don't care) of one sequence after the road-look veto, the lane ahead in
+    ``band``."""
+    from freespace.datagen.options import LookOptions
+    from freespace.datagen.road_look import look_veto_frames
+    from freespace.labels import RoadLabel
+
+    labels = [RoadLabel(c == 1, c != 255) for c in classes]
+    vetoed, _ = look_veto_frames(images, labels, LookOptions(band=band))
+    return [np.where(x.valid, x.road, 255).astype(np.uint8) for x in vetoed]
 
 
 def labels_sha256(label: Path) -> str:
@@ -171,7 +190,8 @@ def labels_sha256(label: Path) -> str:
 def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
           prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
           drive_teachers: list[Path] | None = None, drive_teacher_first: bool = False,
-          complete: bool = False, carry: bool = False, release: tuple[float, float] = (0.0, 1.0)) -> dict[str, object]:
+          complete: bool = False, carry: bool = False, release: tuple[float, float] = (0.0, 1.0),
+          look: tuple[float, float] | None = None) -> dict[str, object]:
     """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
     (a new folder); return the report. ``drive_copies``: each training frame of the drives is listed this many
     times (``<name>-c1``, ...: each copy draws its own augmentation), to weigh the drives against the other
@@ -181,7 +201,9 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
     appearance (:func:`freespace.datagen.completion.complete_by_appearance`: a graph cut on the frame's colours
     labels the pixels the teacher is unsure of; issue 70, item 1; ``release``: also the confident not road near
     the road, :func:`frame_classes`). ``carry``: the confident labels are first carried
-    along time within each sequence (:func:`frame_classes`)."""
+    along time within each sequence (:func:`frame_classes`). ``look``: the teachers' road of another look made
+    don't care last (:func:`frame_classes`; the drives' labels are look-checked by ``freespace autolabel
+    --look-from`` before they come here)."""
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
     lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}
@@ -190,7 +212,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
                          drive_teacher_first) if drive_teachers else None
     confident, road = [], []
     paths = sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png")
-    classes, carried = frame_classes(paths, _sessions(teachers), threshold, complete, carry, release)
+    classes, carried = frame_classes(paths, _sessions(teachers), threshold, complete, carry, release, look)
     for path, frame in zip(paths, classes):
         label = np.zeros((*frame.shape, 3), np.uint8)
         label[frame == 1], label[frame == 0] = ROAD_BGR, NON_ROAD_BGR
@@ -209,6 +231,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
               "drive_copies": drive_copies, "drive_teachers": [str(t) for t in drive_teachers or []],
               "drives_filled": filled, "completed_by_appearance": complete,
               "released": list(release) if complete else None, "carried_along_time": carried,
+              "look_band": list(look) if look else None,
               "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road)),
               "labels_sha256": labels_sha256(out / "label")}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
@@ -236,6 +259,9 @@ def main() -> None:
                          "height of the teacher's road (0: none)")
     ap.add_argument("--release-far", type=float, default=1.0, metavar="F",
                     help="... only in the top F share of the road's rows (1: all)")
+    ap.add_argument("--look", type=lambda t: tuple(float(x) for x in t.split(",")), metavar="LO,HI",
+                    help="the teachers' road of another look made don't care, each sequence's road look learnt from "
+                         "its labels with the lane ahead in columns LO–HI (CamVid drives on the left: 0.45,0.70)")
     a = ap.parse_args()
     if a.release and not a.complete:
         ap.error("--release needs --complete")
@@ -243,7 +269,7 @@ def main() -> None:
         ap.error("--drive-teacher-first needs --drive-teacher MODEL")
     print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold,
                            a.drive_copies, a.drive_teacher, a.drive_teacher_first, a.complete, a.carry,
-                           (a.release, a.release_far))))
+                           (a.release, a.release_far), a.look)))
 
 
 if __name__ == "__main__":
