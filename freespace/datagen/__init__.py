@@ -7,6 +7,6 @@ is called).
   same over files and datasets (``freespace autolabel``);
 * :mod:`freespace.datagen.runner`: the resumable, sharded per-frame dataset runner both commands use, and
   :mod:`freespace.datagen.inputs`: the dataset settings and checks they share;
-* :mod:`freespace.datagen.propagate` and :mod:`freespace.datagen.road_look`: the passes over a label tree that
-  ``autolabel --propagate-from`` and ``--look-from`` run (the road later frames saw; the road of another look vetoed).
+* :mod:`freespace.datagen.propagate` and :mod:`freespace.datagen.road_look`: `freespace autolabel`'s passes over a
+  label tree (the road later frames saw carried back; the road of another look vetoed).
 """
