@@ -79,8 +79,9 @@ def read_tree_settings(tree: Path, dataset: StereoRoadDataset, option: str = "pr
         raise DatasetError(f"{param(option)} {tree} has no readable settings.json, so it is no tree that "
                            f"`freespace autolabel` wrote; label the dataset first (`freespace autolabel --out TREE`)")
     if done in made:
+        source = made.get("look_source_labels" if done == "look" else "source_labels")
         raise DatasetError(f"{param(option)} {tree} is already {_DONE[done]}; give the tree it was made from "
-                           f"({made.get('source_labels')})")
+                           f"({source})")
     return made
 
 
