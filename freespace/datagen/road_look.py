@@ -193,7 +193,8 @@ _OPTION = "look_from"
 def _check_drive(dataset: StereoRoadDataset, indices: list[int], tree: Path, staging: Path, encoder: Any,
                  options: LookOptions) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Learn one drive's road look from ``tree`` and write its vetoed labels into ``staging``; the frames' rows
-    and the drive's classifier row."""
+    and the drive's classifier row. The frames are read and encoded twice (to learn, then to veto) rather than
+    held: a drive's features would take hundreds of megabytes."""
 
     def frames() -> Iterator[tuple[Any, np.ndarray, tuple[RoadLabel, Any, dict[str, Any], np.ndarray]]]:
         for i in indices:

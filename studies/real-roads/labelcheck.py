@@ -96,22 +96,13 @@ def check_look(kitti2015: Path) -> dict[str, dict[str, float]]:
     ``disp_occ_0/``, ``road_mask/``) from each disparity source, before and after the road-look veto."""
     from freespace.data.disparity import fuse_disparities
     from freespace.datagen.autolabel import autolabel
-    from freespace.datagen.options import LookOptions
-    from freespace.datagen.road_look import (
-        cell_examples,
-        fit_road_look,
-        look_encoder,
-        look_features,
-        road_probability,
-        veto_label,
-    )
+    from freespace.datagen.road_look import look_encoder, look_veto_frames
     from freespace.geometry import compute_disparity
     from freespace.io.codecs import read_disparity
 
-    encoder, options, result = look_encoder(), LookOptions(), {}
+    encoder, result = look_encoder(), {}
     images = [_rgb(kitti2015 / "image_2" / f"{frame}.png") for frame in KITTI2015_FRAMES]
     humans = [cv2.imread(str(kitti2015 / "road_mask" / f"{f}.png"), cv2.IMREAD_GRAYSCALE) > 0 for f in KITTI2015_FRAMES]
-    features = [look_features(image, encoder) for image in images]
     for source in ("sgbm", "lidar", "fused"):
         labels = []
         for frame, image in zip(KITTI2015_FRAMES, images):
@@ -119,13 +110,10 @@ def check_look(kitti2015: Path) -> dict[str, dict[str, float]]:
             lidar = read_disparity(kitti2015 / "disp_occ_0" / f"{frame}.png")
             disparity = {"sgbm": sgbm, "lidar": lidar, "fused": fuse_disparities(lidar, sgbm)}[source]
             labels.append(autolabel(disparity, baseline=0.54).label)
-        examples = [cell_examples(label, options) for label in labels]
-        weights, bias = fit_road_look(np.concatenate([f[r] for f, (r, _) in zip(features, examples)]),
-                                      np.concatenate([f[n] for f, (_, n) in zip(features, examples)]))
+        checked, _ = look_veto_frames(images, labels, encoder=encoder)
         sums = {"autolabel": 0, "look-checked": 0}
-        for label, f, human in zip(labels, features, humans):
-            checked, _ = veto_label(label, road_probability(f, weights, bias, label.shape), options.veto)
-            for name, x in (("autolabel", label), ("look-checked", checked)):
+        for before, after, human in zip(labels, checked, humans):
+            for name, x in (("autolabel", before), ("look-checked", after)):
                 sums[name] = sums[name] + count(_kitti_colours(np.where(x.valid, x.road, 255).astype(np.uint8)),
                                                 human, np.ones_like(human))
         result.update({f"{source} {name}": summary(s) for name, s in sums.items()})
@@ -202,17 +190,11 @@ def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
 
 
 def looked(images: list[np.ndarray], labels: list[np.ndarray], band: tuple[float, float]) -> list[np.ndarray]:
-    """KITTI-colour ``labels`` (BGR) of one sequence's ``images`` after the road-look veto
-    (:func:`freespace.datagen.road_look.look_veto_frames`, the lane ahead in ``band``): its road of another look
-    made don't care."""
-    from freespace.datagen.options import LookOptions
-    from freespace.datagen.road_look import look_veto_frames
-    from freespace.labels import RoadLabel
-
-    road = [(label == student.ROAD_BGR).all(2) for label in labels]
-    valid = [r | (label == student.NON_ROAD_BGR).all(2) for r, label in zip(road, labels)]
-    vetoed, _ = look_veto_frames(images, [RoadLabel(r, v) for r, v in zip(road, valid)], LookOptions(band=band))
-    return [_kitti_colours(np.where(x.valid, x.road, 255).astype(np.uint8)) for x in vetoed]
+    """KITTI-colour ``labels`` (BGR) of one sequence's ``images`` after the road-look veto (``student.py --look``,
+    the lane ahead in ``band``): its road of another look made don't care."""
+    classes = [np.where((label == student.ROAD_BGR).all(2), 1, np.where((label == student.NON_ROAD_BGR).all(2), 0, 255))
+               .astype(np.uint8) for label in labels]
+    return [_kitti_colours(c) for c in student.looked(images, classes, band)]
 
 
 def check_kitti_dev(teachers: list[Path], kitti_dev: Path, sources: tuple[str, ...] = ("confident",),
@@ -254,7 +236,7 @@ def main() -> None:
     c.add_argument("--teacher", type=Path, action="append", default=[], help="a model folder, light normalised")
     c.add_argument("--raw-teacher", type=Path, action="append", default=[], help="a model folder, frames as they are")
     c.add_argument("--sources", default="confident", help=f"label sources, comma-separated: {', '.join(SOURCES)}")
-    c.add_argument("--look", type=lambda t: tuple(float(x) for x in t.split(",")), metavar="LO,HI",
+    c.add_argument("--look", type=student.parse_band, metavar="LO,HI",
                    help="also each source after the road-look veto, the lane ahead in columns LO–HI (fractions of "
                         "the width; CamVid drives on the left: 0.45,0.70)")
     d = sub.add_parser("kittidev", help="a teacher's labels on the 22 KITTI frames of other streets")

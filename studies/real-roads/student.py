@@ -159,12 +159,12 @@ def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int
                    for im, prob, c in zip(images, probs, classes)]
     if look is not None:
         for idx in groups.values():
-            for i, c in zip(idx, _looked([images[i] for i in idx], [classes[i] for i in idx], look)):
+            for i, c in zip(idx, looked([images[i] for i in idx], [classes[i] for i in idx], look)):
                 classes[i] = c
     return classes, record
 
 
-def _looked(images: list[np.ndarray], classes: list[np.ndarray], band: tuple[float, float]) -> list[np.ndarray]:
+def looked(images: list[np.ndarray], classes: list[np.ndarray], band: tuple[float, float]) -> list[np.ndarray]:
     """Class maps (1 road, 0 not road, 255 don't care) of one sequence after the road-look veto, the lane ahead in
     ``band``."""
     from freespace.datagen.options import LookOptions
@@ -174,6 +174,15 @@ def _looked(images: list[np.ndarray], classes: list[np.ndarray], band: tuple[flo
     labels = [RoadLabel(c == 1, c != 255) for c in classes]
     vetoed, _ = look_veto_frames(images, labels, LookOptions(band=band))
     return [np.where(x.valid, x.road, 255).astype(np.uint8) for x in vetoed]
+
+
+def parse_band(text: str) -> tuple[float, float]:
+    """``"LO,HI"`` → ``(LO, HI)``: the columns of the lane ahead, fractions of the width (argparse type)."""
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be LO,HI (two fractions of the width), got {text!r}") from None
+    return lo, hi
 
 
 def labels_sha256(label: Path) -> str:
@@ -259,7 +268,7 @@ def main() -> None:
                          "height of the teacher's road (0: none)")
     ap.add_argument("--release-far", type=float, default=1.0, metavar="F",
                     help="... only in the top F share of the road's rows (1: all)")
-    ap.add_argument("--look", type=lambda t: tuple(float(x) for x in t.split(",")), metavar="LO,HI",
+    ap.add_argument("--look", type=parse_band, metavar="LO,HI",
                     help="the teachers' road of another look made don't care, each sequence's road look learnt from "
                          "its labels with the lane ahead in columns LO–HI (CamVid drives on the left: 0.45,0.70)")
     a = ap.parse_args()
