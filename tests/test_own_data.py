@@ -161,6 +161,7 @@ def test_a_model_folder_from_a_run_is_a_start_and_a_predictor(folder_run: dict[s
     assert {p.name for p in folder.iterdir()} >= {"model.onnx", "model.ckpt", "README.md", "metrics.json"}
     card = (folder / "README.md").read_text()
     assert "CC BY 4.0 &lt;b&gt;\\|test\\|&lt;/b&gt;" in card and "camvid labels" in card and "| `eval` " in card
+    assert '{"preset": ' in card and "&quot;" not in card  # the network's options read as written
     ckpt = torch.load(folder / "model.ckpt", weights_only=True)
     assert ckpt["hyper_parameters"]["image_size"] == list(SIZE)
     assert all(v.dtype != torch.float16 for v in ckpt["state_dict"].values())  # as trained

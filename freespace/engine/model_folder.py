@@ -40,9 +40,10 @@ _FIGURES = ("precision", "recall", "f_score", "iou")
 
 
 def _plain(text: Any, most: int = 200) -> str:
-    """``text`` as one line of a Markdown card: bounded, HTML escaped, table pipes and backticks neutralised."""
+    """``text`` as one line of a Markdown card: bounded, tags escaped (quotes kept readable: outside a tag they
+    open nothing), table pipes and backticks neutralised."""
     line = " ".join(str(text).split())[:most]
-    return html.escape(line).replace("|", "\\|").replace("`", "'")
+    return html.escape(line, quote=False).replace("|", "\\|").replace("`", "'")
 
 
 def _read_json(path: Path, what: str) -> dict[str, Any]:
