@@ -1,5 +1,6 @@
-"""``freespace adapt --across-time`` (issue 70, item 1): each round's labels carried from the next frames when the
-frames are a sequence; recorded in the summary, the rounds and the card; ``off`` and bad values. The carrying itself
+"""``freespace adapt``'s labels (issue 70, item 1): ``--across-time``, each round's labels carried from the next frames
+when the frames are a sequence; completed by appearance (``--release``); checked by their look (``--look``); each
+recorded in the summary, the rounds and the card; bad values. The carrying itself
 is tested on generated sequences in ``test_temporal.py``; here a tiny model (32×96: too small for road features,
 so ``auto`` finds no sequence) runs the whole command."""
 
@@ -91,3 +92,42 @@ def test_released_labels_are_recorded_and_need_the_completion(model: Path, frame
     refused(capsys, ["adapt", "--model", str(model), "--input", str(frames), "--out", str(tmp_path / "x"),
                      "--release", "0.1", "--release-far", "0"], match="--release-far")
     assert not (tmp_path / "bad").exists() and not (tmp_path / "x").exists()
+
+
+def test_the_look_check_vetoes_road_of_another_look_on_the_training_frames_only() -> None:
+    from freespace.engine.adapt import IGNORE, _Data, _look_check
+
+    labels = np.zeros((3, 4, 6), np.uint8)
+    labels[:, 2:] = 1
+    looks = np.ones((3, 4, 6), bool)
+    looks[:, 2:, 4:] = False  # a strip of the road that does not look like it
+    data = _Data(np.zeros((3, 4, 6, 3), np.uint8), np.zeros(0), train=np.array([0, 1]), held=np.array([2]))
+    record: dict = {}
+    kept = _look_check(data, labels, (looks, {}), (0.3, 0.55), record)
+    assert kept[0] is looks and data.labels is labels
+    assert (labels[:2, 2:, 4:] == IGNORE).all() and (labels[:2, 2:, :4] == 1).all() and (labels[:2, :2] == 0).all()
+    assert (labels[2, 2:] == 1).all()  # the held-out frame is not a training label
+    assert record["vetoed"] == pytest.approx(8 / 48, abs=1e-4)
+
+
+def test_the_look_check_is_recorded(model: Path, frames: Path, tmp_path: Path) -> None:
+    summary = _adapt(model, frames, tmp_path / "out", across_time="off", look=(0.3, 0.55))
+    assert list(summary["settings"]["look"]) == [0.3, 0.55]
+    assert summary["look"]["road_examples"] >= 10 and 0 <= summary["look"]["road_recall"] <= 1
+    card = (tmp_path / "out" / "README.md").read_text()
+    assert "road that does not look like the lane ahead (columns 0.3–0.55 of the width)" in card
+    with open(tmp_path / "out" / "rounds.csv") as f:
+        assert 0 <= float(next(csv.DictReader(f))["vetoed"]) <= 1
+    plain = _adapt(model, frames, tmp_path / "plain", across_time="off")
+    assert plain["settings"]["look"] is None and "look" not in plain
+    assert "| labels by look | not checked |" in (tmp_path / "plain" / "README.md").read_text()
+
+
+@pytest.mark.parametrize("bad", ["0.6,0.5", "x", "0.1,1.5", "0.1"])
+def test_a_bad_look_band_is_one_line(bad: str, model: Path, frames: Path, tmp_path: Path,
+                                     capsys: pytest.CaptureFixture) -> None:
+    refused(capsys, ["adapt", "--model", str(model), "--input", str(frames), "--out", str(tmp_path / "x"),
+                     "--look", bad], match="--look")
+    with pytest.raises(InvalidOptionError, match="look"):
+        _adapt(model, frames, tmp_path / "y", look=(0.5,))
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()

@@ -14,6 +14,7 @@ from freespace.datagen.road_look import (
     look_encoder,
     look_features,
     look_veto_frames,
+    looks_like_road,
     road_probability,
     veto_label,
 )
@@ -76,6 +77,17 @@ def test_a_sequence_in_memory_is_vetoed_by_its_own_look() -> None:
     assert row["road_examples"] > 0 and row["not_road_recall"] > 0.9
     for (_, label, strip), new in zip(frames, vetoed):
         assert new.road[strip].mean() < 0.2 and new.road[label.road & ~strip].mean() > 0.95
+
+
+def test_adapts_look_is_learnt_from_the_training_frames_and_judges_every_frame() -> None:
+    frames = [_frame(seed) for seed in range(5)]
+    images = np.stack([image for image, _, _ in frames])
+    labels = np.stack([np.where(label.road, 1, 0).astype(np.uint8) for _, label, _ in frames])
+    labels[0, :8] = 255  # don't care teaches nothing
+    looks, row = looks_like_road(images, labels, np.arange(4), LookOptions(band=(0.25, 0.5)))
+    assert looks.shape == labels.shape and looks.dtype == bool and row["road_examples"] > 0
+    _, label, strip = frames[4]  # a frame it did not learn from
+    assert looks[4][strip].mean() < 0.2 and looks[4][label.road & ~strip].mean() > 0.95
 
 
 def test_frame_sizes_that_fill_no_whole_cell_take_the_nearest_cell() -> None:

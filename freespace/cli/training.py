@@ -169,10 +169,26 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--release-far", type=B["release_far"], default=D.release_far, metavar="F",
                    help=f"with --release, only in the top F share of the road's rows: the far road, not the "
                         f"pavements beside the car (0…1, default {D.release_far:g}: every row)")
+    p.add_argument("--look", type=_band, metavar="LO,HI",
+                   help="check each round's labels by their look: the road's look is learnt from the road in the "
+                        "columns LO…HI of the width (the lane ahead: 0.30,0.55 where cars drive on the right, "
+                        "0.45,0.70 on the left) against the not road, and road that does not look like it is not "
+                        "trained on (pavements and verges the teacher takes; needs the ImageNet Lite0 weights; "
+                        "default: no check)")
     p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=WORKERS, help="CPU threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
     p.set_defaults(func=cmd_adapt)
+
+
+def _band(text: str) -> tuple[float, float]:
+    """``"LO,HI"`` → ``(LO, HI)``, two numbers (their bounds are adapt's to check)."""
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be LO,HI, two fractions of the width (e.g. 0.30,0.55), got "
+                                         f"{text!r}") from None
+    return lo, hi
 
 
 def cmd_adapt(args: argparse.Namespace) -> int:
@@ -184,7 +200,7 @@ def cmd_adapt(args: argparse.Namespace) -> int:
               threshold=args.threshold, lr=args.lr, batch_size=args.batch_size, ema=args.ema,
               max_drift=args.max_drift, seed=args.seed, norm_stats=args.norm_stats,
               across_time=args.across_time, complete=args.complete, release=args.release,
-              release_far=args.release_far,
+              release_far=args.release_far, look=args.look,
               progress=not args.no_progress, threads=args.threads)
     b, a = s["before"], s["after"]
     print(f"adapted {shown_path(s['model'])} on {s['frames']} frames ({s['skipped']} unreadable skipped) in "

@@ -184,6 +184,33 @@ def look_veto_frames(images: list[np.ndarray], labels: list[RoadLabel], options:
     return vetoed, row
 
 
+def looks_like_road(images: np.ndarray, labels: np.ndarray, learn: np.ndarray, options: LookOptions = LookOptions(),
+                    encoder: Any = None) -> tuple[np.ndarray, dict[str, Any]]:
+    """Which pixels of a sequence held in memory look like its road (``freespace adapt``'s look check).
+
+    Args:
+        images: ``N×H×W×3 uint8`` RGB frames. labels: their ``N×H×W uint8`` labels (1 road, 0 not road, 255 don't
+            care). learn: the indices of the frames whose labels teach the look (:func:`learn_look`).
+        options: the look's settings (:attr:`LookOptions.veto` is the road probability a pixel needs).
+        encoder: a :func:`look_encoder` to reuse (default: :attr:`LookOptions.encoder`'s).
+
+    Returns:
+        ``bool N×H×W``: the road probability of each pixel's cell at or above the veto, for every frame; and the
+        classifier's row (:func:`learn_look`).
+
+    Raises:
+        DatasetError: the learning frames' labels give fewer than 10 cells of a class.
+    """
+    options.check()
+    encoder = encoder if encoder is not None else look_encoder(options.encoder)
+    pairs = ((images[i], RoadLabel(labels[i] == 1, labels[i] != 255)) for i in learn)
+    weights, bias, row = learn_look(pairs, encoder, options, len(learn))
+    looks = np.empty(labels.shape, bool)
+    for i, image in enumerate(images):
+        looks[i] = road_probability(look_features(image, encoder), weights, bias, labels.shape[1:]) >= options.veto
+    return looks, row
+
+
 # --- a whole dataset: a label tree in, a look-checked tree out -------------------------------------------------------
 
 #: the option that names the tree in messages

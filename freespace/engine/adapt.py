@@ -163,6 +163,8 @@ class AdaptSettings:
     complete: bool = True
     release: float = 0.0
     release_far: float = 1.0
+    #: the lane ahead's columns (fractions of the width) whose road teaches the road's look, or None: no look check
+    look: tuple[float, float] | None = None
 
     def check(self) -> AdaptSettings:
         """These settings, each option checked against :data:`BOUNDS` (whole numbers made ``int``), ``norm_stats``
@@ -179,6 +181,7 @@ class AdaptSettings:
         if not isinstance(self.complete, bool):
             raise InvalidOptionError(f"{param('complete')} must be True or False, got {reprlib.repr(self.complete)}")
         check_norm_stats(self.norm_stats)
+        look = None if self.look is None else _check_look(self.look)
         if self.release and not self.complete:
             raise InvalidOptionError(f"{param('release')} acts in the completion by appearance; leave "
                                      f"{param('complete')} on or {param('release')} at 0")
@@ -191,7 +194,19 @@ class AdaptSettings:
                 values[name] = bound.kind(bound.check(value))
             except InvalidOptionError as exc:
                 raise InvalidOptionError(f"{param(name)} {exc}") from None
-        return replace(self, **values)
+        return replace(self, **values, look=look)
+
+
+def _check_look(look: Any) -> tuple[float, float]:
+    """``look`` as a ``(lo, hi)`` pair of floats, 0 ≤ lo < hi ≤ 1, or :class:`InvalidOptionError` naming it."""
+    try:
+        lo, hi = (float(x) for x in look)
+    except (TypeError, ValueError):
+        lo = hi = math.nan
+    if not 0 <= lo < hi <= 1:
+        raise InvalidOptionError(f"{param('look')} must be two fractions of the width, 0 ≤ lo < hi ≤ 1 (the lane "
+                                 f"ahead, e.g. 0.30,0.55), got {reprlib.repr(look)}")
+    return lo, hi
 
 
 def _model_folder(model: PathLike) -> tuple[Path, Path]:
@@ -467,8 +482,8 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
           max_drift: float = AdaptSettings.max_drift, seed: int = AdaptSettings.seed,
           norm_stats: str = AdaptSettings.norm_stats, across_time: str = AdaptSettings.across_time,
           complete: bool = AdaptSettings.complete, release: float = AdaptSettings.release,
-          release_far: float = AdaptSettings.release_far, progress: bool = True,
-          threads: int | None = None) -> dict[str, Any]:
+          release_far: float = AdaptSettings.release_far, look: tuple[float, float] | None = None,
+          progress: bool = True, threads: int | None = None) -> dict[str, Any]:
     """Adapt the published model in the folder ``model`` to the unlabelled frames ``inputs``; write the
     adapted model folder ``out`` (see the module's docstring for the method and what is written).
 
@@ -499,6 +514,10 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
             when the frames are a sequence, ``"on"``, ``"off"``), completed by appearance, and with ``release`` in
             (0, 1] also the confident not road within that share of the frame's height of the road, in the top
             ``release_far`` share of its rows (:func:`freespace.datagen.completion.released_seeds`).
+        look: the columns of the lane ahead (fractions of the width, ``(0.30, 0.55)`` for a car driving on the right,
+            ``(0.45, 0.70)`` on the left), or None: the road's look is learnt from the first round's labels of the
+            training frames (:func:`freespace.datagen.road_look.looks_like_road`: ImageNet features, the lane
+            ahead against the not road) and each round's road that does not look like it is don't care.
         threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use);
             ``progress``: a progress bar on a terminal (one line per round otherwise).
 
@@ -523,7 +542,7 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
     _check_arguments(model=model, input=inputs, out=out, source=source, progress=progress)
     threads = check_threads(threads)
     settings = AdaptSettings(epochs, minutes, threshold, lr, batch_size, ema, max_drift, seed, norm_stats,
-                             across_time, complete, release, release_far).check()
+                             across_time, complete, release, release_far, look).check()
     folder, ckpt = _model_folder(model)
     check_writable(out, folder=True)
     _check_overlap(folder, inputs, source, out)
@@ -629,7 +648,8 @@ def _check_memory(size: tuple[int, int], settings: AdaptSettings, folder: Path) 
         raise InvalidOptionError(f"{param('batch_size')} {settings.batch_size}: views of {h}×{view // h} pixels are "
                                  f"at most {MAX_STEP_PIXELS // view} a step for this model (at most {MAX_STEP_PIXELS} "
                                  f"pixels a step)")
-    return int(min(MAX_FRAMES, MAX_FRAME_BYTES // (5 * h * w)))
+    per_pixel = 5 + (settings.look is not None)  # RGB and a float16 probability; the look check's mask
+    return int(min(MAX_FRAMES, MAX_FRAME_BYTES // (per_pixel * h * w)))
 
 
 def _self_train(net: Any, frames: Frames, src: Frames | None, settings: AdaptSettings, progress: bool,
@@ -726,11 +746,13 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
                        enabled=progress)
     start = time.monotonic()
     deadline = start + settings.minutes * 60 if settings.minutes else math.inf
-    rows, now, held_now = [], before, held_before
+    rows, now, held_now, looks = [], before, held_before, None
     for r in range(1, settings.epochs + 1):
         confident = pseudo_labels(data.probs.astype(np.float32), settings.threshold)
         data.labels, carried = round_labels(data.images, data.probs, confident, steps, data.held, settings.complete,
                                             (settings.release, settings.release_far))
+        if settings.look is not None:
+            looks = _look_check(data, confident, looks, settings.look, carried)
         stats = _train_round(student, teacher, opt, data, settings, rng, deadline, bar, f"in round {r}")
         now, held_now = _measure(_teacher_session(teacher, size, threads), data, source_masks)
         rows.append({"round": r, **stats, **now, **carried, "seconds": round(time.monotonic() - start, 1)})
@@ -745,7 +767,30 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
             break
     bar.close()
     return {"net": teacher, "rounds": rows, "before": before, "before_tta": before_tta, "after": now, "held": held,
-            "held_probs": (held_before, held_now), "train_frames": len(train), "across_time": across, **norms}
+            "held_probs": (held_before, held_now), "train_frames": len(train), "across_time": across, **norms,
+            **({"look": looks[1]} if looks is not None else {})}
+
+
+def _look_check(data: _Data, confident: np.ndarray, looks: tuple[np.ndarray, dict[str, Any]] | None,
+                band: tuple[float, float], record: dict[str, float]) -> tuple[np.ndarray, dict[str, Any]]:
+    """The round's labels (``data.labels``, or the ``confident`` ones) with the road that does not look like the
+    road made don't care, in place; the look (``bool N×h×w``, and the classifier's row) is learnt on the first
+    round (``looks`` None) from the training frames' labels and kept. ``record`` gets ``vetoed``: the share of the
+    training frames' pixels so made don't care."""
+    from freespace.datagen.options import LookOptions
+    from freespace.datagen.road_look import looks_like_road
+
+    labels = data.labels if data.labels is not None else confident
+    if looks is None:
+        looks = looks_like_road(data.images, labels, data.train, LookOptions(band=band))
+        log.info("adapt: the road's look learnt from %d frames (road cells right %.1f%%, not road %.1f%%)",
+                 len(data.train), 100 * looks[1]["road_recall"], 100 * looks[1]["not_road_recall"])
+    vetoed = (labels == 1) & ~looks[0]
+    vetoed[data.held] = False
+    labels[vetoed] = IGNORE
+    data.labels = labels
+    record["vetoed"] = round(float(vetoed.sum()) / max(labels[data.train].size, 1), 4)
+    return looks
 
 
 def _norm_step(net: Any, data: _Data, settings: AdaptSettings, kept: str | None, threads: int,

@@ -44,7 +44,7 @@ MAX_CARD_BYTES, MAX_TITLE_CHARS = 64 * 1024, 200
 #: the width (pixels) of each panel of ``before_after.jpg``, and how many held-out frames it shows
 PANEL_WIDTH, PICTURE_FRAMES = 480, 4
 _ROUND_FIELDS = ("round", "loss", "confident", "steps", "stopped", "road_share", "confidence", "source_agreement",
-                 "gained", "overridden", "conflicts", "completed", "seconds")
+                 "gained", "overridden", "conflicts", "completed", "vetoed", "seconds")
 
 
 @dataclass
@@ -369,6 +369,18 @@ def _completion_line(settings: dict[str, Any]) -> str:
     return f"completed: the teacher's unsure pixels take a graph cut's side (`complete`){also}"
 
 
+def _look_line(summary: dict[str, Any]) -> str:
+    """The card's line on the look check (``look`` of the settings, the classifier's row in the summary)."""
+    band = summary["settings"].get("look")
+    if band is None:
+        return "not checked"
+    row = summary["look"]
+    return (f"road that does not look like the lane ahead (columns {band[0]:g}–{band[1]:g} of the width) made don't "
+            f"care (`look`): the look learnt from {row['road_examples']} road and {row['not_road_examples']} "
+            f"not-road cells, {100 * row['road_recall']:.1f} % and {100 * row['not_road_recall']:.1f} % of them "
+            f"told apart")
+
+
 def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | None) -> str:
     """The adapted model's card (Markdown)."""
     s = summary["settings"]
@@ -390,6 +402,7 @@ def _card(summary: dict[str, Any], folder: Path, frames: Frames, src: Frames | N
                                   f"setting `{s['norm_stats']}`)"),
         ("labels along time", _across_line(summary["across_time"])),
         ("labels by appearance", _completion_line(s)),
+        ("labels by look", _look_line(summary)),
         ("settings", f"{s['epochs']} rounds{limit}, confidence threshold {s['threshold']:g}, AdamW lr {s['lr']:g}, "
                      f"batch {s['batch_size']}, teacher EMA {s['ema']:g}, max drift {s['max_drift']:g}, "
                      f"seed {s['seed']}"),
@@ -454,7 +467,7 @@ def write_model_folder(stage: Path, run: dict[str, Any], hp: dict[str, Any], fol
                "norm_stats": run["norm_stats"], "across_time": run["across_time"], "before": run["before"],
                "before_tta": run["before_tta"],
                **({"after_norm_stats": run["after_norm_stats"]} if "after_norm_stats" in run else {}),
-               "after": run["after"],
+               "after": run["after"], **({"look": run["look"]} if "look" in run else {}),
                "export": {"fp16": export["fp16"]},
                "record": {"commit": package_commit(), "torch": torch.__version__}}
     atomic_write_text(stage / "README.md", _card(summary, folder, frames, src))
