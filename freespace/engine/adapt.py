@@ -549,6 +549,10 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
     net, hp = load_checkpoint(ckpt)
     size = _checkpoint_size(hp, ckpt)
     kept = norm_stats_plan(net, settings.norm_stats, ckpt)
+    if settings.look is not None:  # its ImageNet weights before any work (the error says what to install)
+        from freespace.datagen.road_look import look_encoder
+
+        look_encoder()
     most = _check_memory(size, settings, folder)
     frames, src = _read_inputs(inputs, source, size, most)
     t0 = time.monotonic()
@@ -774,9 +778,9 @@ def _rounds(net: Any, frames: Frames, src: Frames | None, settings: AdaptSetting
 def _look_check(data: _Data, confident: np.ndarray, looks: tuple[np.ndarray, dict[str, Any]] | None,
                 band: tuple[float, float], record: dict[str, float]) -> tuple[np.ndarray, dict[str, Any]]:
     """The round's labels (``data.labels``, or the ``confident`` ones) with the road that does not look like the
-    road made don't care, in place; the look (``bool N×h×w``, and the classifier's row) is learnt on the first
-    round (``looks`` None) from the training frames' labels and kept. ``record`` gets ``vetoed``: the share of the
-    training frames' pixels so made don't care."""
+    road made don't care, in place (``data.labels`` then holds them); returns the look (``bool N×h×w`` and the
+    classifier's row), learnt on the first round (``looks`` None) from the training frames' labels and kept.
+    ``record`` gets ``vetoed``: the share of the training frames' pixels so made don't care."""
     from freespace.datagen.options import LookOptions
     from freespace.datagen.road_look import looks_like_road
 
