@@ -209,6 +209,15 @@ def _check_look(look: Any) -> tuple[float, float]:
     return lo, hi
 
 
+def _check_look_weights(settings: AdaptSettings) -> None:
+    """With a look check, load its ImageNet encoder before any work: a missing one ends the run at once, in one line
+    (:class:`~freespace.errors.PretrainedWeightsError` says what to install)."""
+    if settings.look is not None:
+        from freespace.datagen.road_look import look_encoder
+
+        look_encoder()
+
+
 def _model_folder(model: PathLike) -> tuple[Path, Path]:
     """The model folder and its checkpoint, checked to exist.
 
@@ -514,10 +523,8 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
             when the frames are a sequence, ``"on"``, ``"off"``), completed by appearance, and with ``release`` in
             (0, 1] also the confident not road within that share of the frame's height of the road, in the top
             ``release_far`` share of its rows (:func:`freespace.datagen.completion.released_seeds`).
-        look: the columns of the lane ahead (fractions of the width, ``(0.30, 0.55)`` for a car driving on the right,
-            ``(0.45, 0.70)`` on the left), or None: the road's look is learnt from the first round's labels of the
-            training frames (:func:`freespace.datagen.road_look.looks_like_road`: ImageNet features, the lane
-            ahead against the not road) and each round's road that does not look like it is don't care.
+        look: the lane ahead's columns (fractions of the width: ``(0.30, 0.55)`` driving on the right), or None:
+            each round's road that does not look like it is don't care (:func:`_look_check`).
         threads: CPU threads, 1…:func:`~freespace.limits.max_workers` (None: the cores this process may use);
             ``progress``: a progress bar on a terminal (one line per round otherwise).
 
@@ -549,10 +556,7 @@ def adapt(model: PathLike, inputs: PathLike, out: PathLike, *, source: PathLike 
     net, hp = load_checkpoint(ckpt)
     size = _checkpoint_size(hp, ckpt)
     kept = norm_stats_plan(net, settings.norm_stats, ckpt)
-    if settings.look is not None:  # its ImageNet weights before any work (the error says what to install)
-        from freespace.datagen.road_look import look_encoder
-
-        look_encoder()
+    _check_look_weights(settings)
     most = _check_memory(size, settings, folder)
     frames, src = _read_inputs(inputs, source, size, most)
     t0 = time.monotonic()
@@ -779,7 +783,8 @@ def _look_check(data: _Data, confident: np.ndarray, looks: tuple[np.ndarray, dic
                 band: tuple[float, float], record: dict[str, float]) -> tuple[np.ndarray, dict[str, Any]]:
     """The round's labels (``data.labels``, or the ``confident`` ones) with the road that does not look like the
     road made don't care, in place (``data.labels`` then holds them); returns the look (``bool N×h×w`` and the
-    classifier's row), learnt on the first round (``looks`` None) from the training frames' labels and kept.
+    classifier's row), learnt on the first round (``looks`` None) from the training frames' labels and kept
+    (:func:`freespace.datagen.road_look.looks_like_road`: ImageNet features, the lane ahead against the not road).
     ``record`` gets ``vetoed``: the share of the training frames' pixels so made don't care."""
     from freespace.datagen.options import LookOptions
     from freespace.datagen.road_look import looks_like_road
