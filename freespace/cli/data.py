@@ -13,6 +13,7 @@ from freespace.cli.shared import (
     check_mode,
     dataset_of,
     flags_of,
+    number_pair,
     refuse_folders,
     run_dataset,
 )
@@ -271,13 +272,8 @@ def _look(args: argparse.Namespace) -> int:
 # --- synth ---------------------------------------------------------------------------------------------
 
 
-def _range(text: str) -> tuple[float, float]:
-    """``"MIN,MAX"`` → ``(MIN, MAX)`` (argparse type: a bad value is a one-line usage error)."""
-    try:
-        lo, hi = (float(x) for x in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be MIN,MAX (two numbers), got {text!r}") from None
-    return lo, hi
+#: ``"MIN,MAX"`` → ``(MIN, MAX)`` (argparse type: a bad value is a one-line usage error)
+_range = number_pair("MIN,MAX", "two numbers")
 
 
 def synth_parser(p: argparse.ArgumentParser) -> None:

@@ -17,6 +17,20 @@ WORKERS = bounded_int(1, max_workers, why=f"{WORKERS_PER_CORE} per CPU core")
 SEED = bounded_int(0, MAX_SEED)
 
 
+def number_pair(form: str, what: str) -> Callable[[str], tuple[float, float]]:
+    """An argparse type for ``"A,B"`` → ``(A, B)``, two floats; ``form`` (``"MIN,MAX"``) and ``what`` (``"two
+    numbers"``) word the one-line usage error. Their bounds are the caller's to check."""
+
+    def pair(text: str) -> tuple[float, float]:
+        try:
+            a, b = (float(x) for x in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {form} ({what}), got {text!r}") from None
+        return a, b
+
+    return pair
+
+
 class Parser(argparse.ArgumentParser):
     """argparse, except that an argument starting with a minus and a digit, ``inf`` or ``nan`` is a value,
     never an option: ``--shift -1,0,0``, ``--rotate -2,0,0`` and ``--pitches -5,5`` need no ``=`` form (no

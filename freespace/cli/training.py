@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from freespace.cli.config_options import FromFile, add_config_options, config_values
-from freespace.cli.shared import SEED, WORKERS, add_dataset_root
+from freespace.cli.shared import SEED, WORKERS, add_dataset_root, number_pair
 from freespace.limits import bounded_int
 
 # --- train, evaluate, evaluate-kitti -------------------------------------------------------------------
@@ -169,7 +169,7 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--release-far", type=B["release_far"], default=D.release_far, metavar="F",
                    help=f"with --release, only in the top F share of the road's rows: the far road, not the "
                         f"pavements beside the car (0…1, default {D.release_far:g}: every row)")
-    p.add_argument("--look", type=_band, metavar="LO,HI",
+    p.add_argument("--look", type=number_pair("LO,HI", "two fractions of the width, e.g. 0.30,0.55"), metavar="LO,HI",
                    help="check each round's labels by their look: the road's look is learnt from the road in the "
                         "columns LO…HI of the width (the lane ahead: 0.30,0.55 where cars drive on the right, "
                         "0.45,0.70 on the left) against the not road, and road that does not look like it is not "
@@ -179,16 +179,6 @@ def adapt_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=WORKERS, help="CPU threads (default: the cores this process may use)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
     p.set_defaults(func=cmd_adapt)
-
-
-def _band(text: str) -> tuple[float, float]:
-    """``"LO,HI"`` → ``(LO, HI)``, two numbers (their bounds are adapt's to check)."""
-    try:
-        lo, hi = (float(x) for x in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be LO,HI, two fractions of the width (e.g. 0.30,0.55), got "
-                                         f"{text!r}") from None
-    return lo, hi
 
 
 def cmd_adapt(args: argparse.Namespace) -> int:

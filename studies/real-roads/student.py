@@ -35,6 +35,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from freespace.cli.shared import number_pair
 from freespace.engine.adapt import road_probabilities
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -176,13 +177,8 @@ def looked(images: list[np.ndarray], classes: list[np.ndarray], band: tuple[floa
     return [np.where(x.valid, x.road, 255).astype(np.uint8) for x in vetoed]
 
 
-def parse_band(text: str) -> tuple[float, float]:
-    """``"LO,HI"`` → ``(LO, HI)``: the columns of the lane ahead, fractions of the width (argparse type)."""
-    try:
-        lo, hi = (float(x) for x in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be LO,HI (two fractions of the width), got {text!r}") from None
-    return lo, hi
+#: ``"LO,HI"`` → ``(LO, HI)``: the columns of the lane ahead, fractions of the width (argparse type)
+parse_band = number_pair("LO,HI", "two fractions of the width")
 
 
 def labels_sha256(label: Path) -> str:
