@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from helpers import TRAINED_ARGS, TRAINED_FRAMES, TRAINED_SEED, TRAINED_SIZE
+
+
+@pytest.fixture(autouse=True, scope="session")
+def ctrl_c_raises() -> Iterator[None]:
+    """SIGINT raises :class:`KeyboardInterrupt`, as in a terminal, even when the suite was started in the background
+    (``nohup``, ``&`` in a script), where it inherits SIGINT ignored and Python installs no handler for it: the
+    tests that send Ctrl-C to a command then test the command, not how pytest was started. Restored after."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
 
 
 def _state(*roots: Path) -> dict[str, tuple[int, int]]:
