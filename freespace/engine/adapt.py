@@ -213,9 +213,10 @@ def _check_look_weights(settings: AdaptSettings) -> None:
     """With a look check, load its ImageNet encoder before any work: a missing one ends the run at once, in one line
     (:class:`~freespace.errors.PretrainedWeightsError` says what to install)."""
     if settings.look is not None:
+        from freespace.datagen.options import LookOptions
         from freespace.datagen.road_look import look_encoder
 
-        look_encoder()
+        look_encoder(LookOptions().encoder)  # the encoder _look_check's looks_like_road loads
 
 
 def _model_folder(model: PathLike) -> tuple[Path, Path]:
