@@ -134,7 +134,8 @@ def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) 
             "photometric_strength: mild\nzoom: 0.0\n").replace("dataset: synth", "dataset: kitti").replace(
             "human_share: 0.0\n", "human_share: 0.0\nimages: null\nlabel_format: null\nlabels_like: null\n"
             "road: null\nignore: null\ntolerance: null\nval_images: null\nval_labels: null\nval_share: 0.2\n"
-            "init: null\nfreeze: auto\n").replace("- 256\nseed: 0\n", "- 256\nresize: stretch\nseed: 0\n")
+            "init: null\nfreeze: auto\nteacher: null\nteacher_weight: 1.0\nteacher_pixels: all\n").replace(
+            "- 256\nseed: 0\n", "- 256\nresize: stretch\nseed: 0\n")
     # the options added since; the layout's own name for an alias
 
 
@@ -172,7 +173,7 @@ def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:
                        "photometric_strength": "mild", "zoom": 0.0, "dataset": "kitti", "images": None,
                        "label_format": None, "labels_like": None, "road": None, "ignore": None, "tolerance": None,
                        "val_images": None, "val_labels": None, "val_share": 0.2, "init": None, "freeze": "auto",
-                       "resize": "stretch"}
+                       "teacher": None, "teacher_weight": 1.0, "teacher_pixels": "all", "resize": "stretch"}
     # one spelling per value (the layout's own name for the alias synth); the options added since, at their defaults
     assert TrainConfig.load(tmp_path / "new.yaml") == old
     assert read_config_yaml(tmp_path / "old.yaml")["augment"] == ("homography", "virtual")

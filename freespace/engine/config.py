@@ -24,7 +24,7 @@ from dataclasses import MISSING, InitVar, dataclass, fields, replace
 from pathlib import Path
 from typing import Annotated, Any
 
-from pydantic import BeforeValidator, Field
+from pydantic import Field
 
 from freespace.data.label_tree import check_label_tree, resolved_path
 from freespace.engine import config_yaml
@@ -35,9 +35,13 @@ from freespace.engine.option_values import (
     AUGMENTS,
     FIRST_FRAME_SIZE,
     Augment,
+    DatasetName,
     ImageSize,
     PathText,
     Ranges,
+    dataset_choices,
+    disparity_source_choices,
+    model_choices,
     weights_path,
 )
 from freespace.errors import MAX_SEED, CorruptFileError, InvalidOptionError, param
@@ -56,46 +60,22 @@ from freespace.limits import (
     check_workers,
 )
 
-__all__ = ["TrainConfig", "read_config_yaml", "PRESETS", "STRATEGIES", "PATH_OPTIONS", "FREEZE"]
+__all__ = ["TrainConfig", "read_config_yaml", "PRESETS", "STRATEGIES", "PATH_OPTIONS", "FREEZE", "TEACHER_PIXELS"]
 
 PRESETS = ("light", "paper")
 #: what ``freeze`` may keep at its starting values
 FREEZE = ("auto", "none", "norm", "encoder")
 STRATEGIES = ("auto", "ddp")
+#: where a teacher's probabilities are learnt (``teacher_pixels``)
+TEACHER_PIXELS = ("all", "ignored")
 
 #: the options that name files or folders (config.yaml keeps them resolved); ``encoder_weights`` is one when it
 #: is a path, not a name of weights (:func:`~freespace.engine.option_values.weights_path`)
 PATH_OPTIONS = ("root", "out", "splits_dir", "cache_dir", "labels", "encoder_weights", "images", "val_images",
-                "val_labels", "init")
+                "val_labels", "init", "teacher")
 
 # config.yaml keys of runs made before the names said which split and which disparity source they mean
 _RENAMED = {"splits": "splits_dir", "disparity": "disparity_source", "disparity_mode": "disparity_source"}
-
-
-def _layout_name(value: Any) -> Any:
-    """A dataset name as its layout's own (``synth`` → ``kitti``): configs written with an alias load as the same
-    configuration."""
-    from freespace.data.registry import layout_name
-
-    return layout_name(value)
-
-
-def _datasets() -> tuple[str, ...]:
-    from freespace.data.registry import list_datasets
-
-    return tuple(list_datasets(aliases=False))
-
-
-def _models() -> tuple[str, ...]:
-    from freespace.models import list_models  # imports torch: only called for training
-
-    return tuple(list_models())
-
-
-def _disparity_sources() -> tuple[str, ...]:
-    from freespace.data.disparity import DISPARITY_SOURCES
-
-    return DISPARITY_SOURCES
 
 
 _VIRTUAL = f"virtual views ({param('augment')} virtual; reproduce's HV-X, HAV-X): "
@@ -117,13 +97,13 @@ class TrainConfig:
             parameter), or ``human_share`` without ``labels``.
     """
 
-    dataset: Annotated[str, BeforeValidator(_layout_name)] | None = option(
+    dataset: DatasetName | None = option(
         f"dataset layout (kitti: KITTI road, and the renderer's output, which `freespace synth` writes as a KITTI "
         f"road tree); or train on a labelled folder instead: {param('images')} and {param('labels')}", None,
-        choices=_datasets)
+        choices=dataset_choices)
     root: PathText | None = option("dataset folder", None, metavar="DIR")
     out: PathText = option("run folder", metavar="RUN_DIR")
-    model: str = option("network", "unet", choices=_models)
+    model: str = option("network", "unet", choices=model_choices)
     preset: str = option("network size: light (CPU) or paper", "light", choices=PRESETS)
     encoder_name: str | None = option("encoder of unet, deeplabv3plus, dupsampling, gscnn, denseaspp or "
                                        "contextnet (its context branch), e.g. efficientnet-lite0 (default: the "
@@ -218,8 +198,18 @@ class TrainConfig:
                          f"norms' statistics: a published model's are folded into its convolutions, and batches of "
                          f"few frames give noisy ones) or encoder (norm, and the encoder's weights)", "auto",
                          choices=FREEZE, metavar="PART")
+    teacher: PathText | None = option(f"distillation: also learn the road probabilities of this model folder or "
+                                      f"training checkpoint, run on each training batch as the network sees it "
+                                      f"(augmented; any network, e.g. a slower, more accurate one), on the pixels "
+                                      f"of {param('teacher_pixels')}", None, metavar="MODEL_DIR|CKPT")
+    teacher_weight: Annotated[float, Field(gt=0, le=100)] = option(
+        f"the weight of {param('teacher')}'s term (the mean KL divergence from its probabilities) beside the "
+        f"labels' cross-entropy, which weighs 1", 1.0, metavar="W")
+    teacher_pixels: str = option(f"where {param('teacher')} teaches: all (every pixel, labelled or not) or ignored "
+                                 f"(only the pixels the labels leave don't care)", "all",
+                                 choices=TEACHER_PIXELS, metavar="WHICH")
     disparity_source: str = option("disparities for the DS-Generator: auto = file, else depth + camera, else cached "
-                                    "SGBM", "auto", choices=_disparity_sources)
+                                    "SGBM", "auto", choices=disparity_source_choices)
     cache_dir: PathText | None = option("SGBM disparity cache (default ~/.cache/freespace/sgbm)", None, metavar="DIR")
     tensorboard: bool = option("also write TensorBoard logs (needs tensorboard)", False)
     # augment virtual (reproduce's HV-X, HAV-X): ranges of the random pose (dx, dy, dz metres; roll, pitch, yaw
@@ -253,6 +243,9 @@ class TrainConfig:
         if self.photometric_strength != "mild" and not self.photometric:
             raise InvalidOptionError(f"{param('photometric_strength')} {self.photometric_strength} says how "
                                      f"{param('photometric')} recolours; give {param('photometric')} too")
+        if self.teacher is None and (self.teacher_weight != 1.0 or self.teacher_pixels != "all"):
+            raise InvalidOptionError(f"{param('teacher_weight')} and {param('teacher_pixels')} say how "
+                                     f"{param('teacher')} teaches; give {param('teacher')} too")
         check_source(self)
         if self.human_share > 0 and self.labels is None:
             raise InvalidOptionError(f"{param('human_share')} keeps the dataset's labels on a share of the training "
@@ -287,12 +280,16 @@ class TrainConfig:
             check_dataset_root(self.root, get_dataset_class(self.dataset).name)
             if self.labels is not None:  # (a missing folder is refused in the same words)
                 check_label_tree(self.labels, self.dataset, self.root, self.split)
+        if self.teacher is not None:  # a missing, corrupt or crafted file is refused now, in one line
+            from freespace.engine.init import read_init
+
+            read_init(self.teacher, "teacher")
         check_writable(self.out, folder=True)
         weights_file = self.encoder_weights if self.encoder_weights and Path(self.encoder_weights).is_file() else None
         check_outputs({"out": self.out}, {"root": self.root, "splits_dir": self.splits_dir, "labels": self.labels,
                                           "encoder_weights": weights_file, "images": self.images,
                                           "val_images": self.val_images, "val_labels": self.val_labels,
-                                          "init": self.init})
+                                          "init": self.init, "teacher": self.teacher})
         if self.images is not None:  # every label read and checked now, before anything is written
             from freespace.engine.labelled import labelled_frames
 

@@ -19,7 +19,8 @@ from freespace.errors import CorruptFileError, InputFileError, InvalidOptionErro
 from freespace.io.files import PathLike
 from freespace.io.frame_fit import check_resize
 
-__all__ = ["InitWeights", "init_checkpoint", "read_init", "resolve_init", "check_encoder", "CHECKPOINT"]
+__all__ = ["InitWeights", "init_checkpoint", "read_init", "teacher_network", "resolve_init", "check_encoder",
+           "CHECKPOINT"]
 
 #: the checkpoint of a model folder
 CHECKPOINT = "model.ckpt"
@@ -40,8 +41,9 @@ class InitWeights:
         return (int(size[0]), int(size[1])) if size else None
 
 
-def init_checkpoint(init: PathLike) -> Path:
-    """The checkpoint that ``init`` names: a model folder's :data:`CHECKPOINT`, or the file itself.
+def init_checkpoint(init: PathLike, option: str = "init") -> Path:
+    """The checkpoint that ``init`` names: a model folder's :data:`CHECKPOINT`, or the file itself; ``option``: the
+    parameter that named it, for the messages (``init`` or ``teacher``).
 
     Raises:
         InputFileError: nothing at ``init``, or a folder without :data:`CHECKPOINT`.
@@ -50,15 +52,30 @@ def init_checkpoint(init: PathLike) -> Path:
     if path.is_dir():
         ckpt = path / CHECKPOINT
         if not ckpt.is_file():
-            raise InputFileError(f"{param('init')} {path} is a folder without {CHECKPOINT}; give a model folder "
+            raise InputFileError(f"{param(option)} {path} is a folder without {CHECKPOINT}; give a model folder "
                                  f"(models/real-road-fast) or a training checkpoint (RUN/checkpoints/best.ckpt)")
         return ckpt
     if not path.is_file():
-        raise InputFileError(f"{param('init')} not found: {path} (a model folder or a .ckpt file)")
+        raise InputFileError(f"{param(option)} not found: {path} (a model folder or a .ckpt file)")
     return path
 
 
-def read_init(init: PathLike) -> InitWeights:
+def teacher_network(teacher: PathLike) -> Any:
+    """The network of ``teacher`` (a model folder or a training checkpoint, as ``init``; read with
+    ``torch.load(weights_only=True)``), in eval mode with its gradients off: a ``torch.nn.Module`` that maps an
+    ``N×3×H×W`` batch (RGB in [0, 1], as training feeds the network) to ``N×2×H×W`` logits (not road, road).
+
+    Raises:
+        InputFileError: nothing at ``teacher``. CorruptFileError: not a freespace checkpoint, or weights that do
+            not fit the network it names.
+    """
+    from freespace.inference.predictor import load_checkpoint
+
+    net, _ = load_checkpoint(init_checkpoint(teacher, "teacher"))
+    return net.eval().requires_grad_(False)
+
+
+def read_init(init: PathLike, option: str = "init") -> InitWeights:
     """The weights and hyper-parameters of ``init`` (:func:`init_checkpoint`), read with
     ``torch.load(weights_only=True)`` (no code runs), checked to rebuild their network; read once per process
     for an unchanged file.
@@ -67,7 +84,7 @@ def read_init(init: PathLike) -> InitWeights:
         InputFileError: nothing there. CorruptFileError: not a freespace checkpoint, or weights that do not fit
             the network it names, or an input size that is not two positive sides.
     """
-    path = init_checkpoint(init).resolve()
+    path = init_checkpoint(init, option).resolve()
     st = path.stat()
     return _read(path, st.st_mtime_ns, st.st_size)
 

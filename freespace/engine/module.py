@@ -52,7 +52,19 @@ class RoadModule(pl.LightningModule):
         if encoder is not None:
             encoder.requires_grad_(False)
         self._val_f: list[float] = []  # each epoch's validation F-score (kept in checkpoints)
+        self._teacher: tuple[torch.nn.Module, float, str] | None = None  # attach_teacher's
         self._reset()
+
+    def attach_teacher(self, teacher: torch.nn.Module, weight: float = 1.0, pixels: str = "all") -> None:
+        """Distillation: from now on each training step also runs ``teacher`` (a network in eval mode that maps
+        the ``N×3×H×W`` batch to ``N×2×H×W`` logits, e.g. :func:`~freespace.engine.init.teacher_network`'s) on
+        the batch as the network sees it and adds ``weight`` × the mean KL divergence of the network's class
+        probabilities from the teacher's, over ``pixels``: ``all`` or ``ignored`` (only the don't-care ones of
+        the labels); the step logs it as ``train_distil``. The teacher is kept outside the module's weights: it
+        is neither trained nor saved in checkpoints (a resumed run attaches it again)."""
+        if pixels not in ("all", "ignored"):
+            raise ValueError(f"pixels must be all or ignored, got {pixels!r}")
+        self._teacher = (teacher.eval().requires_grad_(False), float(weight), pixels)
 
     def _reset(self) -> None:
         self._evaluator = RoadEvaluator()
@@ -92,13 +104,17 @@ class RoadModule(pl.LightningModule):
 
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         outputs = self.net(batch["image"])
-        if not bool((batch["label"] != IGNORE_INDEX).any()):
+        ignored = batch["label"] == IGNORE_INDEX
+        if bool(ignored.all()):
             # no evaluated pixel in the whole batch (e.g. all-black KITTI ground truth, all don't care): the mean
             # over no pixel is NaN; nothing to learn, so a zero loss that still reaches every output
             zero = main_logits(outputs).sum() * 0.0
             losses = {"total": zero, "seg": zero}
         else:
             losses = self.net.loss(outputs, batch["label"], IGNORE_INDEX)
+        if self._teacher is not None:
+            distil = self._distil(main_logits(outputs), batch["image"], ignored)
+            losses = {**losses, "total": losses["total"] + self._teacher[1] * distil, "distil": distil}
         loss = losses["total"]
         if not torch.isfinite(loss):
             raise TrainingError(f"the loss became {loss.item()} at epoch {self.current_epoch}, step {batch_idx}; "
@@ -107,6 +123,19 @@ class RoadModule(pl.LightningModule):
             self.log(f"train_{'loss' if k == 'total' else k}", v.detach(), on_step=False, on_epoch=True,
                      batch_size=batch["image"].shape[0], sync_dist=True)
         return loss
+
+    def _distil(self, logits: torch.Tensor, image: torch.Tensor, ignored: torch.Tensor) -> torch.Tensor:
+        """The mean KL divergence ``KL(teacher ‖ network)`` of the two classes' probabilities over the teacher's
+        pixels (``N×H×W`` ``ignored`` when it teaches only those; zero when there is none in the batch)."""
+        teacher, _, pixels = self._teacher
+        if next(teacher.parameters()).device != image.device:  # once: after Lightning moved the module
+            teacher.to(image.device, memory_format=torch.channels_last)
+        with torch.no_grad():
+            target = torch.softmax(main_logits(teacher(image)).float(), 1)
+        kl = (target * (torch.log(target.clamp_min(1e-8)) - torch.log_softmax(logits.float(), 1))).sum(1)
+        if pixels == "all":
+            return kl.mean()
+        return (kl * ignored).sum() / ignored.sum().clamp_min(1)
 
     def _accumulate(self, batch: dict[str, Any]) -> None:
         t0 = time.perf_counter()

@@ -18,7 +18,8 @@ from freespace.errors import InvalidOptionError, param
 from freespace.io.codecs import MAX_IMAGE_SIDE
 
 __all__ = ["AUGMENT_NAMES", "AUGMENTS", "FIRST_FRAME_SIZE", "weights_path", "parse_augment", "augment_text",
-           "ranges_text", "parse_size", "number", "Augment", "Ranges", "ImageSize", "PathText"]
+           "ranges_text", "parse_size", "number", "Augment", "Ranges", "ImageSize", "PathText", "DatasetName",
+           "dataset_choices", "model_choices", "disparity_source_choices"]
 
 #: the augmentations ``augment`` combines, in their one order (duplicate: the step-count control of homography)
 AUGMENT_NAMES = ("homography", "virtual", "duplicate")
@@ -163,3 +164,38 @@ ImageSize = Annotated[tuple[int, int] | Literal["first-frame"], BeforeValidator(
 #: a file or folder name, never empty (``""`` would be the current folder)
 PathText = Annotated[str, BeforeValidator(_path_text)]
 
+
+# --- the choices of named values (read when first offered: the lists import their modules) -------------------
+
+
+def _layout_name(value: Any) -> Any:
+    """A dataset name as its layout's own (``synth`` → ``kitti``): configs written with an alias load as the same
+    configuration."""
+    from freespace.data.registry import layout_name
+
+    return layout_name(value)
+
+
+def dataset_choices() -> tuple[str, ...]:
+    """The dataset layouts ``dataset`` takes (their own names, no alias)."""
+    from freespace.data.registry import list_datasets
+
+    return tuple(list_datasets(aliases=False))
+
+
+def model_choices() -> tuple[str, ...]:
+    """The networks ``model`` takes."""
+    from freespace.models import list_models  # imports torch: only called for training
+
+    return tuple(list_models())
+
+
+def disparity_source_choices() -> tuple[str, ...]:
+    """Where ``disparity_source`` takes the DS-Generator's disparities from."""
+    from freespace.data.disparity import DISPARITY_SOURCES
+
+    return DISPARITY_SOURCES
+
+
+#: a dataset layout's name, an alias read as its layout's own
+DatasetName = Annotated[str, BeforeValidator(_layout_name)]

@@ -59,7 +59,7 @@ def content_hashes(config: Any) -> dict[str, Any]:
     ``{"encoder_weights": {"path", "sha256"}}`` when its weights are a file
     (:func:`~freespace.data.label_tree.file_record`); ``{"labels": {"path", "sha256", "files"}}`` with a label tree
     (:func:`~freespace.data.label_tree.tree_record`); a labelled folder's ``images`` and ``labels`` (and
-    ``val_images``, ``val_labels``) as the files it pairs; an ``init`` checkpoint. A run records it
+    ``val_images``, ``val_labels``) as the files it pairs; an ``init`` checkpoint and a ``teacher``'s. A run records it
     (``RUN/inputs.json``); a resumed run and the cells of one ``reproduce`` are refused when the files changed in
     between (:func:`~freespace.data.label_tree.changed_inputs`)."""
     from freespace.data.label_tree import file_record, files_record, tree_record
@@ -79,4 +79,8 @@ def content_hashes(config: Any) -> dict[str, Any]:
         from freespace.engine.init import init_checkpoint
 
         found["init"] = file_record(init_checkpoint(config.init))
+    if config.teacher is not None:
+        from freespace.engine.init import init_checkpoint
+
+        found["teacher"] = file_record(init_checkpoint(config.teacher, "teacher"))
     return found

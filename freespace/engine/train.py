@@ -31,7 +31,7 @@ from freespace.data.label_tree import changed_inputs
 from freespace.data.torch_dataset import RoadSegmentationDataset
 from freespace.engine.config import TrainConfig
 from freespace.engine.data import EpochSampler, is_rank_zero, loader_context, prepare_data
-from freespace.engine.init import read_init, resolve_init
+from freespace.engine.init import read_init, resolve_init, teacher_network
 from freespace.engine.record import content_hashes, run_record
 from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionError, Terminated, TrainingError, param
 from freespace.inference.predictor import check_weights, checkpoint_state_dict, read_checkpoint_file
@@ -442,6 +442,8 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     module = RoadModule(config.model, config.model_options(), config.lr, config.momentum, config.weight_decay,
                         image_size=list(size), seed=config.seed, val_window=config.val_window,
                         encoder_weights=config.encoder_weights, freeze=frozen_part(config), resize=config.resize)
+    if config.teacher is not None:  # outside the checkpoint: attached again when the run goes on
+        module.attach_teacher(teacher_network(config.teacher), config.teacher_weight, config.teacher_pixels)
     if config.init is not None and not resume:  # every weight from the init (a resumed run has its own)
         module.net.load_state_dict(read_init(config.init).state)
     elif not resume:  # what a network fits from the labels (e.g. DUpsampling's W) comes back with the checkpoint
