@@ -9,6 +9,7 @@ import lightning.pytorch as pl
 import numpy as np
 import torch
 
+from freespace.engine.config import TEACHER_PIXELS
 from freespace.errors import TrainingError, param
 from freespace.evaluation.metrics import RoadEvaluator
 from freespace.labels import IGNORE_INDEX
@@ -62,9 +63,10 @@ class RoadModule(pl.LightningModule):
         probabilities from the teacher's, over ``pixels``: ``all`` or ``ignored`` (only the don't-care ones of
         the labels); the step logs it as ``train_distil``. The teacher is kept outside the module's weights: it
         is neither trained nor saved in checkpoints (a resumed run attaches it again)."""
-        if pixels not in ("all", "ignored"):
-            raise ValueError(f"pixels must be all or ignored, got {pixels!r}")
-        self._teacher = (teacher.eval().requires_grad_(False), float(weight), pixels)
+        if pixels not in TEACHER_PIXELS:
+            raise ValueError(f"pixels must be one of {TEACHER_PIXELS}, got {pixels!r}")
+        teacher = teacher.eval().requires_grad_(False).to(memory_format=torch.channels_last)  # as batches come
+        self._teacher = (teacher, float(weight), pixels)
 
     def _reset(self) -> None:
         self._evaluator = RoadEvaluator()
@@ -129,7 +131,7 @@ class RoadModule(pl.LightningModule):
         pixels (``N×H×W`` ``ignored`` when it teaches only those; zero when there is none in the batch)."""
         teacher, _, pixels = self._teacher
         if next(teacher.parameters()).device != image.device:  # once: after Lightning moved the module
-            teacher.to(image.device, memory_format=torch.channels_last)
+            teacher.to(image.device)
         with torch.no_grad():
             target = torch.softmax(main_logits(teacher(image)).float(), 1)
         kl = (target * (torch.log(target.clamp_min(1e-8)) - torch.log_softmax(logits.float(), 1))).sum(1)
