@@ -69,9 +69,11 @@ def teacher_network(teacher: PathLike) -> Any:
         InputFileError: nothing at ``teacher``. CorruptFileError: not a freespace checkpoint, or weights that do
             not fit the network it names.
     """
-    from freespace.inference.predictor import load_checkpoint
+    from freespace.inference.predictor import rebuild_model
 
-    net, _ = load_checkpoint(init_checkpoint(teacher, "teacher"))
+    found = read_init(teacher, "teacher")  # the file TrainConfig.check read, not read again
+    net = rebuild_model(found.hp["model"], found.hp["model_options"], found.path)
+    net.load_state_dict(found.state)
     return net.eval().requires_grad_(False)
 
 

@@ -75,12 +75,9 @@ def content_hashes(config: Any) -> dict[str, Any]:
             found[key] = files_record(getattr(config, key), paths)
     elif config.labels is not None and Path(config.labels).is_dir():
         found["labels"] = tree_record(config.labels)
-    if config.init is not None:
-        from freespace.engine.init import init_checkpoint
+    from freespace.engine.init import init_checkpoint
 
-        found["init"] = file_record(init_checkpoint(config.init))
-    if config.teacher is not None:
-        from freespace.engine.init import init_checkpoint
-
-        found["teacher"] = file_record(init_checkpoint(config.teacher, "teacher"))
+    for key in ("init", "teacher"):  # checkpoints: a model folder's model.ckpt, or the file
+        if getattr(config, key) is not None:
+            found[key] = file_record(init_checkpoint(getattr(config, key), key))
     return found
