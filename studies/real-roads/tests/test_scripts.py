@@ -401,3 +401,40 @@ def test_labelcheck_s_appearance_source_takes_release() -> None:
     road = [(label == labelcheck.student.ROAD_BGR).all(2) for label in
             (labelcheck.labels_of("appearance", [image], [prob], release)[0] for release in ((0.0, 1.0), (0.3, 1.0)))]
     assert not road[0][40:60].any() and road[1][40:60].mean() > 0.95 and not road[1][:36].any()
+
+
+def _rebuild(tmp_path: Path, frames: int, out: Path) -> subprocess.CompletedProcess:
+    (tmp_path / "raw" / "2011_09_26").mkdir(parents=True, exist_ok=True)
+    camvid = tmp_path / f"camvid{frames}"
+    camvid.mkdir(exist_ok=True)
+    for i in range(frames):
+        (camvid / f"f{i:03d}.png").write_bytes(b"png")
+    env = {"RAW": str(tmp_path / "raw"), "FRAMES": str(camvid), "OUT": str(out), "PYTHON": sys.executable,
+           "PATH": "/usr/bin:/bin"}
+    return subprocess.run(["bash", str(STUDY / "rebuild.sh")], capture_output=True, text=True, env=env)
+
+
+def test_rebuild_refuses_an_output_in_the_repository_and_a_wrong_frame_folder(tmp_path: Path) -> None:
+    res = _rebuild(tmp_path, 367, STUDY / "rebuilt" / "deeper")
+    assert res.returncode == 2 and "lies inside the repository" in res.stderr, res.stderr
+    assert not (STUDY / "rebuilt").exists()
+    res = _rebuild(tmp_path, 366, tmp_path / "out")
+    assert res.returncode == 2 and "does not hold CamVid's 367 training images" in res.stderr, res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_rebuild_pins_what_the_model_card_names() -> None:
+    """rebuild.sh's commits, teacher hashes and labels hash are the ones models/real-road-fast's card gives."""
+    import re
+
+    script = (STUDY / "rebuild.sh").read_text()
+    card = (STUDY.parents[1] / "models" / "real-road-fast" / "README.md").read_text()
+    commits = dict(re.findall(r"(FIRST|TEACHERS|DATASET|TRAINING)=([0-9a-f]{7})", script))
+    assert f"git show {commits['FIRST']}:models/real-road-fast" in card
+    assert (f"Teachers at commit {commits['TEACHERS']}, the look-checked tree and the student dataset at "
+            f"{commits['DATASET']}, the training at {commits['TRAINING']}") in " ".join(card.split())
+    hashes = re.findall(r"\b[0-9a-f]{64}\b", script)
+    assert len(hashes) == 4
+    for h in hashes[:3]:
+        assert f"`{h[:16]}…`" in card
+    assert hashes[3] in card
