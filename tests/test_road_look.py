@@ -101,3 +101,18 @@ def test_too_few_examples_and_bad_options_are_refused() -> None:
     for bad in (LookOptions(band=(0.6, 0.4)), LookOptions(veto=1.0), LookOptions(cell_share=0.2)):
         with pytest.raises(InvalidOptionError):
             bad.check()
+
+
+def test_the_fit_does_not_depend_on_torchs_global_random_state() -> None:
+    """fit_road_look starts from zero weights: the same cells give the same classifier whatever ran before it."""
+    import torch
+
+    rng = np.random.default_rng(0)
+    road = rng.normal(0.5, 1, (60, 8)).astype(np.float32)
+    not_road = rng.normal(-0.5, 1, (80, 8)).astype(np.float32)
+    fits = []
+    for seed in (1, 2):
+        torch.manual_seed(seed)
+        fits.append(fit_road_look(road, not_road))
+    np.testing.assert_array_equal(fits[0][0], fits[1][0])
+    assert fits[0][1] == fits[1][1] and fits[0][0][0] > 0

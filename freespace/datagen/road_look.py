@@ -114,6 +114,8 @@ def fit_road_look(road: np.ndarray, not_road: np.ndarray, l2: float = 1e-4) -> t
     y = torch.cat([torch.ones(len(road)), torch.zeros(len(not_road))])
     weight = torch.where(y > 0, 0.5 / len(road), 0.5 / len(not_road))
     linear = torch.nn.Linear(x.shape[1], 1)
+    torch.nn.init.zeros_(linear.weight)  # a fixed start: the fit does not depend on torch's global random state
+    torch.nn.init.zeros_(linear.bias)
     optimiser = torch.optim.LBFGS(linear.parameters(), max_iter=200, line_search_fn="strong_wolfe")
 
     def loss() -> torch.Tensor:
