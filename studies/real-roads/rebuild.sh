@@ -10,7 +10,8 @@
 # subfolder and a step whose subfolder is complete is skipped, so an interrupted rebuild continues.
 # Needs a clone with history (the pinned commits). One thread a step, as the card's cells ran.
 set -euo pipefail
-: "${RAW:?set RAW to the KITTI raw root fetch.sh wrote}" "${FRAMES:?set FRAMES to the 367 CamVid training images}" "${OUT:?set OUT to a folder outside the repository}"
+: "${RAW:?set RAW to the KITTI raw root fetch.sh wrote}" "${FRAMES:?set FRAMES to the 367 CamVid training images}"
+: "${OUT:?set OUT to a folder outside the repository}"
 REPO=$(cd "$(dirname "$0")/../.." && pwd)
 PYTHON=${PYTHON:-$REPO/.venv/bin/python}
 SEED=${SEED:-0}
@@ -24,9 +25,12 @@ fail() { echo "rebuild.sh: error: $*" >&2; exit 2; }
 [ "$(find "$FRAMES" -maxdepth 1 -name '*.png' 2>/dev/null | wc -l)" -eq 367 ] \
     || fail "$FRAMES does not hold CamVid's 367 training images (real_dev/make.sh's DEST/camvid/train)"
 [ -x "$PYTHON" ] || fail "no Python at $PYTHON: run make test once (it sets up .venv), or set PYTHON"
-case "$(realpath -m "$OUT")/" in
-    "$REPO"/*) fail "OUT $OUT lies inside the repository: choose a folder outside it" ;;
-esac
+out=$(realpath -m "$OUT")/
+for inside in "$REPO" "$(realpath -m "$RAW")" "$(realpath -m "$FRAMES")"; do
+    case "$out" in
+        "$inside"/*) fail "OUT $OUT lies inside $inside (the repository or an input): choose a folder outside it" ;;
+    esac
+done
 for c in $FIRST $TEACHERS $DATASET $TRAINING; do
     git -C "$REPO" cat-file -e "$c^{commit}" 2>/dev/null || fail "commit $c is not in $REPO: rebuild from a full clone"
 done

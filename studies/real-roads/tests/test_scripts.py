@@ -414,10 +414,13 @@ def _rebuild(tmp_path: Path, frames: int, out: Path) -> subprocess.CompletedProc
     return subprocess.run(["bash", str(STUDY / "rebuild.sh")], capture_output=True, text=True, env=env)
 
 
-def test_rebuild_refuses_an_output_in_the_repository_and_a_wrong_frame_folder(tmp_path: Path) -> None:
+def test_rebuild_refuses_an_output_in_the_repository_or_an_input_and_a_wrong_frame_folder(tmp_path: Path) -> None:
     res = _rebuild(tmp_path, 367, STUDY / "rebuilt" / "deeper")
-    assert res.returncode == 2 and "lies inside the repository" in res.stderr, res.stderr
+    assert res.returncode == 2 and "lies inside" in res.stderr and "the repository" in res.stderr, res.stderr
     assert not (STUDY / "rebuilt").exists()
+    res = _rebuild(tmp_path, 367, tmp_path / "raw" / "out")  # inside an input
+    assert res.returncode == 2 and "lies inside" in res.stderr, res.stderr
+    assert not (tmp_path / "raw" / "out").exists()
     res = _rebuild(tmp_path, 366, tmp_path / "out")
     assert res.returncode == 2 and "does not hold CamVid's 367 training images" in res.stderr, res.stderr
     assert not (tmp_path / "out").exists()
