@@ -88,10 +88,11 @@ if [ ! -s "$OUT/mix/report.json" ]; then
     step "the student dataset (at $DATASET)"
     src=$(source_of $DATASET)
     rm -rf "$OUT/mix"
-    (cd "$src" && "$PYTHON" studies/real-roads/student.py --raw "$RAW" --autolabels "$OUT/autolabels-look" \
-        --splits studies/real-roads/splits-raw --frames "$FRAMES" --teacher "$OUT/teachers/t0" \
-        --teacher "$OUT/teachers/t1" --teacher "$OUT/teachers/t2" --drive-copies 3 --carry --complete \
-        --release 0.1 --release-far 0.4 --look 0.45,0.70 --out "$OUT/mix")
+    # PYTHONPATH: a script's folder, not the working one, heads sys.path; freespace must be the commit's, not the venv's
+    (cd "$src" && PYTHONPATH=$src "$PYTHON" studies/real-roads/student.py --raw "$RAW" \
+        --autolabels "$OUT/autolabels-look" --splits studies/real-roads/splits-raw --frames "$FRAMES" \
+        --teacher "$OUT/teachers/t0" --teacher "$OUT/teachers/t1" --teacher "$OUT/teachers/t2" --drive-copies 3 \
+        --carry --complete --release 0.1 --release-far 0.4 --look 0.45,0.70 --out "$OUT/mix")
 fi
 got=$("$PYTHON" -c 'import json, sys; print(json.load(open(sys.argv[1]))["labels_sha256"])' "$OUT/mix/report.json")
 if [ "$got" = "$LABELS_SHA" ]; then
