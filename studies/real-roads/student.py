@@ -192,11 +192,14 @@ def labels_sha256(label: Path) -> str:
     return digest.hexdigest()
 
 
-def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: list[Path], out: Path,
-          prefix: str = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
+Band = tuple[float, float]
+
+
+def build(raw: Path, autolabels: Path, splits: Path, frames: Path | list[Path], teachers: list[Path], out: Path,
+          prefix: str | list[str] = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
           drive_teachers: list[Path] | None = None, drive_teacher_first: bool = False,
           complete: bool = False, carry: bool = False, release: tuple[float, float] = (0.0, 1.0),
-          look: tuple[float, float] | None = None) -> dict[str, object]:
+          look: Band | list[Band | None] | None = None) -> dict[str, object]:
     """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
     (a new folder); return the report. ``drive_copies``: each training frame of the drives is listed this many
     times (``<name>-c1``, ...: each copy draws its own augmentation), to weigh the drives against the other
@@ -208,35 +211,53 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
     the road, :func:`frame_classes`). ``carry``: the confident labels are first carried
     along time within each sequence (:func:`frame_classes`). ``look``: the teachers' road of another look made
     don't care last (:func:`frame_classes`; the drives' labels are look-checked by ``freespace autolabel
-    --look-from`` before they come here)."""
+    --look-from`` before they come here). Several folders of unlabelled frames may be given (``frames`` a list),
+    each with its own ``prefix`` and ``look`` band (a list, one per folder; one band alone applies to all): each
+    folder is labelled on its own (its sequences carried and look-checked within it) and the report gives each
+    folder's shares."""
+    folders = frames if isinstance(frames, list) else [frames]
+    prefixes = prefix if isinstance(prefix, list) else [prefix]
+    bands = look if isinstance(look, list) else [look] * len(folders)
+    if not len(folders) == len(prefixes) == len(bands):
+        raise SystemExit("give one --prefix (and one --look, or a single one for all) per --frames folder")
     if out.exists():
         raise SystemExit(f"{out} exists; give a new folder")
     lists: dict[str, list[str]] = {"train": [], "val": [], "test": []}
     link_drives(raw, autolabels, splits, out, lists, drive_copies)
     filled = fill_drives(out, list(lists["train"]), _sessions(drive_teachers), threshold,
                          drive_teacher_first) if drive_teachers else None
-    confident, road = [], []
-    paths = sorted(p for p in frames.iterdir() if p.suffix.lower() == ".png")
-    classes, carried = frame_classes(paths, _sessions(teachers), threshold, complete, carry, release, look)
-    for path, frame in zip(paths, classes):
-        label = np.zeros((*frame.shape, 3), np.uint8)
-        label[frame == 1], label[frame == 0] = ROAD_BGR, NON_ROAD_BGR
-        name = f"{prefix}-{path.stem}"
-        _link(path, out / "left" / f"{name}.png")
-        cv2.imwrite(str(out / "label" / f"{name}.png"), label)
-        confident.append(float(label.any(2).mean()))
-        road.append(float((label[..., 0] == 255).mean()))
-        lists["train"].append(name)
+    sessions, confident, road, sets, carried = _sessions(teachers), [], [], [], {}
+    for folder, name_prefix, band in zip(folders, prefixes, bands):
+        paths = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".png")
+        classes, record = frame_classes(paths, sessions, threshold, complete, carry, release, band)
+        carried = carried if record is None else {**carried, **record}
+        shares = []
+        for path, frame in zip(paths, classes):
+            label = np.zeros((*frame.shape, 3), np.uint8)
+            label[frame == 1], label[frame == 0] = ROAD_BGR, NON_ROAD_BGR
+            name = f"{name_prefix}-{path.stem}"
+            _link(path, out / "left" / f"{name}.png")
+            cv2.imwrite(str(out / "label" / f"{name}.png"), label)
+            shares.append((float(label.any(2).mean()), float((label[..., 0] == 255).mean())))
+            lists["train"].append(name)
+        confident += [c for c, _ in shares]
+        road += [r for _, r in shares]
+        sets.append({"frames": str(folder), "prefix": name_prefix, "count": len(shares),
+                     "look_band": list(band) if band else None,
+                     "confident_share": float(np.mean([c for c, _ in shares])) if shares else 0.0,
+                     "road_share": float(np.mean([r for _, r in shares])) if shares else 0.0})
     (out / "freespace.yaml").write_text("left: left\nlabel: label\nlabel_encoding: kitti\n")
     (out / "splits").mkdir()
     for part, names in lists.items():
         (out / "splits" / f"{part}.txt").write_text("".join(f"{n}\n" for n in names))
-    report = {"teachers": [str(t) for t in teachers], "threshold": threshold, "frames": str(frames),
+    report = {"teachers": [str(t) for t in teachers], "threshold": threshold,
+              "frames": str(frames) if not isinstance(frames, list) else [str(f) for f in frames],
               "counts": {k: len(v) for k, v in lists.items()}, "teacher_frames": len(road),
               "drive_copies": drive_copies, "drive_teachers": [str(t) for t in drive_teachers or []],
               "drives_filled": filled, "completed_by_appearance": complete,
-              "released": list(release) if complete else None, "carried_along_time": carried,
-              "look_band": list(look) if look else None,
+              "released": list(release) if complete else None, "carried_along_time": carried if carry else None,
+              "look_band": [list(b) if b else None for b in look] if isinstance(look, list)
+              else (list(look) if look else None), "sets": sets,
               "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road)),
               "labels_sha256": labels_sha256(out / "label")}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
@@ -245,10 +266,12 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path, teachers: lis
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for name in ("raw", "autolabels", "splits", "frames", "out"):
+    for name in ("raw", "autolabels", "splits", "out"):
         ap.add_argument(f"--{name}", type=Path, required=True)
+    ap.add_argument("--frames", type=Path, action="append", required=True,
+                    help="a folder of unlabelled frames (.png); repeat for several, each with its --prefix")
     ap.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder (model.onnx)")
-    ap.add_argument("--prefix", default="camvid")
+    ap.add_argument("--prefix", action="append", help="the frames' name prefix, one per --frames (camvid)")
     ap.add_argument("--threshold", type=float, default=THRESHOLD)
     ap.add_argument("--drive-copies", type=int, default=1, help="list each training frame of the drives N times")
     ap.add_argument("--drive-teacher", type=Path, action="append", default=[],
@@ -264,7 +287,7 @@ def main() -> None:
                          "height of the teacher's road (0: none)")
     ap.add_argument("--release-far", type=float, default=1.0, metavar="F",
                     help="... only in the top F share of the road's rows (1: all)")
-    ap.add_argument("--look", type=parse_band, metavar="LO,HI",
+    ap.add_argument("--look", type=parse_band, metavar="LO,HI", action="append",
                     help="the teachers' road of another look made don't care, each sequence's road look learnt from "
                          "its labels with the lane ahead in columns LO–HI (CamVid drives on the left: 0.45,0.70)")
     a = ap.parse_args()
@@ -272,9 +295,13 @@ def main() -> None:
         ap.error("--release needs --complete")
     if a.drive_teacher_first and not a.drive_teacher:
         ap.error("--drive-teacher-first needs --drive-teacher MODEL")
-    print(json.dumps(build(a.raw, a.autolabels, a.splits, a.frames, a.teacher, a.out, a.prefix, a.threshold,
+    frames = a.frames[0] if len(a.frames) == 1 else a.frames
+    prefix = a.prefix or ["camvid"] * len(a.frames)
+    look = a.look[0] if a.look and len(a.look) == 1 else a.look
+    print(json.dumps(build(a.raw, a.autolabels, a.splits, frames, a.teacher, a.out,
+                           prefix[0] if len(prefix) == 1 else prefix, a.threshold,
                            a.drive_copies, a.drive_teacher, a.drive_teacher_first, a.complete, a.carry,
-                           (a.release, a.release_far), a.look)))
+                           (a.release, a.release_far), look)))
 
 
 if __name__ == "__main__":

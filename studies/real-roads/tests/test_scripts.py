@@ -284,6 +284,39 @@ def test_student_labels_the_teacher_s_confident_road_beside_the_drives(tmp_path:
         "2011_09_26_drive_0001_sync-0000000000", "2011_09_26_drive_0001_sync-0000000000-c1", "camvid-a"]
 
 
+def test_student_labels_several_frame_folders_each_with_its_prefix(tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    import cv2
+    import numpy as np
+
+    student = _load("student")
+    drive = tmp_path / "raw" / "2011_09_26" / "2011_09_26_drive_0001_sync" / "image_02" / "data"
+    drive.mkdir(parents=True)
+    (tmp_path / "al" / "2011_09_26_drive_0001_sync").mkdir(parents=True)
+    for frame in ("0000000000", "0000000001"):
+        (drive / f"{frame}.png").write_bytes(b"png")
+        (tmp_path / "al" / "2011_09_26_drive_0001_sync" / f"{frame}.png").write_bytes(b"label")
+    splits = _one_train_one_val(tmp_path)
+    folders = [tmp_path / "city", tmp_path / "highway"]
+    for folder, rows in zip(folders, (18, 9)):  # the city's road the lower half, the highway's the lower three quarters
+        folder.mkdir()
+        image = np.zeros((36, 48, 3), np.uint8)
+        image[rows:] = (40, 40, 240)
+        cv2.imwrite(str(folder / "f_000.png"), image)
+    monkeypatch.setattr(student, "_sessions", lambda teachers: [(_RedIsRoad(), (16, 24))])
+    report = student.build(tmp_path / "raw", tmp_path / "al", splits, folders, [tmp_path / "t"], tmp_path / "mix",
+                           prefix=["camvid", "highway"])
+    assert (tmp_path / "mix" / "splits" / "train.txt").read_text().split() == [
+        "2011_09_26_drive_0001_sync-0000000000", "camvid-f_000", "highway-f_000"]
+    assert report["teacher_frames"] == 2 and [s["prefix"] for s in report["sets"]] == ["camvid", "highway"]
+    city, highway = report["sets"]
+    assert 0.4 < city["road_share"] < 0.6 and 0.65 < highway["road_share"] < 0.85
+    assert report["road_share"] == pytest.approx((city["road_share"] + highway["road_share"]) / 2)
+    with pytest.raises(SystemExit, match="one --prefix"):
+        student.build(tmp_path / "raw", tmp_path / "al", splits, folders, [tmp_path / "t"], tmp_path / "mix2")
+    assert not (tmp_path / "mix2").exists()  # refused before anything is written
+
+
 def test_student_fills_the_drives_don_t_care_with_the_drive_teacher_s_confident_labels(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import cv2
