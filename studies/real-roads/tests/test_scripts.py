@@ -474,3 +474,53 @@ def test_rebuild_pins_what_the_model_card_names() -> None:
     for h in hashes[:3]:
         assert f"`{h[:16]}…`" in card
     assert hashes[3] in card
+
+
+def test_errors_puts_the_false_road_on_its_class_and_the_missed_road_in_its_place() -> None:
+    import numpy as np
+
+    errors = _load("errors")
+    raw = np.zeros((30, 40, 3), np.uint8)
+    raw[:] = errors.CITYSCAPES["sky"]
+    raw[10:] = errors.CITYSCAPES["road"]
+    raw[10:, 30:] = errors.CITYSCAPES["sidewalk"]
+    raw[20:25, 0:4] = (5, 3, 140)  # a car, its colour blended as a scaled frame's edges are
+    classes, names = errors.class_names(raw)
+    assert names[classes[22, 1]] == "car" and names[classes[0, 0]] == "sky"
+    road = (classes == names.index("road"))
+    valid = np.ones_like(road)
+    pred = road.copy()
+    pred[10:13] = False  # the far road (rows 10-16 are the top third of the road's rows 10-29) partly missed
+    pred[15:29, :8] = False  # the road around the car missed
+    pred[25:, 30:] = True  # the pavement taken for road
+    counts = {"fp": {}, "road": {}, "missed": {}, "tp": {}}
+    errors.tally(pred, road, valid, classes, names, 0.1, counts)  # beside: within 3 rows/columns of the car
+    s = errors.summary(counts)
+    assert s["false_road_by_class"] == {"sidewalk": 1.0} and s["false_road_pixels"] == 5 * 10
+    where = errors.places(road, classes, names, 0.1)
+    assert where[10, 20] == 1 and where[20, 20] == 2 and where[22, 6] == 0 and where[22, 8] == 2
+    beside = s["missed_road_by_place"]["beside a vehicle"]
+    assert beside["recall"] == 0.0  # every road pixel within 3 of the car is in the missed block
+    assert 0 < s["missed_road_by_place"]["far"]["recall"] < 1 and s["missed_road_by_place"]["elsewhere"]["recall"] > 0.9
+    assert sum(v["share"] for v in s["missed_road_by_place"].values()) == pytest.approx(1.0)
+    assert s["recall"] == pytest.approx(counts["tp"]["all"] / road.sum())
+
+
+def test_errors_reads_camvid_ids() -> None:
+    import numpy as np
+
+    errors = _load("errors")
+    classes, names = errors.class_names(np.array([[3, 4], [8, 200]], np.uint8))
+    assert [names[i] for i in classes.ravel()] == ["road", "pavement", "car", "void"]
+
+
+def test_errors_refuses_a_missing_model_in_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    errors = _load("errors")
+    for model, said in ((f"m={tmp_path / 'none.onnx'}", "no such file"), ("m", "NAME=PATH")):
+        monkeypatch.setattr(sys, "argv", ["errors.py", "--real-dev", str(tmp_path), "--model", model,
+                                          "--out", str(tmp_path / "e.json")])
+        with pytest.raises(SystemExit) as exit_:
+            errors.main()
+        assert exit_.value.code == 2 and said in capsys.readouterr().err
+    assert not (tmp_path / "e.json").exists()

@@ -1,0 +1,153 @@
+"""Where a road model's errors lie on the labelled development frames (issue 70's two diagnoses, measured).
+
+The false road by the human class it falls on (pavement, parking, terrain, ...), and the missed road by place:
+**beside a vehicle** (within ``--near`` × the frame's height of a car, truck, bus or cyclist of the human labels),
+**far** (in the top third of the rows the frame's human road spans), or **elsewhere**; each place's share of the
+missed road and the recall of the road there. The sets and their road are ``bench/real_bench.py``'s (KITTI's other
+streets, Cityscapes colours; CamVid ``val`` and dusk, class ids); a pixel's class is the nearest listed colour (the
+KITTI frames were scaled, blending colours at class edges) or its id. Labels are for measuring only.
+
+    .venv/bin/python studies/real-roads/errors.py --real-dev DEV --model NAME=PATH [--model ...] \\
+        [--threshold 0.5] [--near 0.03] [--threads N] --out errors.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))
+import real_bench  # noqa: E402  (the bench's sets, so that the road and the scores are the bench's)
+from freespace.evaluation.labelled import read_label_image  # noqa: E402
+
+#: Cityscapes' colours (RGB) of the classes KITTI's semantics frames use
+CITYSCAPES = {"road": (128, 64, 128), "sidewalk": (244, 35, 232), "parking": (250, 170, 160),
+              "rail track": (230, 150, 140), "building": (70, 70, 70), "wall": (102, 102, 156),
+              "fence": (190, 153, 153), "bridge": (150, 100, 100), "pole": (153, 153, 153),
+              "traffic light": (250, 170, 30), "traffic sign": (220, 220, 0), "vegetation": (107, 142, 35),
+              "terrain": (152, 251, 152), "sky": (70, 130, 180), "person": (220, 20, 60), "rider": (255, 0, 0),
+              "car": (0, 0, 142), "truck": (0, 0, 70), "bus": (0, 60, 100), "train": (0, 80, 100),
+              "motorcycle": (0, 0, 230), "bicycle": (119, 11, 32), "void": (0, 0, 0)}
+#: CamVid's class ids (SegNet's 11 classes, 11 void)
+CAMVID = ("sky", "building", "pole", "road", "pavement", "tree", "sign", "fence", "car", "pedestrian", "bicyclist",
+          "void")
+VEHICLES = {"car", "truck", "bus", "train", "motorcycle", "bicycle", "rider", "bicyclist"}
+PLACES = ("beside a vehicle", "far", "elsewhere")
+
+
+def class_names(raw: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
+    """A label image's classes: ``(H×W int index, names)``. ``H×W×3`` RGB: the nearest Cityscapes colour;
+    ``H×W``: CamVid's ids (an id past the list: void)."""
+    if raw.ndim == 2:
+        return np.minimum(raw.astype(np.int64), len(CAMVID) - 1), CAMVID
+    rgb = raw.astype(np.int32)
+    best, index = np.full(raw.shape[:2], np.iinfo(np.int32).max), np.zeros(raw.shape[:2], np.int64)
+    for i, colour in enumerate(CITYSCAPES.values()):
+        distance = np.abs(rgb - np.array(colour, np.int32)).sum(2)
+        index[distance < best], best = i, np.minimum(best, distance)
+    return index, tuple(CITYSCAPES)
+
+
+def places(road: np.ndarray, classes: np.ndarray, names: tuple[str, ...], near: float) -> np.ndarray:
+    """Each pixel's place (``H×W int``, an index of :data:`PLACES`): beside a vehicle (within ``near`` × the height
+    of one, a square neighbourhood), else far (the top third of the rows ``road`` spans), else elsewhere."""
+    h = road.shape[0]
+    out = np.full(road.shape, 2, np.int64)
+    rows = np.flatnonzero(road.any(1))
+    if rows.size:
+        out[: rows[0] + (rows[-1] - rows[0] + 1) // 3] = 1
+    vehicle = np.isin(classes, [i for i, n in enumerate(names) if n in VEHICLES]).astype(np.uint8)
+    r = max(1, round(near * h))
+    out[cv2.dilate(vehicle, np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0] = 0
+    return out
+
+
+def tally(pred: np.ndarray, road: np.ndarray, valid: np.ndarray, classes: np.ndarray, names: tuple[str, ...],
+          near: float, into: dict[str, dict[str, int]]) -> None:
+    """Add one frame's counts to ``into``: ``fp`` (false road pixels by class name), ``road`` and ``missed`` (road
+    pixels and missed ones by place), ``tp``. ``pred``, ``road``, ``valid``: ``H×W bool``."""
+    fp = pred & ~road & valid
+    for i in np.unique(classes[fp]):
+        into["fp"][names[i]] = into["fp"].get(names[i], 0) + int((fp & (classes == i)).sum())
+    where = places(road & valid, classes, names, near)
+    truth = road & valid
+    for i, place in enumerate(PLACES):
+        into["road"][place] = into["road"].get(place, 0) + int((truth & (where == i)).sum())
+        into["missed"][place] = into["missed"].get(place, 0) + int((truth & ~pred & (where == i)).sum())
+    into["tp"]["all"] = into["tp"].get("all", 0) + int((truth & pred).sum())
+
+
+def summary(counts: dict[str, dict[str, int]]) -> dict[str, object]:
+    """Precision, recall, F (pooled); each class's share of the false road (largest first); each place's share of
+    the missed road and the recall there. Shares and figures in [0, 1]."""
+    tp, fp = counts["tp"].get("all", 0), sum(counts["fp"].values())
+    fn, total = sum(counts["missed"].values()), sum(counts["road"].values())
+    p, r = tp / max(tp + fp, 1), tp / max(total, 1)
+    return {"precision": p, "recall": r, "f_score": 2 * p * r / max(p + r, 1e-12), "false_road_pixels": fp,
+            "missed_road_pixels": fn,
+            "false_road_by_class": {k: v / max(fp, 1) for k, v in sorted(counts["fp"].items(), key=lambda x: -x[1])},
+            "missed_road_by_place": {k: {"share": counts["missed"][k] / max(fn, 1),
+                                         "road_share": counts["road"][k] / max(total, 1),
+                                         "recall": 1 - counts["missed"][k] / max(counts["road"][k], 1)}
+                                     for k in PLACES}}
+
+
+def run(models: dict[str, Path], real_dev: Path, threshold: float, near: float, threads: int | None
+        ) -> dict[str, dict[str, object]]:
+    """Every model on KITTI's other streets, CamVid ``val`` and dusk → ``{set: {model: summary}}``."""
+    from freespace.evaluation.labelled import pair_labelled_frames
+
+    out: dict[str, dict[str, object]] = {}
+    for s in real_bench.SETS:
+        if s.root != "real_dev" or not (real_dev / s.labels).is_dir():
+            continue
+        frames = pair_labelled_frames(real_dev / s.images, real_dev / s.labels, s.label_format)
+        out[s.name] = {}
+        for name, path in models.items():
+            predictor = real_bench._predictor(path, threads)
+            counts: dict[str, dict[str, int]] = {"fp": {}, "road": {}, "missed": {}, "tp": {}}
+            for frame in frames:
+                image, label = frame.read(s.label_format)
+                if not label.valid.any():
+                    continue
+                classes, names = class_names(read_label_image(frame.label))
+                pred = predictor.predict([image])[0] >= threshold
+                tally(pred, label.road, label.valid, classes, names, near, counts)
+            out[s.name][name] = summary(counts)
+            print(f"{s.name} {name}: F {100 * out[s.name][name]['f_score']:.2f}", flush=True)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--real-dev", type=Path, required=True, help="the development sets (real_dev/make.sh's DEST)")
+    ap.add_argument("--model", action="append", required=True, metavar="NAME=PATH",
+                    help="an ONNX model or a training checkpoint; repeatable")
+    ap.add_argument("--threshold", type=float, default=0.5)
+    ap.add_argument("--near", type=float, default=0.03, help="beside a vehicle: within this × the frame's height")
+    ap.add_argument("--threads", type=int)
+    ap.add_argument("--out", type=Path, required=True)
+    a = ap.parse_args()
+    if not a.real_dev.is_dir():
+        ap.error(f"--real-dev {a.real_dev} is not a folder; lay the sets out with shared/data/real_dev/make.sh")
+    if any("=" not in m for m in a.model):
+        ap.error("--model takes NAME=PATH")
+    models = {k: Path(v) for k, v in (m.split("=", 1) for m in a.model)}
+    for name, path in models.items():
+        if not path.is_file():
+            ap.error(f"--model {name}={path}: no such file")
+    res = {"threshold": a.threshold, "near": a.near, "models": {k: str(v) for k, v in models.items()},
+           "sets": run(models, a.real_dev, a.threshold, a.near, a.threads)}
+    tmp = a.out.with_name(a.out.name + ".part")
+    tmp.write_text(json.dumps(res, indent=1) + "\n")
+    tmp.replace(a.out)
+
+
+if __name__ == "__main__":
+    main()
