@@ -3,9 +3,10 @@
 The false road by the human class it falls on (pavement, parking, terrain, ...), and the missed road by place:
 **beside a vehicle** (within ``--near`` × the frame's height of a car, truck, bus or cyclist of the human labels),
 **far** (in the top third of the rows the frame's human road spans), or **elsewhere**; each place's share of the
-missed road and the recall of the road there. The sets and their road are ``bench/real_bench.py``'s (KITTI's other
-streets, Cityscapes colours; CamVid ``val`` and dusk, class ids); a pixel's class is the nearest listed colour (the
-KITTI frames were scaled, blending colours at class edges) or its id. Labels are for measuring only.
+missed road and the recall of the road there. The sets and their road are read as ``bench/real_bench.py`` reads
+them (KITTI's other streets, Cityscapes colours; CamVid ``val`` and dusk, class ids); a pixel's class is the nearest
+listed colour (the KITTI frames were scaled, blending colours at class edges) or its id. Labels are for measuring
+only.
 
     .venv/bin/python studies/real-roads/errors.py --real-dev DEV --model NAME=PATH [--model ...] \\
         [--threshold 0.5] [--near 0.03] [--threads N] --out errors.json
@@ -15,16 +16,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "bench"))
-import real_bench  # noqa: E402  (the bench's sets, so that the road and the scores are the bench's)
-from freespace.evaluation.labelled import read_label_image  # noqa: E402
+from freespace.evaluation.labelled import pair_labelled_frames, parse_label_format, read_label_image
+
+#: the labelled development sets as ``bench/real_bench.py`` reads them: name, images, labels (under real_dev/make.sh's
+#: DEST), the label format
+SETS = (("kitti_dev", "kitti_dev/images", "kitti_dev/masks", parse_label_format("palette", "128,64,128")),
+        ("camvid_val", "camvid/val", "camvid/valannot", parse_label_format("class-id", "3", "11")),
+        ("camvid_dusk", "camvid/train", "camvid/duskannot", parse_label_format("class-id", "3", "11")))
 
 #: Cityscapes' colours (RGB) of the classes KITTI's semantics frames use
 CITYSCAPES = {"road": (128, 64, 128), "sidewalk": (244, 35, 232), "parking": (250, 170, 160),
@@ -100,27 +103,28 @@ def summary(counts: dict[str, dict[str, int]]) -> dict[str, object]:
 
 def run(models: dict[str, Path], real_dev: Path, threshold: float, near: float, threads: int | None
         ) -> dict[str, dict[str, object]]:
-    """Every model on KITTI's other streets, CamVid ``val`` and dusk → ``{set: {model: summary}}``."""
-    from freespace.evaluation.labelled import pair_labelled_frames
+    """Every model on KITTI's other streets, CamVid ``val`` and dusk (those here) → ``{set: {model: summary}}``."""
+    from freespace.inference.predictor import Predictor
 
     out: dict[str, dict[str, object]] = {}
-    for s in real_bench.SETS:
-        if s.root != "real_dev" or not (real_dev / s.labels).is_dir():
+    predictors = {name: Predictor(onnx=path, threads=threads) if path.suffix == ".onnx" else Predictor(checkpoint=path)
+                  for name, path in models.items()}
+    for set_name, images, labels, label_format in SETS:
+        if not (real_dev / labels).is_dir():
             continue
-        frames = pair_labelled_frames(real_dev / s.images, real_dev / s.labels, s.label_format)
-        out[s.name] = {}
-        for name, path in models.items():
-            predictor = real_bench._predictor(path, threads)
+        frames = pair_labelled_frames(real_dev / images, real_dev / labels, label_format)
+        out[set_name] = {}
+        for name, predictor in predictors.items():
             counts: dict[str, dict[str, int]] = {"fp": {}, "road": {}, "missed": {}, "tp": {}}
             for frame in frames:
-                image, label = frame.read(s.label_format)
+                image, label = frame.read(label_format)
                 if not label.valid.any():
                     continue
                 classes, names = class_names(read_label_image(frame.label))
                 pred = predictor.predict([image])[0] >= threshold
                 tally(pred, label.road, label.valid, classes, names, near, counts)
-            out[s.name][name] = summary(counts)
-            print(f"{s.name} {name}: F {100 * out[s.name][name]['f_score']:.2f}", flush=True)
+            out[set_name][name] = summary(counts)
+            print(f"{set_name} {name}: F {100 * out[set_name][name]['f_score']:.2f}", flush=True)
     return out
 
 
