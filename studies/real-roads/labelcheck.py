@@ -157,12 +157,15 @@ def labels_of(source: str, images: list[np.ndarray], probs: list[np.ndarray],
 def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
                  sources: tuple[str, ...] = ("confident",),
                  release: tuple[float, float] = (0.0, 1.0),
-                 look: tuple[float, float] | None = None) -> dict[str, dict[str, float]]:
+                 look: tuple[float, float] | None = None,
+                 opening: tuple[float, float] | None = None) -> dict[str, dict[str, float]]:
     """The CamVid labels of ``teachers`` (light normalised), ``raw_teachers`` (as they are) and the mean of all
     models, on ``val`` and the dusk frames under ``camvid`` (``make.sh``'s layout; each set one sequence in time
     order: ``val`` 15 frames a second, dusk one), each made by every label ``sources`` (:data:`SOURCES`; other than
     ``confident``, named ``name / source``; ``release``: :func:`labels_of`'s; ``look``: each also after the
-    road-look veto with the lane ahead in that band of columns, named ``... + look``)."""
+    road-look veto with the lane ahead in that band of columns, named ``... + look``; ``opening``: each of those
+    also with the teachers' confident not road near their road left don't care, ``student.py --open``, named
+    ``... + open``)."""
     normalised, raw = student._sessions(teachers), student._sessions(raw_teachers)
     sums: dict[str, np.ndarray] = {}
     for part, folder, masks in (("val", "val", "valannot"), ("dusk", "train", "duskannot")):
@@ -183,6 +186,10 @@ def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
                 made = {key: labels_of(source, images, probs, release)}
                 if look is not None:
                     made[f"{key} + look"] = looked(images, made[key], look)
+                if opening is not None:
+                    made.update({f"{k} + open": [_kitti_colours(student.opened(_classes(x), p, student.THRESHOLD,
+                                                                                opening)) for x, p in zip(v, probs)]
+                                 for k, v in list(made.items())})
                 for k, labels in made.items():
                     for label, human in zip(labels, classes):
                         sums[k] = sums.get(k, 0) + count(label, human == CAMVID_ROAD, human != CAMVID_VOID)
@@ -192,9 +199,13 @@ def check_camvid(teachers: list[Path], raw_teachers: list[Path], camvid: Path,
 def looked(images: list[np.ndarray], labels: list[np.ndarray], band: tuple[float, float]) -> list[np.ndarray]:
     """KITTI-colour ``labels`` (BGR) of one sequence's ``images`` after the road-look veto (``student.py --look``,
     the lane ahead in ``band``): its road of another look made don't care."""
-    classes = [np.where((label == student.ROAD_BGR).all(2), 1, np.where((label == student.NON_ROAD_BGR).all(2), 0, 255))
-               .astype(np.uint8) for label in labels]
-    return [_kitti_colours(c) for c in student.looked(images, classes, band)]
+    return [_kitti_colours(c) for c in student.looked(images, [_classes(x) for x in labels], band)]
+
+
+def _classes(label: np.ndarray) -> np.ndarray:
+    """A KITTI-colour label (``H×W×3`` BGR) as a class map (1 road, 0 not road, 255 don't care)."""
+    return np.where((label == student.ROAD_BGR).all(2), 1, np.where((label == student.NON_ROAD_BGR).all(2), 0, 255)
+                    ).astype(np.uint8)
 
 
 def check_kitti_dev(teachers: list[Path], kitti_dev: Path, sources: tuple[str, ...] = ("confident",),
@@ -239,6 +250,10 @@ def main() -> None:
     c.add_argument("--look", type=student.parse_band, metavar="LO,HI",
                    help="also each source after the road-look veto, the lane ahead in columns LO–HI (fractions of "
                         "the width; CamVid drives on the left: 0.45,0.70)")
+    c.add_argument("--open", type=float, default=0.0, metavar="R",
+                   help="also each label with the confident not road within R × the image height of the teachers' "
+                        "road left don't care (student.py --open)")
+    c.add_argument("--open-far", type=float, default=1.0, metavar="F", help="... only in the top F share of its rows")
     d = sub.add_parser("kittidev", help="a teacher's labels on the 22 KITTI frames of other streets")
     d.add_argument("--kitti-dev", type=Path, required=True, help="make.sh's kitti_dev folder")
     d.add_argument("--teacher", type=Path, action="append", required=True, help="a model folder, frames as they are")
@@ -265,7 +280,8 @@ def main() -> None:
         sources = tuple(a.sources.split(","))
         if not set(sources) <= set(SOURCES):
             ap.error(f"--sources takes {', '.join(SOURCES)}")
-        result = check_camvid(a.teacher, a.raw_teacher, a.camvid, sources, (a.release, a.release_far), a.look)
+        result = check_camvid(a.teacher, a.raw_teacher, a.camvid, sources, (a.release, a.release_far), a.look,
+                              (a.open, a.open_far) if a.open else None)
     print(json.dumps(result, indent=1))
 
 

@@ -128,15 +128,16 @@ def fill_drives(out: Path, names: list[str], sessions: list[tuple[object, tuple[
 
 def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int]]], threshold: float = THRESHOLD,
                   complete: bool = False, carry: bool = False,
-                  release: tuple[float, float] = (0.0, 1.0), look: tuple[float, float] | None = None
-                  ) -> tuple[list[np.ndarray], dict[str, object] | None]:
+                  release: tuple[float, float] = (0.0, 1.0), look: tuple[float, float] | None = None,
+                  opening: tuple[float, float] | None = None) -> tuple[list[np.ndarray], dict[str, object] | None]:
     """The teachers' class maps (``uint8 H×W``: 1 road, 0 not road, 255 don't care) of the frames at ``paths``:
     the confident label, carried along time with ``carry`` (frames grouped into sequences by the name before its
     last ``_``, CamVid's ``0016E5_07959``, in name order; :func:`freespace.datagen.temporal.carry_along` with
     labelcheck's settings), then completed by appearance with ``complete`` (``release``: the distance and far
     share of :func:`freespace.datagen.completion.released_seeds`, the confident not road near the road the graph cut
     may relabel), then with ``look`` the road of another look made don't care (each sequence's road look learnt from
-    its own labels, the lane ahead in that band of columns: :func:`freespace.datagen.road_look.look_veto_frames`).
+    its own labels, the lane ahead in that band of columns: :func:`freespace.datagen.road_look.look_veto_frames`),
+    last with ``opening`` the teachers' confident not road near their road left open (:func:`opened`).
     Also the carrying's record per sequence (``None`` without ``carry``)."""
     from freespace.datagen.completion import complete_by_appearance, confident_label
     from freespace.datagen.temporal import CarryOptions, carry_along
@@ -162,7 +163,22 @@ def frame_classes(paths: list[Path], sessions: list[tuple[object, tuple[int, int
         for idx in groups.values():
             for i, c in zip(idx, looked([images[i] for i in idx], [classes[i] for i in idx], look)):
                 classes[i] = c
+    if opening is not None:
+        classes = [opened(c, prob, threshold, opening) for c, prob in zip(classes, probs)]
     return classes, record
+
+
+def opened(classes: np.ndarray, prob: np.ndarray, threshold: float, opening: tuple[float, float]) -> np.ndarray:
+    """A class map (``uint8 H×W``: 1 road, 0 not road, 255 don't care) whose not road is made don't care where the
+    teachers' mean road probability ``prob`` (``H×W``) was confidently not road within ``opening[0]`` × the image
+    height of their road, in the top ``opening[1]`` share of its rows
+    (:func:`freespace.datagen.completion.released_seeds`): the lanes beside the cars and the road's far end, which
+    the teachers call not road confidently and wrongly a third of the time, left to the student instead of taught as
+    not road (issue 70)."""
+    from freespace.datagen.completion import confident_label, released_seeds
+
+    near = released_seeds(confident_label(prob, threshold), prob, *opening)
+    return np.where(near & (classes == 0), 255, classes).astype(np.uint8)
 
 
 def looked(images: list[np.ndarray], classes: list[np.ndarray], band: tuple[float, float]) -> list[np.ndarray]:
@@ -199,7 +215,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path | list[Path], 
           prefix: str | list[str] = "camvid", threshold: float = THRESHOLD, drive_copies: int = 1,
           drive_teachers: list[Path] | None = None, drive_teacher_first: bool = False,
           complete: bool = False, carry: bool = False, release: tuple[float, float] = (0.0, 1.0),
-          look: Band | list[Band | None] | None = None) -> dict[str, object]:
+          look: Band | list[Band | None] | None = None, opening: Band | None = None) -> dict[str, object]:
     """Write the links, the teacher's labels, ``freespace.yaml``, ``splits/`` and ``report.json`` under ``out``
     (a new folder); return the report. ``drive_copies``: each training frame of the drives is listed this many
     times (``<name>-c1``, ...: each copy draws its own augmentation), to weigh the drives against the other
@@ -214,7 +230,8 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path | list[Path], 
     --look-from`` before they come here). Several folders of unlabelled frames may be given (``frames`` a list),
     each with its own ``prefix`` and ``look`` band (a list, one per folder; one band alone applies to all): each
     folder is labelled on its own (its sequences carried and look-checked within it) and the report gives each
-    folder's shares."""
+    folder's shares. ``opening``: the teachers' confident not road near their road left don't care (:func:`opened`;
+    the distance and far share)."""
     folders = frames if isinstance(frames, list) else [frames]
     prefixes = prefix if isinstance(prefix, list) else [prefix]
     bands = look if isinstance(look, list) else [look] * len(folders)
@@ -229,7 +246,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path | list[Path], 
     sessions, confident, road, sets, carried = _sessions(teachers), [], [], [], {}
     for folder, name_prefix, band in zip(folders, prefixes, bands):
         paths = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".png")
-        classes, record = frame_classes(paths, sessions, threshold, complete, carry, release, band)
+        classes, record = frame_classes(paths, sessions, threshold, complete, carry, release, band, opening)
         carried = carried if record is None else {**carried, **record}
         shares = []
         for path, frame in zip(paths, classes):
@@ -257,7 +274,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path | list[Path], 
               "drives_filled": filled, "completed_by_appearance": complete,
               "released": list(release) if complete else None, "carried_along_time": carried if carry else None,
               "look_band": [list(b) if b else None for b in look] if isinstance(look, list)
-              else (list(look) if look else None), "sets": sets,
+              else (list(look) if look else None), "opened": list(opening) if opening else None, "sets": sets,
               "confident_share": float(np.mean(confident)), "road_share": float(np.mean(road)),
               "labels_sha256": labels_sha256(out / "label")}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
@@ -290,6 +307,11 @@ def main() -> None:
     ap.add_argument("--look", type=parse_band, metavar="LO,HI", action="append",
                     help="the teachers' road of another look made don't care, each sequence's road look learnt from "
                          "its labels with the lane ahead in columns LO–HI (CamVid drives on the left: 0.45,0.70)")
+    ap.add_argument("--open", type=float, default=0.0, metavar="R",
+                    help="leave don't care the teachers' confident not road within R × the image height of their "
+                         "road (0: none), last")
+    ap.add_argument("--open-far", type=float, default=1.0, metavar="F",
+                    help="... only in the top F share of the road's rows (1: all)")
     a = ap.parse_args()
     if a.release and not a.complete:
         ap.error("--release needs --complete")
@@ -301,7 +323,7 @@ def main() -> None:
     print(json.dumps(build(a.raw, a.autolabels, a.splits, frames, a.teacher, a.out,
                            prefix[0] if len(prefix) == 1 else prefix, a.threshold,
                            a.drive_copies, a.drive_teacher, a.drive_teacher_first, a.complete, a.carry,
-                           (a.release, a.release_far), look)))
+                           (a.release, a.release_far), look, (a.open, a.open_far) if a.open else None)))
 
 
 if __name__ == "__main__":

@@ -315,6 +315,28 @@ def test_student_labels_several_frame_folders_each_with_its_prefix(tmp_path: Pat
     with pytest.raises(SystemExit, match="one --prefix"):
         student.build(tmp_path / "raw", tmp_path / "al", splits, folders, [tmp_path / "t"], tmp_path / "mix2")
     assert not (tmp_path / "mix2").exists()  # refused before anything is written
+    assert report["opened"] is None
+    opened = student.build(tmp_path / "raw", tmp_path / "al", splits, folders, [tmp_path / "t"], tmp_path / "mix3",
+                           prefix=["camvid", "highway"], opening=(0.2, 1.0))
+    assert opened["opened"] == [0.2, 1.0] and opened["confident_share"] < report["confident_share"]
+
+
+def test_student_opens_the_confident_not_road_near_the_teacher_s_road() -> None:
+    import numpy as np
+
+    student = _load("student")
+    prob = np.zeros((20, 8), np.float32)
+    prob[10:] = 1  # the teachers' road: the lower half
+    prob[:, 6:] = 0.3  # an unsure strip: don't care in the class map, and not opened
+    classes = np.where(prob > 0.9, 1, np.where(prob < 0.1, 0, 255)).astype(np.uint8)
+    out = student.opened(classes, prob, 0.9, (0.2, 1.0))  # within 4 rows of the road
+    assert (out[6:10, :6] == 255).all() and (out[:6, :6] == 0).all()  # the band above the road opened, not beyond
+    assert (out[10:] == classes[10:]).all() and (out[:, 6:] == classes[:, 6:]).all()
+    beside = np.zeros((20, 8), np.float32)
+    beside[10:, :3] = 1  # road on the left only: the not road right of it, in its top rows, opened
+    c = np.where(beside > 0.9, 1, 0).astype(np.uint8)
+    side = student.opened(c, beside, 0.9, (0.2, 0.5))  # rows from 15 (the road's lower half) stay
+    assert (side[10:15, 3:7] == 255).all() and (side[15:, 3:] == 0).all() and (side[10:15, 7] == 0).all()
 
 
 def test_student_fills_the_drives_don_t_care_with_the_drive_teacher_s_confident_labels(
