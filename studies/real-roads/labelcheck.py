@@ -265,6 +265,8 @@ def main() -> None:
         parser.add_argument("--release-far", type=float, default=1.0, metavar="F",
                             help="... only in the top F share of the road's rows")
     a = ap.parse_args()
+    if not 0 <= getattr(a, "open", 0.0) <= 1 or not 0 < getattr(a, "open_far", 1.0) <= 1:
+        ap.error("--open takes a share of the image height in [0, 1], --open-far a share of rows in (0, 1]")
     if a.check == "kitti2015":
         result = check_kitti2015(a.teacher, a.autolabels, a.kitti2015)
     elif a.check == "look":

@@ -317,6 +317,8 @@ def main() -> None:
         ap.error("--release needs --complete")
     if a.drive_teacher_first and not a.drive_teacher:
         ap.error("--drive-teacher-first needs --drive-teacher MODEL")
+    if not 0 <= getattr(a, "open", 0.0) <= 1 or not 0 < getattr(a, "open_far", 1.0) <= 1:
+        ap.error("--open takes a share of the image height in [0, 1], --open-far a share of rows in (0, 1]")
     frames = a.frames[0] if len(a.frames) == 1 else a.frames
     prefix = a.prefix or ["camvid"] * len(a.frames)
     look = a.look[0] if a.look and len(a.look) == 1 else a.look
