@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from freespace.evaluation.labelled import pair_labelled_frames, parse_label_format, read_label_image
+from freespace.evaluation.metrics import Counts
 
 #: the labelled development sets as ``bench/real_bench.py`` reads them: name, images, labels (under real_dev/make.sh's
 #: DEST), the label format
@@ -76,8 +77,9 @@ def tally(pred: np.ndarray, road: np.ndarray, valid: np.ndarray, classes: np.nda
     """Add one frame's counts to ``into``: ``fp`` (false road pixels by class name), ``road`` and ``missed`` (road
     pixels and missed ones by place), ``tp``. ``pred``, ``road``, ``valid``: ``H×W bool``."""
     fp = pred & ~road & valid
-    for i in np.unique(classes[fp]):
-        into["fp"][names[i]] = into["fp"].get(names[i], 0) + int((fp & (classes == i)).sum())
+    for i, n in enumerate(np.bincount(classes[fp], minlength=len(names))):
+        if n:
+            into["fp"][names[i]] = into["fp"].get(names[i], 0) + int(n)
     where = places(road & valid, classes, names, near)
     truth = road & valid
     for i, place in enumerate(PLACES):
@@ -91,8 +93,8 @@ def summary(counts: dict[str, dict[str, int]]) -> dict[str, object]:
     the missed road and the recall there. Shares and figures in [0, 1]."""
     tp, fp = counts["tp"].get("all", 0), sum(counts["fp"].values())
     fn, total = sum(counts["missed"].values()), sum(counts["road"].values())
-    p, r = tp / max(tp + fp, 1), tp / max(total, 1)
-    return {"precision": p, "recall": r, "f_score": 2 * p * r / max(p + r, 1e-12), "false_road_pixels": fp,
+    scores = Counts(tp=tp, fp=fp, fn=fn).metrics()
+    return {**{k: scores[k] for k in ("precision", "recall", "f_score")}, "false_road_pixels": fp,
             "missed_road_pixels": fn,
             "false_road_by_class": {k: v / max(fp, 1) for k, v in sorted(counts["fp"].items(), key=lambda x: -x[1])},
             "missed_road_by_place": {k: {"share": counts["missed"][k] / max(fn, 1),

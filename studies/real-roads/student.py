@@ -247,7 +247,7 @@ def build(raw: Path, autolabels: Path, splits: Path, frames: Path | list[Path], 
     for folder, name_prefix, band in zip(folders, prefixes, bands):
         paths = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".png")
         classes, record = frame_classes(paths, sessions, threshold, complete, carry, release, band, opening)
-        carried = carried if record is None else {**carried, **record}
+        carried.update(record or {})
         shares = []
         for path, frame in zip(paths, classes):
             label = np.zeros((*frame.shape, 3), np.uint8)
@@ -317,7 +317,7 @@ def main() -> None:
         ap.error("--release needs --complete")
     if a.drive_teacher_first and not a.drive_teacher:
         ap.error("--drive-teacher-first needs --drive-teacher MODEL")
-    if not 0 <= getattr(a, "open", 0.0) <= 1 or not 0 < getattr(a, "open_far", 1.0) <= 1:
+    if not 0 <= a.open <= 1 or not 0 < a.open_far <= 1:
         ap.error("--open takes a share of the image height in [0, 1], --open-far a share of rows in (0, 1]")
     frames = a.frames[0] if len(a.frames) == 1 else a.frames
     prefix = a.prefix or ["camvid"] * len(a.frames)
