@@ -135,7 +135,8 @@ def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) 
             "human_share: 0.0\n", "human_share: 0.0\nimages: null\nlabel_format: null\nlabels_like: null\n"
             "road: null\nignore: null\ntolerance: null\nval_images: null\nval_labels: null\nval_share: 0.2\n"
             "init: null\nfreeze: auto\nteacher: null\nteacher_weight: 1.0\nteacher_pixels: all\n").replace(
-            "- 256\nseed: 0\n", "- 256\nresize: stretch\nseed: 0\n")
+            "- 256\nseed: 0\n", "- 256\nresize: stretch\nseed: 0\n").replace(
+            "\nmomentum:", "\nlr_schedule: constant\nmomentum:")
     # the options added since; the layout's own name for an alias
 
 
@@ -154,6 +155,8 @@ def test_diff_lets_only_the_cap_and_patience_grow(tmp_path: Path) -> None:
     changed, grown = dataclasses.replace(saved, epochs=20, lr=0.01, image_size=(32, 48)).diff(saved)
     assert changed == ["lr 0.001 → 0.01", "image_size [64, 96] → [32, 48]"] and grown == ["epochs"]
     assert saved.diff(dataclasses.replace(saved, image_size=FIRST_FRAME_SIZE)) == (["image_size None → [64, 96]"], [])
+    poly = dataclasses.replace(saved, lr_schedule="poly")  # its decay was laid over its first epochs
+    assert dataclasses.replace(poly, epochs=20, patience=5).diff(poly) == (["epochs 10 → 20"], ["patience"])
 
 
 def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:
@@ -173,7 +176,8 @@ def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:
                        "photometric_strength": "mild", "zoom": 0.0, "dataset": "kitti", "images": None,
                        "label_format": None, "labels_like": None, "road": None, "ignore": None, "tolerance": None,
                        "val_images": None, "val_labels": None, "val_share": 0.2, "init": None, "freeze": "auto",
-                       "teacher": None, "teacher_weight": 1.0, "teacher_pixels": "all", "resize": "stretch"}
+                       "teacher": None, "teacher_weight": 1.0, "teacher_pixels": "all", "resize": "stretch",
+                       "lr_schedule": "constant"}
     # one spelling per value (the layout's own name for the alias synth); the options added since, at their defaults
     assert TrainConfig.load(tmp_path / "new.yaml") == old
     assert read_config_yaml(tmp_path / "old.yaml")["augment"] == ("homography", "virtual")

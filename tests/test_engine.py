@@ -375,3 +375,23 @@ def test_deterministic_mode_warns_only_on_a_gpu(monkeypatch: pytest.MonkeyPatch)
     assert deterministic_mode() is True
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
     assert deterministic_mode() == "warn"
+
+
+def test_the_poly_schedule_decays_to_zero_and_resumes_exactly(tiny: Path, tmp_path: Path) -> None:
+    """``--lr-schedule poly``: the rate after each epoch is ``lr (1 − steps / all steps)^0.9``, zero after the last;
+    a run stopped early and resumed with more patience ends as a run started with it (the schedule's state comes
+    back with the checkpoint), and more epochs are refused (the decay was laid over the first ones)."""
+    stopped, fresh, constant = tmp_path / "stopped", tmp_path / "fresh", tmp_path / "constant"
+    common = ("--epochs", "4", "--min-delta", "0.5", "--image-size", "64x96", "--lr", "0.01")
+    assert _train(tiny, fresh, *common, "--patience", "4", "--lr-schedule", "poly") == 0
+    lrs = [float(r["lr"]) for r in csv.DictReader((fresh / "metrics.csv").open())]
+    assert lrs == pytest.approx([0.01 * (1 - k / 4) ** 0.9 for k in (1, 2, 3, 4)], abs=1e-12) and lrs[-1] == 0
+    assert _train(tiny, constant, *common, "--patience", "4") == 0
+    assert {float(r["lr"]) for r in csv.DictReader((constant / "metrics.csv").open())} == {0.01}
+    assert _metrics(constant) != _metrics(fresh)
+    assert _train(tiny, stopped, *common, "--patience", "1", "--lr-schedule", "poly") == 0
+    assert json.loads((stopped / "metrics.json").read_text())["epochs_run"] == 2
+    assert _train(tiny, stopped, *common, "--patience", "4", "--lr-schedule", "poly", "--resume") == 0
+    assert _metrics(stopped) == _metrics(fresh)
+    more = ("--epochs", "6", *common[2:], "--patience", "4", "--lr-schedule", "poly", "--resume")
+    assert _train(tiny, stopped, *more) == 2  # refused: epochs 4 → 6 under a poly decay

@@ -1196,6 +1196,7 @@ RESUME_CRAFTED = {
     "optimizer state a number": (lambda c: c.update(optimizer_states=[1]), "optimizer_states"),
     "loops a list": (lambda c: c.update(loops=[1]), "loops"),
     "callbacks a list": (lambda c: c.update(callbacks=[1]), "callbacks"),
+    "a schedule's state a number": (lambda c: c.update(lr_schedulers=[1]), "lr_schedulers"),
     "a weight of another shape": (lambda c: c["state_dict"].__setitem__(_first_weight(c), _zeros(3, 3)),
                                   "another shape"),
     "a momentum buffer of another shape": (

@@ -60,7 +60,8 @@ from freespace.limits import (
     check_workers,
 )
 
-__all__ = ["TrainConfig", "read_config_yaml", "PRESETS", "STRATEGIES", "PATH_OPTIONS", "FREEZE", "TEACHER_PIXELS"]
+__all__ = ["TrainConfig", "read_config_yaml", "PRESETS", "STRATEGIES", "PATH_OPTIONS", "FREEZE", "TEACHER_PIXELS",
+           "LR_SCHEDULES"]
 
 PRESETS = ("light", "paper")
 #: what ``freeze`` may keep at its starting values
@@ -68,6 +69,8 @@ FREEZE = ("auto", "none", "norm", "encoder")
 STRATEGIES = ("auto", "ddp")
 #: where a teacher's probabilities are learnt (``teacher_pixels``)
 TEACHER_PIXELS = ("all", "ignored")
+#: how the learning rate moves over a run (:meth:`~freespace.engine.module.RoadModule.configure_optimizers`)
+LR_SCHEDULES = ("constant", "poly")
 
 #: the options that name files or folders (config.yaml keeps them resolved); ``encoder_weights`` is one when it
 #: is a path, not a name of weights (:func:`~freespace.engine.option_values.weights_path`)
@@ -135,6 +138,8 @@ class TrainConfig:
     epochs: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = option("most epochs", 50)
     batch_size: Annotated[int, Field(ge=1, le=MAX_BATCH_SIZE)] = option("training batch size", 4)
     lr: Annotated[float, Field(gt=0, lt=10)] = option("SGD learning rate", 0.001)
+    lr_schedule: str = option("constant, or poly: lr × (1 − step / the last step of the epochs)^0.9 after every step, "
+                              "segmentation's usual decay", "constant", choices=LR_SCHEDULES, metavar="NAME")
     momentum: Annotated[float, Field(ge=0, lt=1)] = option("SGD momentum", 0.9)
     weight_decay: Annotated[float, Field(ge=0, le=MAX_WEIGHT_DECAY)] = option("SGD weight decay", 0.0)
     patience: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = option("early-stopping patience in epochs", 10)
@@ -364,10 +369,12 @@ class TrainConfig:
         options, in :attr:`GROWABLE` order. An ``image_size`` of :data:`FIRST_FRAME_SIZE` here matches the size
         ``saved`` was resolved to.
 
-        A resumed training run and a cell of ``reproduce`` refuse a run whose ``changed`` is not empty.
+        A resumed training run and a cell of ``reproduce`` refuse a run whose ``changed`` is not empty; with
+        ``lr_schedule: poly`` more ``epochs`` are a change (the decay ends at the epochs the run began with).
         """
         now, then = self.with_size(saved.image_size).to_dict(), saved.to_dict()
-        grown = [k for k in self.GROWABLE if now[k] > then[k]]
+        grown = [k for k in self.GROWABLE if now[k] > then[k]  # a poly decay was laid over the epochs it began with
+                 and not (k == "epochs" and then["lr_schedule"] == "poly")]
         changed = [f"{k} {then[k]!r} → {v!r}" for k, v in now.items()
                    if k not in (*self.WHERE_AND_HOW, *grown) and then[k] != v]
         return changed, grown

@@ -1,4 +1,5 @@
-"""The Lightning module: a network, its losses, SGD with momentum, metrics from summed counts."""
+"""The Lightning module: a network, its losses, SGD with momentum (a constant or poly rate), metrics from summed
+counts."""
 
 from __future__ import annotations
 
@@ -9,13 +10,16 @@ import lightning.pytorch as pl
 import numpy as np
 import torch
 
-from freespace.engine.config import TEACHER_PIXELS
+from freespace.engine.config import LR_SCHEDULES, TEACHER_PIXELS
 from freespace.errors import TrainingError, param
 from freespace.evaluation.metrics import RoadEvaluator
 from freespace.labels import IGNORE_INDEX
 from freespace.models import create_model, main_logits
 
-__all__ = ["RoadModule", "TrainingError", "epoch_seed"]
+__all__ = ["RoadModule", "TrainingError", "epoch_seed", "POLY_POWER"]
+
+#: the exponent of the ``poly`` learning-rate decay (DeepLab's, and most segmentation codebases')
+POLY_POWER = 0.9
 
 
 def epoch_seed(seed: int, epoch: int) -> int:
@@ -34,7 +38,7 @@ class RoadModule(pl.LightningModule):
     def __init__(self, model: str, model_options: dict[str, Any], lr: float, momentum: float,
                  weight_decay: float, image_size: tuple[int, int] | list[int] | None = None, seed: int = 0,
                  val_window: int = 1, encoder_weights: str | None = None, freeze: str = "none",
-                 resize: str = "stretch") -> None:
+                 resize: str = "stretch", lr_schedule: str = "constant") -> None:
         """``seed``: the run's seed, from which dropout draws (with the epoch); ``val_window``: the epochs
         over which ``val_f_window`` (the early-stopping and checkpoint criterion when > 1) averages the
         validation F-score; ``encoder_weights``: the encoder's initial weights ("imagenet" or a file; a
@@ -42,13 +46,16 @@ class RoadModule(pl.LightningModule):
         starting values while training: ``none``, ``norm`` (every batch norm stays in eval mode: its running
         statistics are the start's, its scale and shift still learn) or ``encoder`` (``norm``, and the weights of
         the network's ``encoder`` are fixed); ``resize``: how frames were fitted to ``image_size``
-        (:mod:`freespace.io.frame_fit`), kept in the checkpoint so that prediction fits them the same way."""
+        (:mod:`freespace.io.frame_fit`), kept in the checkpoint so that prediction fits them the same way;
+        ``lr_schedule``: ``constant`` or ``poly`` (:meth:`configure_optimizers`)."""
         super().__init__()
         self.save_hyperparameters()
         weights = {"encoder_weights": encoder_weights} if encoder_weights is not None else {}
         self.net = create_model(model, **model_options, **weights)
         if freeze not in ("none", "norm", "encoder"):
             raise ValueError(f"freeze must be none, norm or encoder, got {freeze!r}")
+        if lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"lr_schedule must be one of {LR_SCHEDULES}, got {lr_schedule!r}")
         encoder = getattr(self.net, "encoder", None) if freeze == "encoder" else None
         if encoder is not None:
             encoder.requires_grad_(False)
@@ -85,8 +92,16 @@ class RoadModule(pl.LightningModule):
             m.eval()
 
     def configure_optimizers(self):
-        return torch.optim.SGD([p for p in self.parameters() if p.requires_grad], lr=self.hparams.lr,
-                               momentum=self.hparams.momentum, weight_decay=self.hparams.weight_decay)
+        """SGD with momentum over the trainable weights; with ``lr_schedule`` ``poly`` the rate after step ``s`` is
+        ``lr · (1 − s / S)^0.9``, ``S`` the steps of all the trainer's ``max_epochs`` (zero at the last), stepped
+        after every batch (DeepLab's decay; an early stop leaves it where it was)."""
+        sgd = torch.optim.SGD([p for p in self.parameters() if p.requires_grad], lr=self.hparams.lr,
+                              momentum=self.hparams.momentum, weight_decay=self.hparams.weight_decay)
+        if self.hparams.get("lr_schedule", "constant") == "constant":  # and checkpoints made before the option
+            return sgd
+        poly = torch.optim.lr_scheduler.PolynomialLR(sgd, total_iters=max(int(self.trainer.estimated_stepping_batches),
+                                                                          1), power=POLY_POWER)
+        return {"optimizer": sgd, "lr_scheduler": {"scheduler": poly, "interval": "step"}}
 
     def on_fit_start(self) -> None:
         # channels-last (NHWC) tensors take the faster convolution kernels: an epoch costs less on a CPU (BENCHMARKS.md,

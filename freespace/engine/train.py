@@ -233,6 +233,8 @@ def _check_training_state(checkpoint: Any, path: Path) -> None:
                 if not (isinstance(o, dict) and isinstance(o.get("state"), dict)
                         and isinstance(o.get("param_groups"), list)
                         and all(isinstance(g, dict) for g in o["param_groups"]))]
+        bad += [f"lr_schedulers[{i}]" for i, o in enumerate(checkpoint.get("lr_schedulers", []))
+                if not isinstance(o, dict)]
     if bad:
         raise CorruptFileError(f"{path} is not a freespace training checkpoint, or is damaged ({bad[0]} is not what "
                                f"Lightning saves); it was not loaded")
@@ -441,7 +443,8 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
     torch.manual_seed(config.seed)  # the initial weights depend on the seed only, whatever the data preparation drew
     module = RoadModule(config.model, config.model_options(), config.lr, config.momentum, config.weight_decay,
                         image_size=list(size), seed=config.seed, val_window=config.val_window,
-                        encoder_weights=config.encoder_weights, freeze=frozen_part(config), resize=config.resize)
+                        encoder_weights=config.encoder_weights, freeze=frozen_part(config), resize=config.resize,
+                        lr_schedule=config.lr_schedule)
     if config.teacher is not None:  # outside the checkpoint: attached again when the run goes on
         module.attach_teacher(teacher_network(config.teacher), config.teacher_weight, config.teacher_pixels)
     if config.init is not None and not resume:  # every weight from the init (a resumed run has its own)
