@@ -546,3 +546,63 @@ def test_errors_refuses_a_missing_model_in_one_line(tmp_path: Path, monkeypatch:
             errors.main()
         assert exit_.value.code == 2 and said in capsys.readouterr().err
     assert not (tmp_path / "e.json").exists()
+
+
+def _bench(tmp_path: Path, name: str, f: float, models: int = 1) -> Path:
+    """A bench/real_bench.py output: every set at F ``f``; KITTI's other streets with 12 frames of growing road."""
+    rows = [{"tp": 10 * i, "fp": i, "fn": 2 * i} for i in range(1, 13)]  # the 9 widest: i = 4…12
+    sets = {k: {f"m{j}": {"f_score": f, "precision": f, "recall": f} for j in range(models)}
+            for k in ("kitti2015", "kitti_dev", "camvid_val", "camvid_dusk", "camvid_pool")}
+    for scores in sets["kitti_dev"].values():
+        scores["per_frame"] = rows
+    path = tmp_path / f"{name}.json"
+    path.write_text(json.dumps({"machine": "test", "sets": sets}))
+    return path
+
+
+def _finished_run(tmp_path: Path) -> Path:
+    run = tmp_path / "run"
+    run.mkdir()
+    for f in ("config.yaml", "inputs.json", "metrics.csv", "metrics.json"):
+        (run / f).write_text(f)
+    (tmp_path / "report.json").write_text("{}")
+    return run
+
+
+def test_record_writes_a_cell_once_with_the_wide_frames_and_pairs_cells_with_their_control(tmp_path: Path) -> None:
+    record = _load("record")
+    run = _finished_run(tmp_path)
+    for seed, (a, b) in enumerate([(0.80, 0.78), (0.84, 0.80), (0.82, 0.81)]):
+        for name, f in (("cell", a), ("control", b)):
+            record.record_cell(run, _bench(tmp_path, f"{name}{seed}", f), tmp_path / "report.json",
+                               tmp_path / "look" / f"{name}-s{seed}")
+    written = json.loads((tmp_path / "look" / "cell-s0" / "bench.json").read_text())
+    wide = written["sets"]["kitti_dev_wide9"]  # rows 4…12: tp 720, fp 72, fn 144
+    assert wide == {"frames": 9, "precision": 720 / 792, "recall": 720 / 864}
+    assert "per_frame" not in written["sets"]["kitti_dev"] and list(written["sets"])[:3] == [
+        "kitti2015", "kitti_dev", "kitti_dev_wide9"]
+    assert (tmp_path / "look" / "cell-s0" / "student.json").read_text() == "{}"
+    with pytest.raises(ValueError, match="exists"):
+        record.record_cell(run, _bench(tmp_path, "again", 0.9), tmp_path / "report.json", tmp_path / "look" / "cell-s0")
+    with pytest.raises(ValueError, match="one --model"):
+        record.record_cell(run, _bench(tmp_path, "two", 0.9, models=2), tmp_path / "report.json", tmp_path / "x")
+    assert not (tmp_path / "x").exists() and not (tmp_path / "x.part").exists()
+    paired = record.pair(str(tmp_path / "look" / "cell"), str(tmp_path / "look" / "control"), [0, 1, 2])
+    # differences 2, 4, 1 points: mean 2.33, t interval 2.33 ± 4.303 · 1.528 / √3 = [−1.46, +6.13]
+    assert paired["kitti_dev"] == {"differences": [2.0, 4.0, 1.0], "mean": 2.33, "look": [80.0, 84.0, 82.0],
+                                   "before": [78.0, 80.0, 81.0], "interval": [-1.46, 6.13]}
+    assert paired["wide9_recall"]["differences"] == [0.0, 0.0, 0.0]
+
+
+def test_record_refuses_a_missing_input_in_one_line_and_writes_nothing(tmp_path: Path) -> None:
+    run = _finished_run(tmp_path)
+    (run / "metrics.json").unlink()
+    res = subprocess.run([sys.executable, str(STUDY / "record.py"), "cell", "--run", str(run), "--bench",
+                          str(_bench(tmp_path, "b", 0.9)), "--report", str(tmp_path / "report.json"), "--out",
+                          str(tmp_path / "rec")], capture_output=True, text=True)
+    assert res.returncode == 2 and "metrics.json is not a file" in res.stderr and "Traceback" not in res.stderr
+    assert not (tmp_path / "rec").exists()
+    res = subprocess.run([sys.executable, str(STUDY / "record.py"), "pair", "--cells", str(tmp_path / "none"),
+                          "--control", str(tmp_path / "none"), "--seeds", "0", "--key", "k", "--paired",
+                          str(tmp_path / "paired.json")], capture_output=True, text=True)
+    assert res.returncode == 2 and "holds no bench.json" in res.stderr and not (tmp_path / "paired.json").exists()
