@@ -10,6 +10,9 @@ only.
 
     .venv/bin/python studies/real-roads/errors.py --real-dev DEV --model NAME=PATH [--model ...] \\
         [--threshold 0.5] [--near 0.03] [--threads N] --out errors.json
+    .venv/bin/python studies/real-roads/errors.py --real-dev DEV --model NAME=PATH ... --sweep --out sweep.json
+
+``--sweep`` gives instead each model's pooled precision, recall and F at thresholds 0.05–0.95 (:func:`sweep`).
 """
 
 from __future__ import annotations
@@ -130,6 +133,52 @@ def run(models: dict[str, Path], real_dev: Path, threshold: float, near: float, 
     return out
 
 
+#: the thresholds of ``--sweep``
+SWEEP = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95)
+
+
+def _curve(counts: np.ndarray) -> dict[str, list[float]]:
+    """Pooled precision, recall and F (fractions) from ``T×3`` summed ``tp, fp, fn`` counts, one row a threshold."""
+    tp, fp, fn = counts.T.astype(np.float64)
+    p, r = tp / np.maximum(tp + fp, 1), tp / np.maximum(tp + fn, 1)
+    return {"th": list(SWEEP), "P": p.tolist(), "R": r.tolist(), "F": (2 * p * r / np.maximum(p + r, 1e-12)).tolist()}
+
+
+def sweep(models: dict[str, Path], real_dev: Path, threads: int | None) -> dict[str, dict[str, object]]:
+    """Each model's pooled precision, recall and F at every threshold of :data:`SWEEP` → ``{set: {model: curve}}``:
+    the sets of :data:`SETS` here, ``kitti_wide9`` (the 9 KITTI frames of other streets with the most human road)
+    and ``camvid_pool`` (``val`` and dusk together) — the cheapest control of a change that moves precision and
+    recall together (does it beat the model's own threshold?)."""
+    from freespace.inference.predictor import Predictor
+
+    out: dict[str, dict[str, object]] = {}
+    th = np.array(SWEEP)[:, None]
+    for name, path in models.items():
+        predictor = Predictor(onnx=path, threads=threads) if path.suffix == ".onnx" else Predictor(checkpoint=path)
+        per_set = {}
+        for set_name, images, labels, label_format in SETS:
+            if not (real_dev / labels).is_dir():
+                continue
+            rows = []  # per frame: T×3 counts and its human road
+            for frame in pair_labelled_frames(real_dev / images, real_dev / labels, label_format):
+                image, label = frame.read(label_format)
+                prob = predictor.predict([image])[0][label.valid]
+                road = label.road[label.valid]
+                hit = prob[None, :] >= th
+                rows.append((np.stack([(hit & road).sum(1), (hit & ~road).sum(1), (~hit & road).sum(1)], 1),
+                             int(road.sum())))
+            per_set[set_name] = rows
+            out.setdefault(set_name, {})[name] = _curve(sum(c for c, _ in rows))
+        if "kitti_dev" in per_set:
+            wide = sorted(per_set["kitti_dev"], key=lambda r: r[1], reverse=True)[:9]
+            out.setdefault("kitti_wide9", {})[name] = _curve(sum(c for c, _ in wide))
+        if {"camvid_val", "camvid_dusk"} <= set(per_set):
+            pool = per_set["camvid_val"] + per_set["camvid_dusk"]
+            out.setdefault("camvid_pool", {})[name] = _curve(sum(c for c, _ in pool))
+        print(f"{name}: swept", flush=True)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--real-dev", type=Path, required=True, help="the development sets (real_dev/make.sh's DEST)")
@@ -138,6 +187,8 @@ def main() -> None:
     ap.add_argument("--threshold", type=float, default=0.5)
     ap.add_argument("--near", type=float, default=0.03, help="beside a vehicle: within this × the frame's height")
     ap.add_argument("--threads", type=int)
+    ap.add_argument("--sweep", action="store_true",
+                    help="instead: pooled precision, recall and F at thresholds 0.05–0.95 (no classes, no places)")
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args()
     if not a.real_dev.is_dir():
@@ -148,8 +199,11 @@ def main() -> None:
     for name, path in models.items():
         if not path.is_file():
             ap.error(f"--model {name}={path}: no such file")
-    res = {"threshold": a.threshold, "near": a.near, "models": {k: str(v) for k, v in models.items()},
-           "sets": run(models, a.real_dev, a.threshold, a.near, a.threads)}
+    if a.sweep:
+        res = {"models": {k: str(v) for k, v in models.items()}, "sets": sweep(models, a.real_dev, a.threads)}
+    else:
+        res = {"threshold": a.threshold, "near": a.near, "models": {k: str(v) for k, v in models.items()},
+               "sets": run(models, a.real_dev, a.threshold, a.near, a.threads)}
     tmp = a.out.with_name(a.out.name + ".part")
     tmp.write_text(json.dumps(res, indent=1) + "\n")
     tmp.replace(a.out)

@@ -548,6 +548,40 @@ def test_errors_refuses_a_missing_model_in_one_line(tmp_path: Path, monkeypatch:
     assert not (tmp_path / "e.json").exists()
 
 
+def test_errors_sweeps_the_threshold_over_each_set_and_the_pool(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    import cv2
+    import numpy as np
+
+    import freespace.inference.predictor
+
+    errors = _load("errors")
+    label = np.full((8, 20), 2, np.uint8)
+    label[:, 10:] = 3  # CamVid's road: the right half
+    for images, labels, frames in (("val", "valannot", 2), ("train", "duskannot", 1)):
+        for folder in (images, labels):
+            (tmp_path / "camvid" / folder).mkdir(parents=True)
+        for i in range(frames):
+            cv2.imwrite(str(tmp_path / "camvid" / images / f"f{i}.png"), np.zeros((8, 20, 3), np.uint8))
+            cv2.imwrite(str(tmp_path / "camvid" / labels / f"f{i}.png"), label)
+
+    class Ramp:  # road probability (column + ½) / 20
+        def __init__(self, **_: object) -> None:
+            pass
+
+        def predict(self, images: list[np.ndarray]) -> list[np.ndarray]:
+            return [np.broadcast_to((np.arange(20) + 0.5) / 20, (8, 20)).astype(np.float32) for _ in images]
+
+    monkeypatch.setattr(freespace.inference.predictor, "Predictor", Ramp)
+    out = errors.sweep({"m": tmp_path / "m.onnx"}, tmp_path, threads=1)
+    assert set(out) == {"camvid_val", "camvid_dusk", "camvid_pool"}  # KITTI's frames are not here
+    curve = out["camvid_pool"]["m"]
+    at = {t: i for i, t in enumerate(curve["th"])}
+    assert curve["P"][at[0.5]] == curve["R"][at[0.5]] == curve["F"][at[0.5]] == 1.0
+    assert curve["P"][at[0.05]] == pytest.approx(10 / 19) and curve["R"][at[0.05]] == 1.0  # columns 1-19
+    assert curve["R"][at[0.95]] == pytest.approx(1 / 10) and out["camvid_val"]["m"] == curve
+
+
 def _bench(tmp_path: Path, name: str, f: float, models: int = 1) -> Path:
     """A bench/real_bench.py output: every set at F ``f``; KITTI's other streets with 12 frames of growing road."""
     rows = [{"tp": 10 * i, "fp": i, "fn": 2 * i} for i in range(1, 13)]  # the 9 widest: i = 4…12
