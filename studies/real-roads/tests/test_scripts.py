@@ -640,3 +640,32 @@ def test_record_refuses_a_missing_input_in_one_line_and_writes_nothing(tmp_path:
                           "--control", str(tmp_path / "none"), "--seeds", "0", "--key", "k", "--paired",
                           str(tmp_path / "paired.json")], capture_output=True, text=True)
     assert res.returncode == 2 and "holds no bench.json" in res.stderr and not (tmp_path / "paired.json").exists()
+
+
+def test_shifted_writes_both_cameras_beside_the_masks_and_refuses_its_input(tmp_path: Path) -> None:
+    import cv2
+    import numpy as np
+
+    shifted = _load("shifted")
+    grey = np.full((2, 3, 3), 128, np.uint8)  # BGR
+    washed = shifted.shift(grey, "washed")[0, 0]  # RGB 0.35 + 0.5·0.502·(0.9, 1.0, 1.1) → BGR
+    assert washed.tolist() == [round(255 * (0.35 + 0.5 * 128 / 255 * g)) for g in (1.1, 1.0, 0.9)]
+    assert shifted.shift(np.full((1, 1, 3), 255, np.uint8), "dark")[0, 0].tolist() == [204, 242, 255]  # clipped red
+    dev = tmp_path / "dev"
+    for folder in ("images", "masks"):
+        (dev / "kitti_dev" / folder).mkdir(parents=True)
+    cv2.imwrite(str(dev / "kitti_dev" / "images" / "a.png"), grey)
+    cv2.imwrite(str(dev / "kitti_dev" / "masks" / "a.png"), grey)
+    assert shifted.write_shifted(dev, tmp_path / "out") == 1
+    for name in ("washed", "dark"):
+        assert cv2.imread(str(tmp_path / "out" / name / "kitti_dev" / "images" / "a.png")).tolist() == \
+            shifted.shift(grey, name).tolist()
+        assert (tmp_path / "out" / name / "kitti_dev" / "masks" / "a.png").read_bytes() == \
+            (dev / "kitti_dev" / "masks" / "a.png").read_bytes()
+    with pytest.raises(ValueError, match="exists"):
+        shifted.write_shifted(dev, tmp_path / "out")
+    for out, said in ((dev / "inside", "lies inside"), (tmp_path / "x", "holds no kitti_dev")):
+        real_dev = dev if said == "lies inside" else tmp_path / "empty"
+        res = subprocess.run([sys.executable, str(STUDY / "shifted.py"), "--real-dev", str(real_dev), "--out",
+                              str(out)], capture_output=True, text=True)
+        assert res.returncode == 2 and said in res.stderr and "Traceback" not in res.stderr and not out.exists()
