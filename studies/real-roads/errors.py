@@ -106,14 +106,18 @@ def summary(counts: dict[str, dict[str, int]]) -> dict[str, object]:
                                      for k in PLACES}}
 
 
+def _predictor(path: Path, threads: int | None):
+    """A model file's predictor: an ONNX file on ``threads`` threads, or a training checkpoint."""
+    from freespace.inference.predictor import Predictor
+
+    return Predictor(onnx=path, threads=threads) if path.suffix == ".onnx" else Predictor(checkpoint=path)
+
+
 def run(models: dict[str, Path], real_dev: Path, threshold: float, near: float, threads: int | None
         ) -> dict[str, dict[str, object]]:
     """Every model on KITTI's other streets, CamVid ``val`` and dusk (those here) → ``{set: {model: summary}}``."""
-    from freespace.inference.predictor import Predictor
-
     out: dict[str, dict[str, object]] = {}
-    predictors = {name: Predictor(onnx=path, threads=threads) if path.suffix == ".onnx" else Predictor(checkpoint=path)
-                  for name, path in models.items()}
+    predictors = {name: _predictor(path, threads) for name, path in models.items()}
     for set_name, images, labels, label_format in SETS:
         if not (real_dev / labels).is_dir():
             continue
@@ -149,12 +153,10 @@ def sweep(models: dict[str, Path], real_dev: Path, threads: int | None) -> dict[
     the sets of :data:`SETS` here, ``kitti_wide9`` (the 9 KITTI frames of other streets with the most human road)
     and ``camvid_pool`` (``val`` and dusk together) — the cheapest control of a change that moves precision and
     recall together (does it beat the model's own threshold?)."""
-    from freespace.inference.predictor import Predictor
-
     out: dict[str, dict[str, object]] = {}
     th = np.array(SWEEP)[:, None]
     for name, path in models.items():
-        predictor = Predictor(onnx=path, threads=threads) if path.suffix == ".onnx" else Predictor(checkpoint=path)
+        predictor = _predictor(path, threads)
         per_set = {}
         for set_name, images, labels, label_format in SETS:
             if not (real_dev / labels).is_dir():
