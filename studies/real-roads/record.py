@@ -9,10 +9,15 @@ outside the repository).
 - ``pair``: cells ``<cells>-s<seed>`` against ``<control>-s<seed>`` (record folders), seed by seed: each figure's
   differences in points, their mean and 95 % t interval (:func:`freespace.experiments.stats.paired_gain`), into
   ``paired.json`` under ``--key`` (other keys kept).
+- ``shifted``: cells against a control that is not paired with them, on ``shifted.py``'s copies of KITTI's frames
+  of other streets (``errors.py --sweep`` outputs): each model's F, its mean over the copies, and the difference of
+  the two groups' means with a Welch t interval.
 
     python studies/real-roads/record.py cell --run RUN --bench BENCH.json --report REPORT.json --out DIR
     python studies/real-roads/record.py pair --cells DIR/poly288 --control DIR/lookall288 --seeds 0 1 2 \\
         --key lookall_poly_288x960 --paired DIR/paired.json
+    python studies/real-roads/record.py shifted --sweep washed=W.json --sweep dark=D.json --cells A B C \
+        --control X Y Z --out shifted.json
 """
 
 from __future__ import annotations
@@ -21,6 +26,8 @@ import argparse
 import json
 import shutil
 from pathlib import Path
+
+import numpy as np
 
 from freespace.experiments.stats import paired_gain
 from freespace.io.files import atomic_write_text
@@ -98,6 +105,36 @@ def pair(cells: str, control: str, seeds: list[int]) -> dict:
     return out
 
 
+def welch(a: list[float], b: list[float], level: float = 0.95) -> tuple[float, float, float]:
+    """``mean(a) − mean(b)`` with its Welch t interval (unequal variances, Welch–Satterthwaite degrees of freedom):
+    two groups of cells that are not paired by seed (each of at least two values)."""
+    from scipy.stats import t
+
+    va, vb = np.var(a, ddof=1) / len(a), np.var(b, ddof=1) / len(b)
+    diff = float(np.mean(a) - np.mean(b))
+    df = (va + vb) ** 2 / (va ** 2 / (len(a) - 1) + vb ** 2 / (len(b) - 1))
+    half = float(t.ppf(0.5 + level / 2, df)) * float(np.sqrt(va + vb))
+    return diff, diff - half, diff + half
+
+
+def shifted(sweeps: dict[str, Path], cells: list[str], control: list[str]) -> dict:
+    """KITTI's other streets' F at p ≥ 0.5 (points) of each model on each shifted copy (``{shift: errors.py --sweep
+    output}``), each model's mean over the shifts, and the cells' mean minus the control's with :func:`welch`'s
+    interval."""
+    f = {}
+    for name, path in sweeps.items():
+        curves = json.loads(path.read_text())["sets"]["kitti_dev"]
+        f[name] = {m: 100 * c["F"][c["th"].index(0.5)] for m, c in curves.items()}
+    missing = [m for m in cells + control for name in f if m not in f[name]]
+    if missing:
+        raise ValueError(f"{missing[0]} was not scored in every sweep: sweep each model on each shifted copy")
+    mean = {m: float(np.mean([f[name][m] for name in f])) for m in cells + control}
+    diff, low, high = welch([mean[m] for m in cells], [mean[m] for m in control])
+    return {"f_at_0.5": {name: {m: round(f[name][m], 2) for m in cells + control} for name in f},
+            "mean_over_shifts": {m: round(v, 2) for m, v in mean.items()},
+            "cells_minus_control": round(diff, 2), "interval": [round(low, 2), round(high, 2)]}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="what", required=True)
@@ -110,7 +147,24 @@ def main() -> None:
     p.add_argument("--seeds", type=int, nargs="+", required=True)
     p.add_argument("--key", required=True)
     p.add_argument("--paired", type=Path, required=True, help="paired.json (its other keys kept)")
+    h = sub.add_parser("shifted", help="cells against a control on shifted copies (Welch), into a JSON file")
+    h.add_argument("--sweep", action="append", required=True, metavar="SHIFT=FILE",
+                   help="errors.py --sweep's output on one shifted copy; repeatable")
+    h.add_argument("--cells", nargs="+", required=True, help="the cells' model names in the sweeps")
+    h.add_argument("--control", nargs="+", required=True, help="the control's model names in the sweeps")
+    h.add_argument("--out", type=Path, required=True)
     args = ap.parse_args()
+    if args.what == "shifted":
+        sweeps = {k: Path(v) for k, v in (s.split("=", 1) for s in args.sweep if "=" in s)}
+        if len(sweeps) != len(args.sweep) or not all(p.is_file() for p in sweeps.values()):
+            ap.error("--sweep takes SHIFT=FILE, FILE an errors.py --sweep output")
+        try:
+            result = shifted(sweeps, args.cells, args.control)
+        except ValueError as exc:
+            ap.error(str(exc))
+        atomic_write_text(args.out, json.dumps(result, indent=1) + "\n")
+        print(result["mean_over_shifts"], result["cells_minus_control"], result["interval"])
+        return
     if args.what == "cell":
         try:
             summary = record_cell(args.run, args.bench, args.report, args.out)

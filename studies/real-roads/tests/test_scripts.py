@@ -669,3 +669,23 @@ def test_shifted_writes_both_cameras_beside_the_masks_and_refuses_its_input(tmp_
         res = subprocess.run([sys.executable, str(STUDY / "shifted.py"), "--real-dev", str(real_dev), "--out",
                               str(out)], capture_output=True, text=True)
         assert res.returncode == 2 and said in res.stderr and "Traceback" not in res.stderr and not out.exists()
+
+
+def test_record_compares_unpaired_cells_on_shifted_copies_with_welch(tmp_path: Path) -> None:
+    from scipy.stats import ttest_ind
+
+    record = _load("record")
+    a, b = [80.0, 84.0, 83.0], [78.0, 77.5, 80.0, 76.0]
+    ci = ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
+    assert record.welch(a, b) == pytest.approx((sum(a) / 3 - sum(b) / 4, ci.low, ci.high))
+    models = {"c0": (0.80, 0.70), "c1": (0.84, 0.74), "k0": (0.78, 0.72), "k1": (0.76, 0.70)}
+    sweeps = {}
+    for i, shift in enumerate(("washed", "dark")):
+        curves = {m: {"th": [0.4, 0.5], "F": [0.0, f[i]]} for m, f in models.items()}
+        sweeps[shift] = tmp_path / f"{shift}.json"
+        sweeps[shift].write_text(json.dumps({"sets": {"kitti_dev": curves}}))
+    out = record.shifted(sweeps, ["c0", "c1"], ["k0", "k1"])
+    assert out["mean_over_shifts"] == {"c0": 75.0, "c1": 79.0, "k0": 75.0, "k1": 73.0}
+    assert out["cells_minus_control"] == 3.0 and out["f_at_0.5"]["dark"]["c1"] == 74.0
+    with pytest.raises(ValueError, match="not scored"):
+        record.shifted(sweeps, ["c0", "gone"], ["k0", "k1"])
