@@ -142,10 +142,11 @@ SWEEP = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.6, 0.7, 0.8, 0
 
 
 def _curve(counts: np.ndarray) -> dict[str, list[float]]:
-    """Pooled precision, recall and F (fractions) from ``T×3`` summed ``tp, fp, fn`` counts, one row a threshold."""
-    tp, fp, fn = counts.T.astype(np.float64)
-    p, r = tp / np.maximum(tp + fp, 1), tp / np.maximum(tp + fn, 1)
-    return {"th": list(SWEEP), "P": p.tolist(), "R": r.tolist(), "F": (2 * p * r / np.maximum(p + r, 1e-12)).tolist()}
+    """Pooled precision, recall and F (fractions, :meth:`Counts.metrics`) from ``T×3`` summed ``tp, fp, fn`` counts,
+    one row a threshold of :data:`SWEEP`."""
+    scores = [Counts(*(int(v) for v in row)).metrics() for row in counts]
+    return {"th": list(SWEEP), **{k: [m[name] for m in scores] for k, name in
+                                  (("P", "precision"), ("R", "recall"), ("F", "f_score"))}}
 
 
 def sweep(models: dict[str, Path], real_dev: Path, threads: int | None) -> dict[str, dict[str, object]]:
