@@ -106,11 +106,14 @@ def summary(counts: dict[str, dict[str, int]]) -> dict[str, object]:
                                      for k in PLACES}}
 
 
-def _predictor(path: Path, threads: int | None):
-    """A model file's predictor: an ONNX file on ``threads`` threads, or a training checkpoint."""
+def _predictor(path: Path, threads: int | None, tta: bool = False):
+    """A model file's predictor: an ONNX file on ``threads`` threads, or a training checkpoint; with ``tta``, as
+    ``predict --tta`` sees frames (light normalised, mirror averaged)."""
     from freespace.inference.predictor import Predictor
 
-    return Predictor(onnx=path, threads=threads) if path.suffix == ".onnx" else Predictor(checkpoint=path)
+    if path.suffix == ".onnx":
+        return Predictor(onnx=path, threads=threads, tta=tta)
+    return Predictor(checkpoint=path, tta=tta)
 
 
 def run(models: dict[str, Path], real_dev: Path, threshold: float, near: float, threads: int | None
@@ -149,7 +152,8 @@ def _curve(counts: np.ndarray) -> dict[str, list[float]]:
                                   (("P", "precision"), ("R", "recall"), ("F", "f_score"))}}
 
 
-def sweep(models: dict[str, Path], real_dev: Path, threads: int | None) -> dict[str, dict[str, object]]:
+def sweep(models: dict[str, Path], real_dev: Path, threads: int | None, tta: bool = False
+          ) -> dict[str, dict[str, object]]:
     """Each model's pooled precision, recall and F at every threshold of :data:`SWEEP` → ``{set: {model: curve}}``:
     the sets of :data:`SETS` here, ``kitti_wide9`` (the 9 KITTI frames of other streets with the most human road)
     and ``camvid_pool`` (``val`` and dusk together) — the cheapest control of a change that moves precision and
@@ -157,7 +161,7 @@ def sweep(models: dict[str, Path], real_dev: Path, threads: int | None) -> dict[
     out: dict[str, dict[str, object]] = {}
     th = np.array(SWEEP)[:, None]
     for name, path in models.items():
-        predictor = _predictor(path, threads)
+        predictor = _predictor(path, threads, tta)
         per_set = {}
         for set_name, images, labels, label_format in SETS:
             if not (real_dev / labels).is_dir():
@@ -192,6 +196,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int)
     ap.add_argument("--sweep", action="store_true",
                     help="instead: pooled precision, recall and F at thresholds 0.05–0.95 (no classes, no places)")
+    ap.add_argument("--tta", action="store_true", help="with --sweep: the models as predict --tta runs them")
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args()
     if not a.real_dev.is_dir():
@@ -202,8 +207,11 @@ def main() -> None:
     for name, path in models.items():
         if not path.is_file():
             ap.error(f"--model {name}={path}: no such file")
+    if a.tta and not a.sweep:
+        ap.error("--tta goes with --sweep")
     if a.sweep:
-        res = {"models": {k: str(v) for k, v in models.items()}, "sets": sweep(models, a.real_dev, a.threads)}
+        res = {"models": {k: str(v) for k, v in models.items()}, "tta": a.tta,
+               "sets": sweep(models, a.real_dev, a.threads, a.tta)}
     else:
         res = {"threshold": a.threshold, "near": a.near, "models": {k: str(v) for k, v in models.items()},
                "sets": run(models, a.real_dev, a.threshold, a.near, a.threads)}

@@ -580,6 +580,10 @@ def test_errors_sweeps_the_threshold_over_each_set_and_the_pool(tmp_path: Path,
     assert curve["P"][at[0.5]] == curve["R"][at[0.5]] == curve["F"][at[0.5]] == 1.0
     assert curve["P"][at[0.05]] == pytest.approx(10 / 19) and curve["R"][at[0.05]] == 1.0  # columns 1-19
     assert curve["R"][at[0.95]] == pytest.approx(1 / 10) and out["camvid_val"]["m"] == curve
+    seen = []
+    monkeypatch.setattr(freespace.inference.predictor, "Predictor", lambda **kw: seen.append(kw) or Ramp())
+    errors.sweep({"m": tmp_path / "m.ckpt"}, tmp_path, threads=1, tta=True)
+    assert seen == [{"checkpoint": tmp_path / "m.ckpt", "tta": True}]  # as predict --tta runs it
 
 
 def _bench(tmp_path: Path, name: str, f: float, models: int = 1) -> Path:
