@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 from pathlib import Path
 
 import cv2
@@ -47,7 +48,7 @@ def build(root: Path, out: Path, prefix: str, aspect: float) -> dict[str, int]:
                 continue
             image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
             if image is None:
-                raise SystemExit(f"padded.py: {path} is not an image; rebuild {root}")
+                raise ValueError(f"{path} is not an image: rebuild {root}")
             cv2.imwrite(str(out / sub / path.name), pad_to_aspect(image, aspect))
             counts["padded"] += sub == "left"
     for name in ("splits", "freespace.yaml"):
@@ -74,7 +75,11 @@ def main() -> None:
     tmp = args.out.with_name(args.out.name + ".partial")
     if tmp.exists():
         ap.error(f"{tmp} exists (an interrupted run?): remove it")
-    counts = build(args.root, tmp, args.prefix, args.aspect)
+    try:
+        counts = build(args.root, tmp, args.prefix, args.aspect)
+    except ValueError as err:
+        shutil.rmtree(tmp)
+        ap.exit(1, f"padded.py: {err}\n")
     tmp.rename(args.out)
     print(f"padded.py: {counts['padded']} frames padded to aspect {args.aspect:.3f}, {counts['linked']} linked "
           f"→ {args.out}")

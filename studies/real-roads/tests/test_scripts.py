@@ -693,3 +693,42 @@ def test_record_compares_unpaired_cells_on_shifted_copies_with_welch(tmp_path: P
     assert out["cells_minus_control"] == 3.0 and out["f_at_0.5"]["dark"]["c1"] == 74.0
     with pytest.raises(ValueError, match="not scored"):
         record.shifted(sweeps, ["c0", "gone"], ["k0", "k1"])
+
+
+def test_padded_pads_one_camera_s_frames_to_the_aspect_and_links_the_rest(tmp_path: Path) -> None:
+    import cv2
+    import numpy as np
+
+    padded = _load("padded")
+    image = np.full((4, 5, 3), 7, np.uint8)
+    wide = padded.pad_to_aspect(image, 2.0)  # 8 wide: 1 column left, 2 right
+    assert wide.shape == (4, 8, 3) and wide[:, 1:6].tolist() == image.tolist()
+    assert not wide[:, :1].any() and not wide[:, 6:].any()
+    assert padded.pad_to_aspect(image, 1.0) is image  # already wider
+    root = tmp_path / "mix"
+    for sub in ("left", "label"):
+        (root / sub).mkdir(parents=True)
+        for name in ("camvid-a.png", "drive-b.png"):
+            cv2.imwrite(str(root / sub / name), image)
+    (root / "splits").mkdir()
+    (root / "splits" / "train.txt").write_text("camvid-a\ndrive-b\n")
+    out = tmp_path / "pad"
+    res = subprocess.run([sys.executable, str(STUDY / "padded.py"), "--root", str(root), "--out", str(out),
+                          "--aspect", "2"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    for sub in ("left", "label"):
+        assert cv2.imread(str(out / sub / "camvid-a.png")).tolist() == wide.tolist()
+        assert (out / sub / "drive-b.png").resolve() == (root / sub / "drive-b.png").resolve()
+    assert (out / "splits" / "train.txt").read_text() == "camvid-a\ndrive-b\n"
+    for args, said in ((["--root", str(root), "--out", str(out)], "exists"),
+                       (["--root", str(root), "--out", str(root / "x")], "lies inside"),
+                       (["--root", str(tmp_path / "none"), "--out", str(tmp_path / "y")], "no left/"),
+                       (["--root", str(root), "--out", str(tmp_path / "z"), "--aspect", "0"], "must be positive")):
+        res = subprocess.run([sys.executable, str(STUDY / "padded.py"), *args], capture_output=True, text=True)
+        assert res.returncode == 2 and said in res.stderr and "Traceback" not in res.stderr
+    assert not (root / "x").exists() and not (tmp_path / "y").exists() and not (tmp_path / "z").exists()
+    (root / "left" / "camvid-c.png").write_bytes(b"not a png")
+    res = subprocess.run([sys.executable, str(STUDY / "padded.py"), "--root", str(root), "--out", str(tmp_path / "w")],
+                         capture_output=True, text=True)
+    assert res.returncode == 1 and "camvid-c.png is not an image" in res.stderr and "Traceback" not in res.stderr
+    assert not (tmp_path / "w").exists() and not (tmp_path / "w.partial").exists()
