@@ -131,7 +131,7 @@ def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) 
     assert (tmp_path / "again.yaml").read_text() == \
         CAMPAIGN_YAML.format(**where).replace("disparity_mode:", "disparity_source:").replace(
             "augment: homography\n", "augment: homography\nflip: false\nphotometric: false\n"
-            "photometric_strength: mild\nzoom: 0.0\n").replace("dataset: synth", "dataset: kitti").replace(
+            "photometric_strength: mild\nzoom: 0.0\ncrop_top: 0.0\n").replace("dataset: synth", "dataset: kitti").replace(
             "human_share: 0.0\n", "human_share: 0.0\nimages: null\nlabel_format: null\nlabels_like: null\n"
             "road: null\nignore: null\ntolerance: null\nval_images: null\nval_labels: null\nval_share: 0.2\n"
             "init: null\nfreeze: auto\nteacher: null\nteacher_weight: 1.0\nteacher_pixels: all\n").replace(
@@ -177,7 +177,7 @@ def test_older_spellings_read_as_the_same_values(tmp_path: Path) -> None:
                        "label_format": None, "labels_like": None, "road": None, "ignore": None, "tolerance": None,
                        "val_images": None, "val_labels": None, "val_share": 0.2, "init": None, "freeze": "auto",
                        "teacher": None, "teacher_weight": 1.0, "teacher_pixels": "all", "resize": "stretch",
-                       "lr_schedule": "constant"}
+                       "lr_schedule": "constant", "crop_top": 0.0}
     # one spelling per value (the layout's own name for the alias synth); the options added since, at their defaults
     assert TrainConfig.load(tmp_path / "new.yaml") == old
     assert read_config_yaml(tmp_path / "old.yaml")["augment"] == ("homography", "virtual")

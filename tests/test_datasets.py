@@ -459,6 +459,44 @@ def test_torch_dataset_zoom_scales_image_and_label_together(tmp_path: Path) -> N
         RoadSegmentationDataset(kitti, names, zoom=0.8)
 
 
+def test_torch_dataset_crop_top_cuts_image_and_label_together(tmp_path: Path) -> None:
+    """``crop_top`` cuts the top t × H rows (t in [0, crop_top]) and stretches the rest back: image and label stay
+    aligned (the road's top edge moves up the frame by the same rows in both), the label keeps its classes, the
+    draws repeat for (seed, epoch, i) and leave the other augmentations' draws as they were; out of [0, 0.7) is
+    refused."""
+    torch = pytest.importorskip("torch")
+    import numpy as np
+
+    from freespace.data.torch_dataset import RoadSegmentationDataset, cut_top
+
+    image = np.zeros((10, 4, 3), np.uint8)
+    image[6:] = 200  # "road" from row 6 down, in the image and the label alike
+    label = (np.arange(10)[:, None] >= 6).repeat(4, 1).astype(np.uint8)
+    cut_image, cut_label = cut_top(image, label, 0.5)  # rows 5–9 stretched to 10: road from row 2 down
+    assert cut_label[:, 0].tolist() == [0, 0, 1, 1, 1, 1, 1, 1, 1, 1]
+    assert (cut_image[3:, :, 0] == 200).all() and (cut_image[0, :, 0] == 0).all()  # row 1 blends the two
+    assert cut_top(image, label, 0.01)[1] is label  # less than a row: unchanged
+
+    names = kitti_tree(tmp_path, 1)
+    kitti = KittiRoad(tmp_path, disparity_source="none")
+    plain = RoadSegmentationDataset(kitti, names, flip=True, seed=5)
+    cut = RoadSegmentationDataset(kitti, names, flip=True, seed=5, crop_top=0.5)
+    first_road = []
+    for e in range(20):
+        a, b = plain[(e, 0)], cut[(e, 0)]
+        assert set(torch.unique(b["label"]).tolist()) <= set(torch.unique(a["label"]).tolist())
+        assert torch.equal(b["image"], cut[(e, 0)]["image"]) and torch.equal(b["label"], cut[(e, 0)]["label"])
+        rows = [int((d["label"] == 1).any(1).nonzero()[0]) for d in (a, b)]
+        assert rows[1] <= rows[0]
+        first_road.append(rows[0] - rows[1])
+        # the mirror drawn for (seed, epoch, i) is the same with and without the cut: the label's columns agree
+        assert torch.equal(b["label"][-1], a["label"][-1])
+    assert len(set(first_road)) > 5  # the cut varies over the epochs
+    for bad in (-0.1, 0.7):
+        with pytest.raises(ValueError, match="crop_top must be in"):
+            RoadSegmentationDataset(kitti, names, crop_top=bad)
+
+
 def test_torch_dataset_strong_photometric(tmp_path: Path) -> None:
     """``photometric="strong"`` darkens, blurs and adds noise besides the jitter: its draws spread the image's mean
     brightness wider than the mild ones, never touch the label, and repeat for (seed, epoch, i); a strength that

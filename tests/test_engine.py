@@ -395,3 +395,17 @@ def test_the_poly_schedule_decays_to_zero_and_resumes_exactly(tiny: Path, tmp_pa
     assert _metrics(stopped) == _metrics(fresh)
     more = ("--epochs", "6", *common[2:], "--patience", "4", "--lr-schedule", "poly", "--resume")
     assert _train(tiny, stopped, *more) == 2  # refused: epochs 4 → 6 under a poly decay
+
+
+def test_crop_top_trains_records_itself_and_is_checked(tiny: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """``--crop-top``: a run trains with it and its config.yaml says so; a resume with another value is refused,
+    as is a value out of [0, 0.7), in one line and with no run folder."""
+    run = tmp_path / "cut"
+    common = ("--epochs", "1", "--image-size", "64x96")
+    assert _train(tiny, run, *common, "--crop-top", "0.4") == 0
+    assert yaml.safe_load((run / "config.yaml").read_text())["crop_top"] == 0.4
+    assert _train(tiny, run, *common, "--epochs", "2", "--crop-top", "0.2", "--resume") == 2
+    assert "crop_top 0.4 → 0.2" in capsys.readouterr().err
+    assert _train(tiny, tmp_path / "bad", *common, "--crop-top", "0.7") == 2
+    assert "Traceback" not in capsys.readouterr().err and not (tmp_path / "bad").exists()

@@ -19,6 +19,10 @@ Samples are dicts: ``image`` float32 ``3×H×W`` in [0, 1] (normalisation belong
 * ``zoom=z`` (> 0, with ``affine``): the conventional augmentation also scales image and label by a factor drawn
   in 1 ± z (zoomed out, the new borders are don't care): the road at other distances than the drives show it;
   not in the paper;
+* ``crop_top=c`` (> 0): each sample's top ``t × H`` rows are cut and the rest stretched back to ``H`` (image bilinear,
+  label nearest), ``t`` drawn uniformly in [0, c] from (``seed``, epoch, i), before the colour and the
+  conventional augmentation: the road ends at other rows than the training frames show it (a network otherwise
+  learns where road usually stops); not in the paper;
 * ``virtual=VirtualAugment(...)``: road-plane virtual views (a training run's ``augment="virtual"``),
   drawn from (``seed``, epoch, i) like the conventional augmentation and applied before it (when both are
   on), with the torch-free :func:`freespace.geometry.virtual_view`;
@@ -140,6 +144,17 @@ def _augmenter(affine: bool, flip: bool, photometric: bool | str, zoom: float = 
     return A.Compose(steps, seed=0) if steps else None
 
 
+def cut_top(image: np.ndarray, label: np.ndarray, share: float) -> tuple[np.ndarray, np.ndarray]:
+    """``image`` (``H×W×3 uint8``) and ``label`` (``H×W uint8`` class map) without their top ``round(share × H)`` rows,
+    stretched back to ``H×W`` (image: bilinear, label: nearest, never mixing classes)."""
+    h, w = label.shape
+    top = int(round(share * h))
+    if top == 0:
+        return image, label
+    return (cv2.resize(image[top:], (w, h), interpolation=cv2.INTER_LINEAR),
+            cv2.resize(label[top:], (w, h), interpolation=cv2.INTER_NEAREST))
+
+
 class RoadSegmentationDataset(torch.utils.data.Dataset):
     """Labelled frames of ``dataset`` as segmentation samples (see the module docstring for the options).
 
@@ -158,6 +173,8 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         virtual: road-plane virtual views, drawn from (``seed``, epoch, i); before the conventional
             augmentation when both are on.
         zoom: with ``affine``, also scale by a factor in 1 ± ``zoom`` (0: off; at most 0.5).
+        crop_top: cut the top ``t`` (a fraction of the height, drawn in [0, ``crop_top``]) and stretch the rest
+            back (0: off; below 0.7).
         resize: how a frame is fitted to ``size``: ``stretch`` or ``letterbox`` (aspect kept, the border don't
             care; :mod:`freespace.io.frame_fit`).
 
@@ -169,7 +186,8 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
                  transform: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None, *,
                  size: tuple[int, int] | None = None, affine: bool = False, seed: int = 0,
                  cache: bool = False, virtual: VirtualAugment | None = None, flip: bool = False,
-                 photometric: bool | str = False, zoom: float = 0.0, resize: str = "stretch") -> None:
+                 photometric: bool | str = False, zoom: float = 0.0, resize: str = "stretch",
+                 crop_top: float = 0.0) -> None:
         self.dataset = dataset
         wanted = list(names) if names is not None else [f.name for f in dataset.labelled()]
         self.items = [n if isinstance(n, Item) else Item(dataset.index(n), n) for n in wanted]
@@ -184,7 +202,10 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         self._cache: dict[tuple[int, str | None], tuple[np.ndarray, np.ndarray]] = {}
         if not 0 <= zoom <= 0.5:
             raise ValueError(f"zoom must be in [0, 0.5], got {zoom}")
+        if not 0 <= crop_top < 0.7:
+            raise ValueError(f"crop_top must be in [0, 0.7), got {crop_top}")
         self._aug = _augmenter(affine, flip, photometric, zoom)
+        self.crop_top = crop_top
         self._strong = photometric_strength(photometric) == "strong"
         self.virtual = virtual
         self._K: dict[tuple[int, str | None], np.ndarray] = {}  # intrinsics at the decoded size, by frame and image
@@ -223,6 +244,9 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
 
                 plane = self.virtual.planes[self.items[i].index][1]
                 image, label, _ = virtual_view(image, label, self._K[k], plane, pose, ignore=IGNORE_INDEX)
+        if self.crop_top > 0:  # its own generator, like the strong colours below
+            image, label = cut_top(image, label, np.random.default_rng([self.seed, epoch, i, 2]).uniform(
+                0, self.crop_top))
         if self._strong:  # its own generator: independent of the pipeline's draws, which it leaves as they were
             rng = np.random.default_rng([self.seed, epoch, i, 1])
             image = (strong_photometry(image.astype(np.float32) / 255.0, rng) * 255.0 + 0.5).astype(np.uint8)

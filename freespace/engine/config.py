@@ -135,6 +135,9 @@ class TrainConfig:
     zoom: Annotated[float, Field(ge=0, le=0.5)] = option("also scale each training sample (image and label) by a "
                                                           "factor drawn in 1 ± this, with the conventional "
                                                           "augmentation (new borders don't care); 0: off", 0.0)
+    crop_top: Annotated[float, Field(ge=0, lt=0.7)] = option(
+        "also cut the top t × the height off each training sample (image and label) and stretch the rest back, t "
+        "drawn in [0, this]: the road ends at other rows than the frames show; 0: off", 0.0, metavar="MAX")
     epochs: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = option("most epochs", 50)
     batch_size: Annotated[int, Field(ge=1, le=MAX_BATCH_SIZE)] = option("training batch size", 4)
     lr: Annotated[float, Field(gt=0, lt=10)] = option("SGD learning rate", 0.001)

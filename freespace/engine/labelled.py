@@ -156,8 +156,8 @@ def check_source(config: Any) -> None:
         if config.augment:
             raise InvalidOptionError(f"{param('augment')} {','.join(config.augment)} needs right images or a road "
                                      f"plane, which a labelled folder has not; train without it (the "
-                                     f"conventional augmentation, {param('flip')}, {param('photometric')} and "
-                                     f"{param('zoom')} work)")
+                                     f"conventional augmentation, {param('flip')}, {param('photometric')}, "
+                                     f"{param('zoom')} and {param('crop_top')} work)")
         if config.human_share:
             raise InvalidOptionError(f"{param('human_share')} is for a dataset with a label tree; a labelled "
                                      f"folder's labels are all the user's")

@@ -431,7 +431,8 @@ def _train(config: TrainConfig, resume: bool, progress: bool) -> dict[str, Any]:
                                                 cache=True, virtual=data["virtual"] if k == "train" else None,
                                                 flip=config.flip and k == "train",
                                                 photometric=photometric if k == "train" else False,
-                                                zoom=config.zoom if k == "train" else 0.0, resize=config.resize)
+                                                zoom=config.zoom if k == "train" else 0.0, resize=config.resize,
+                                                crop_top=config.crop_top if k == "train" else 0.0)
                         for k in ("train", "val", "test"))
 
     def loader(frames: RoadSegmentationDataset, shuffle: bool) -> torch.utils.data.DataLoader:
