@@ -131,7 +131,8 @@ def test_a_config_yaml_of_the_running_campaign_is_the_same_cell(tmp_path: Path) 
     assert (tmp_path / "again.yaml").read_text() == \
         CAMPAIGN_YAML.format(**where).replace("disparity_mode:", "disparity_source:").replace(
             "augment: homography\n", "augment: homography\nflip: false\nphotometric: false\n"
-            "photometric_strength: mild\nzoom: 0.0\ncrop_top: 0.0\n").replace("dataset: synth", "dataset: kitti").replace(
+            "photometric_strength: mild\nzoom: 0.0\ncrop_top: 0.0\n").replace(
+            "dataset: synth", "dataset: kitti").replace(
             "human_share: 0.0\n", "human_share: 0.0\nimages: null\nlabel_format: null\nlabels_like: null\n"
             "road: null\nignore: null\ntolerance: null\nval_images: null\nval_labels: null\nval_share: 0.2\n"
             "init: null\nfreeze: auto\nteacher: null\nteacher_weight: 1.0\nteacher_pixels: all\n").replace(

@@ -31,6 +31,10 @@ def predict_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tta", action="store_true", help="test-time augmentation: each frame seen with its light "
                                                       "normalised, averaged with its mirror image (two network passes "
                                                       "a frame; finds more road in dark or bright frames)")
+    p.add_argument("--crop-top", type=float, default=0.0, metavar="F",
+                   help="leave the top F of every frame (a fraction of its height in [0, 0.7), above a fixed "
+                        "camera's horizon) out of the network's input, scored not road: the road fills more of "
+                        "the input (default 0)")
     p.add_argument("--profile", action="store_true", help="also print each stage's time per frame: decode, "
                                                           "preprocess, network, postprocess, write")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
@@ -44,7 +48,8 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
     summary = predict(args.input, args.out, checkpoint=args.checkpoint, onnx=args.onnx, threads=args.threads,
                       batch_size=args.batch_size, shard=args.shard, overlays=not args.no_overlays,
-                      progress=not args.no_progress, tta=args.tta, overlay_format=args.overlay_format)
+                      progress=not args.no_progress, tta=args.tta, overlay_format=args.overlay_format,
+                      crop_top=args.crop_top)
     print(predict_report(summary, args.out, args.shard, profile=args.profile))
     return 0
 

@@ -367,7 +367,8 @@ def _run_record(predictor: Predictor, source: FrameSource, shard: tuple[int, int
             "image_size": list(size) if size is not None else None, "input": shown_path(spec),
             "frames": len(source.paths),
             "frames_sha256": hashlib.sha256(names).hexdigest(), "shards": shard[1] if shard else None,
-            "overlays": overlays, "tta": getattr(predictor, "tta", False)}
+            "overlays": overlays, "tta": getattr(predictor, "tta", False),
+            "crop_top": getattr(predictor, "crop_top", 0.0)}
 
 
 def _join_run(folder: OwnedFolder, record: dict[str, Any]) -> None:
@@ -427,7 +428,8 @@ def _summary(predictor: Predictor, stats: RunStats, **extra: Any) -> dict[str, A
             "frames_per_second": n / wall if n and wall > 0 else None, "seconds": wall,
             "network_share": stats.network_seconds / wall if n and wall > 0 else None, "model": predictor.name,
             "image_size": list(predictor.resize_to) if predictor.resize_to is not None else None,
-            "tta": getattr(predictor, "tta", False), "profile_ms_per_frame": stats.profile(), **extra}
+            "tta": getattr(predictor, "tta", False), "crop_top": getattr(predictor, "crop_top", 0.0),
+            "profile_ms_per_frame": stats.profile(), **extra}
 
 
 def _predict_into(predictor: Predictor, source: FrameSource, out: Path, batch_size: int, progress: bool,
@@ -488,7 +490,7 @@ def predict_video(predictor: Predictor, inputs: PathLike, out: PathLike, batch_s
 def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
             threads: int | None = None, batch_size: int = 4, shard: str | tuple[int, int] | None = None,
             overlays: bool = True, progress: bool = True, tta: bool = False,
-            overlay_format: str = "png") -> dict[str, Any]:
+            overlay_format: str = "png", crop_top: float = 0.0) -> dict[str, Any]:
     """``freespace predict``: the road confidence PNGs and overlays of every frame of ``inputs`` in the folder
     ``out`` (:func:`predict_folder`), or, when ``out`` names a video (``.mp4``), the overlaid video
     (:func:`predict_video`), with the model of ``checkpoint`` or ``onnx`` (one of them).
@@ -497,7 +499,8 @@ def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = No
     ``overlays=False`` are for a folder ``out`` only. ``threads``: the network's CPU threads (None: the cores
     this process may use; else 1…:func:`~freespace.limits.max_workers`, checked first). ``tta``: each frame seen
     with its light normalised and averaged with its mirror image (:class:`~freespace.inference.predictor.Predictor`;
-    two network passes a frame), recorded in the output's run record and summary.
+    two network passes a frame), recorded in the output's run record and summary; ``crop_top``, likewise: the top
+    ``crop_top × H`` rows of every frame left out of the network's input and scored 0 (a region of interest).
 
     Returns:
         The run's summary (:func:`predict_folder` or :func:`predict_video`).
@@ -523,7 +526,7 @@ def predict(inputs: PathLike, out: PathLike, *, checkpoint: PathLike | None = No
     if video and not overlays:
         raise InvalidOptionError(f"{param('no_overlays')} leaves out the overlay PNGs of a folder {param('out')}; a "
                                  f"video {param('out')} is the overlay: leave out {param('no_overlays')}")
-    predictor = Predictor(checkpoint=checkpoint, onnx=onnx, threads=threads, tta=tta)
+    predictor = Predictor(checkpoint=checkpoint, onnx=onnx, threads=threads, tta=tta, crop_top=crop_top)
     if video:
         return predict_video(predictor, inputs, out, batch_size=batch_size, progress=progress)
     return predict_folder(predictor, inputs, out, batch_size=batch_size, progress=progress, shard=shard,

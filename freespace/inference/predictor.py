@@ -235,14 +235,21 @@ class Predictor:
     normalised (:func:`~freespace.data.photometry.normalise_light`, at the network's size) and the probability
     averaged with that of its mirror image (mirrored back): two passes of the network a frame, and the road found
     in frames darker or lighter than the model's training frames.
+
+    ``crop_top`` (a fraction of the height in [0, 0.7); 0: off): the top ``round(crop_top × H)`` rows of each frame,
+    above the horizon of a fixed camera, are left out of the network's input and scored 0 (not road); the rest is
+    resized to ``resize_to`` as a whole frame would be, so the road fills more of the input (a region of interest).
     """
 
     def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
-                 threads: int | None = None, tta: bool = False) -> None:
+                 threads: int | None = None, tta: bool = False, crop_top: float = 0.0) -> None:
         check_threads(threads)
         if not isinstance(tta, bool):
             raise InvalidOptionError(f"{param('tta')} is True or False, got {tta!r}")
-        self.tta = tta
+        if isinstance(crop_top, bool) or not isinstance(crop_top, (int, float)) or not 0 <= crop_top < 0.7:
+            raise InvalidOptionError(f"{param('crop_top')} is a fraction of the frame's height in [0, 0.7), got "
+                                     f"{crop_top!r}")
+        self.tta, self.crop_top = tta, float(crop_top)
         if (checkpoint is None) == (onnx is None):
             raise InvalidOptionError(f"give exactly one of {param('checkpoint')} and {param('onnx')}")
         self.resize_to: tuple[int, int] | None = None
@@ -343,6 +350,7 @@ class Predictor:
         """:meth:`prepare` of an image already checked (:func:`_rgb_image`)."""
         if image.dtype != np.uint8:  # uint16 and float: to [0, 1] first (cv2 resizes float32, not float16)
             image = image.astype(np.float32) * np.float32(1 / 65535 if image.dtype == np.uint16 else 1)
+        image = image[self._cut(image.shape[0]):]
         if self.resize_to is not None and image.shape[:2] != self.resize_to:
             image = fit(image, self.resize_to, self.resize)
         if self.tta:  # the light normalised at the network's size (as adapt's teacher sees frames)
@@ -372,8 +380,18 @@ class Predictor:
 
     def restore(self, prob: np.ndarray, size: tuple[int, int]) -> np.ndarray:
         """``prob`` (``float32 h×w``) at ``size`` = (H, W): the frame's part of the input (:attr:`resize`), bilinear
-        on the probabilities (a threshold after it gives a smooth mask boundary, not the network's blocks)."""
-        return unfit(prob, size, self.resize)
+        on the probabilities (a threshold after it gives a smooth mask boundary, not the network's blocks); the rows
+        that :attr:`crop_top` left out are 0."""
+        top = self._cut(size[0])
+        if top == 0:
+            return unfit(prob, size, self.resize)
+        out = np.zeros(size, np.float32)
+        out[top:] = unfit(prob, (size[0] - top, size[1]), self.resize)
+        return out
+
+    def _cut(self, height: int) -> int:
+        """The rows :attr:`crop_top` leaves out of a frame ``height`` rows high (at least one row is kept)."""
+        return min(int(round(self.crop_top * height)), height - 1)
 
     def predict(self, images: np.ndarray | Iterable[np.ndarray], batch_size: int = 8) -> list[np.ndarray]:
         """Road probability (``float32 H×W`` in [0, 1]) of each image, at its own size, in order.
