@@ -106,14 +106,14 @@ def summary(counts: dict[str, dict[str, int]]) -> dict[str, object]:
                                      for k in PLACES}}
 
 
-def _predictor(path: Path, threads: int | None, tta: bool = False):
+def _predictor(path: Path, threads: int | None, tta: bool = False, crop_top: float = 0.0):
     """A model file's predictor: an ONNX file on ``threads`` threads, or a training checkpoint; with ``tta``, as
-    ``predict --tta`` sees frames (light normalised, mirror averaged)."""
+    ``predict --tta`` sees frames (light normalised, mirror averaged); ``crop_top``: as ``predict --crop-top``."""
     from freespace.inference.predictor import Predictor
 
     if path.suffix == ".onnx":
-        return Predictor(onnx=path, threads=threads, tta=tta)
-    return Predictor(checkpoint=path, tta=tta)
+        return Predictor(onnx=path, threads=threads, tta=tta, crop_top=crop_top)
+    return Predictor(checkpoint=path, tta=tta, crop_top=crop_top)
 
 
 def run(models: dict[str, Path], real_dev: Path, threshold: float, near: float, threads: int | None
@@ -152,7 +152,7 @@ def _curve(counts: np.ndarray) -> dict[str, list[float]]:
                                   (("P", "precision"), ("R", "recall"), ("F", "f_score"))}}
 
 
-def sweep(models: dict[str, Path], real_dev: Path, threads: int | None, tta: bool = False
+def sweep(models: dict[str, Path], real_dev: Path, threads: int | None, tta: bool = False, crop_top: float = 0.0
           ) -> dict[str, dict[str, object]]:
     """Each model's pooled precision, recall and F at every threshold of :data:`SWEEP` → ``{set: {model: curve}}``:
     the sets of :data:`SETS` here, ``kitti_wide9`` (the 9 KITTI frames of other streets with the most human road)
@@ -161,7 +161,7 @@ def sweep(models: dict[str, Path], real_dev: Path, threads: int | None, tta: boo
     out: dict[str, dict[str, object]] = {}
     th = np.array(SWEEP)[:, None]
     for name, path in models.items():
-        predictor = _predictor(path, threads, tta)
+        predictor = _predictor(path, threads, tta, crop_top)
         per_set = {}
         for set_name, images, labels, label_format in SETS:
             if not (real_dev / labels).is_dir():
@@ -197,6 +197,8 @@ def main() -> None:
     ap.add_argument("--sweep", action="store_true",
                     help="instead: pooled precision, recall and F at thresholds 0.05–0.95 (no classes, no places)")
     ap.add_argument("--tta", action="store_true", help="with --sweep: the models as predict --tta runs them")
+    ap.add_argument("--crop-top", type=float, default=0.0, metavar="F",
+                    help="with --sweep: the models as predict --crop-top F runs them")
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args()
     if not a.real_dev.is_dir():
@@ -207,11 +209,13 @@ def main() -> None:
     for name, path in models.items():
         if not path.is_file():
             ap.error(f"--model {name}={path}: no such file")
-    if a.tta and not a.sweep:
-        ap.error("--tta goes with --sweep")
+    if (a.tta or a.crop_top) and not a.sweep:
+        ap.error("--tta and --crop-top go with --sweep")
+    if not 0 <= a.crop_top < 0.7:
+        ap.error(f"--crop-top {a.crop_top} is not a fraction of the height in [0, 0.7)")
     if a.sweep:
-        res = {"models": {k: str(v) for k, v in models.items()}, "tta": a.tta,
-               "sets": sweep(models, a.real_dev, a.threads, a.tta)}
+        res = {"models": {k: str(v) for k, v in models.items()}, "tta": a.tta, "crop_top": a.crop_top,
+               "sets": sweep(models, a.real_dev, a.threads, a.tta, a.crop_top)}
     else:
         res = {"threshold": a.threshold, "near": a.near, "models": {k: str(v) for k, v in models.items()},
                "sets": run(models, a.real_dev, a.threshold, a.near, a.threads)}

@@ -583,7 +583,9 @@ def test_errors_sweeps_the_threshold_over_each_set_and_the_pool(tmp_path: Path,
     seen = []
     monkeypatch.setattr(freespace.inference.predictor, "Predictor", lambda **kw: seen.append(kw) or Ramp())
     errors.sweep({"m": tmp_path / "m.ckpt"}, tmp_path, threads=1, tta=True)
-    assert seen == [{"checkpoint": tmp_path / "m.ckpt", "tta": True}]  # as predict --tta runs it
+    errors.sweep({"m": tmp_path / "m.ckpt"}, tmp_path, threads=1, crop_top=0.35)
+    assert seen == [{"checkpoint": tmp_path / "m.ckpt", "tta": True, "crop_top": 0.0},  # as predict --tta runs it
+                    {"checkpoint": tmp_path / "m.ckpt", "tta": False, "crop_top": 0.35}]  # and --crop-top 0.35
 
 
 def _bench(tmp_path: Path, name: str, f: float, models: int = 1) -> Path:
