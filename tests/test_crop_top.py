@@ -59,3 +59,10 @@ def test_predict_records_crop_top_and_refuses_to_mix(ckpt: Path, tmp_path: Path,
     refused(capsys, ["predict", "--checkpoint", str(ckpt), "--input", str(frames), "--out", str(tmp_path / "bad"),
                      "--crop-top", "0.8"], match="crop-top is a fraction")
     assert not (tmp_path / "bad").exists()
+    ev, labels = tmp_path / "eval", tmp_path / "labels"
+    labels.mkdir()
+    for i in range(3):
+        write_image(labels / f"f{i}.png", (road_frame(SIZE, i)[1] * 255).astype(np.uint8))
+    assert main(["evaluate", "--checkpoint", str(ckpt), "--images", str(frames), "--labels", str(labels),
+                 "--label-format", "binary", "--out", str(ev), "--crop-top", "0.3", "--no-overlays"]) == 0
+    assert json.loads((ev / "metrics.json").read_text())["crop_top"] == 0.3

@@ -75,6 +75,9 @@ def evaluate_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
     p.add_argument("--tta", action="store_true", help="score the model as predict --tta runs it (light normalised, "
                                                       "mirror averaged)")
+    p.add_argument("--crop-top", type=float, default=0.0, metavar="F",
+                   help="score the model as predict --crop-top F runs it (the top F of each frame left out of the "
+                        "network's input, scored not road; default 0)")
     p.add_argument("--no-overlays", action="store_true", help="labelled folder: skip the TP/FN/FP overlays")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (off a terminal there is none anyway)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (a new one, or one this command wrote)")
@@ -89,7 +92,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                  split=args.split, subset=args.subset, splits_dir=args.splits_dir, images=args.images,
                  labels=args.labels, label_format=args.label_format, road=args.road, ignore=args.ignore,
                  tolerance=args.tolerance, labels_like=args.labels_like, threads=args.threads,
-                 overlays=not args.no_overlays, progress=not args.no_progress, tta=args.tta)
+                 overlays=not args.no_overlays, progress=not args.no_progress, tta=args.tta,
+                 crop_top=args.crop_top)
     print(evaluate_report(m, args.out))
     return 0
 

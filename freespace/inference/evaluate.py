@@ -159,25 +159,26 @@ def _write_results(staging: Path, evaluator: RoadEvaluator, scores: PooledScores
 
 
 def _model(checkpoint: PathLike | None, onnx: PathLike | None, threads: int | None,
-           tta: bool = False) -> tuple[Predictor, dict]:
-    predictor = Predictor(checkpoint=checkpoint, onnx=onnx, threads=threads, tta=tta)
+           tta: bool = False, crop_top: float = 0.0) -> tuple[Predictor, dict]:
+    predictor = Predictor(checkpoint=checkpoint, onnx=onnx, threads=threads, tta=tta, crop_top=crop_top)
     return predictor, ({"checkpoint": str(checkpoint)} if checkpoint is not None else {"onnx": str(onnx)}) | \
-        {"tta": tta}
+        {"tta": tta, "crop_top": predictor.crop_top}
 
 
 def evaluate_checkpoint(checkpoint: PathLike | None, dataset: str, root: PathLike, out: PathLike,
                         subset: str = "test", splits_dir: PathLike | None = None, split: str | None = None,
                         progress: bool = True, onnx: PathLike | None = None,
-                        threads: int | None = None, tta: bool = False) -> dict[str, Any]:
-    """Evaluate a model (``checkpoint`` or ``onnx``; ``tta``: as :class:`~freespace.inference.predictor.Predictor`
-    takes it) on ``subset`` (train/val/test from the run's lists, or all labelled frames) of the on-disk ``split``
-    of a dataset; writes ``out`` (see the module docstring)."""
+                        threads: int | None = None, tta: bool = False, crop_top: float = 0.0) -> dict[str, Any]:
+    """Evaluate a model (``checkpoint`` or ``onnx``; ``tta`` and ``crop_top``: as
+    :class:`~freespace.inference.predictor.Predictor` takes them) on ``subset`` (train/val/test from the run's
+    lists, or all labelled frames) of the on-disk ``split`` of a dataset; writes ``out`` (see the module
+    docstring)."""
     if subset not in ("train", "val", "test", "all"):
         raise InvalidOptionError(f"{param('subset')} must be train, val, test or all, got {subset!r}")
     out = Path(out)
     check_writable(out, folder=True)
     check_outputs({"out": out}, {"checkpoint": checkpoint, "onnx": onnx, "root": root, "splits_dir": splits_dir})
-    predictor, record = _model(checkpoint, onnx, threads, tta)
+    predictor, record = _model(checkpoint, onnx, threads, tta, crop_top)
     ds = get_dataset(dataset, root, split, disparity_source="none")
     if not any(ds.has_label(f) for f in ds.frames):
         raise DatasetError(f"{dataset} at {root} has no road labels to evaluate against; evaluate on a labelled "
@@ -195,11 +196,13 @@ def evaluate_checkpoint(checkpoint: PathLike | None, dataset: str, root: PathLik
 
 def evaluate_labelled(images: PathLike, labels: PathLike, label_format: LabelFormat, out: PathLike, *,
                       checkpoint: PathLike | None = None, onnx: PathLike | None = None, threads: int | None = None,
-                      overlays: bool = True, progress: bool = True, tta: bool = False) -> dict[str, Any]:
-    """Evaluate a model (``checkpoint`` or ``onnx``; ``tta`` as :class:`~freespace.inference.predictor.Predictor`
-    takes it) on a labelled folder: every label file of ``labels`` with the
-    image of the same name in ``images`` (:func:`~freespace.evaluation.labelled.pair_labelled_frames`), the labels
-    decoded by ``label_format``. Writes ``out`` (see the module docstring); returns ``metrics.json``'s content.
+                      overlays: bool = True, progress: bool = True, tta: bool = False,
+                      crop_top: float = 0.0) -> dict[str, Any]:
+    """Evaluate a model (``checkpoint`` or ``onnx``; ``tta`` and ``crop_top`` as
+    :class:`~freespace.inference.predictor.Predictor` takes them) on a labelled folder: every label file of
+    ``labels`` with the image of the same name in ``images``
+    (:func:`~freespace.evaluation.labelled.pair_labelled_frames`), the labels decoded by ``label_format``. Writes
+    ``out`` (see the module docstring); returns ``metrics.json``'s content.
 
     Raises:
         DatasetError: no label has an evaluated pixel, or a road value is in no label
@@ -210,7 +213,7 @@ def evaluate_labelled(images: PathLike, labels: PathLike, label_format: LabelFor
     check_outputs({"out": out}, {"checkpoint": checkpoint, "onnx": onnx, "images": images, "labels": labels})
     frames = pair_labelled_frames(images, labels, label_format)
     check_labels(frames, label_format)  # a set that would score nothing is refused before the model runs
-    predictor, record = _model(checkpoint, onnx, threads, tta)
+    predictor, record = _model(checkpoint, onnx, threads, tta, crop_top)
 
     with claim_folder(out, "evaluate") as folder, folder.staged() as staging:  # all or nothing
         evaluator, scores, seconds = score_frames(predictor, [(f.name, partial(f.read, label_format)) for f in frames],
@@ -232,7 +235,7 @@ def evaluate(out: PathLike, *, checkpoint: PathLike | None = None, onnx: PathLik
              labels: PathLike | None = None, label_format: str | None = None, road: str | None = None,
              ignore: str | None = None, tolerance: int | None = None, threads: int | None = None,
              overlays: bool = True, progress: bool = True, labels_like: str | None = None,
-             tta: bool = False) -> dict[str, Any]:
+             tta: bool = False, crop_top: float = 0.0) -> dict[str, Any]:
     """``freespace evaluate``: a model (``checkpoint`` or ``onnx``) on a dataset's frames (``dataset`` and
     ``root``: :func:`evaluate_checkpoint`) or on a labelled folder (``images``, ``labels`` and ``label_format``,
     with ``road``, ``ignore`` and ``tolerance`` as :func:`~freespace.evaluation.labelled.parse_label_format`
@@ -260,7 +263,8 @@ def evaluate(out: PathLike, *, checkpoint: PathLike | None = None, onnx: PathLik
                                      f"{', '.join(missing)}")
         fmt = resolve_label_format(label_format, labels_like, road, ignore, tolerance)
         return evaluate_labelled(images, labels, fmt, out, checkpoint=checkpoint, onnx=onnx,  # type: ignore[arg-type]
-                                 threads=threads, overlays=overlays, progress=progress, tta=tta)
+                                 threads=threads, overlays=overlays, progress=progress, tta=tta,
+                                 crop_top=crop_top)
     if dataset is None or root is None:
         raise InvalidOptionError(f"give the frames to evaluate on: {param('dataset')} NAME {param('root')} DIR, or a "
                                  f"labelled folder ({param('images')} DIR {param('labels')} DIR {param('label_format')}"
@@ -270,7 +274,7 @@ def evaluate(out: PathLike, *, checkpoint: PathLike | None = None, onnx: PathLik
                                  f"folder's labels ({param('images')}/{param('labels')}/{param('label_format')}), not "
                                  f"a dataset's")
     return evaluate_checkpoint(checkpoint, dataset, root, out, subset=subset, splits_dir=splits_dir, split=split,
-                               progress=progress, onnx=onnx, threads=threads, tta=tta)
+                               progress=progress, onnx=onnx, threads=threads, tta=tta, crop_top=crop_top)
 
 
 def evaluate_report(metrics: dict[str, Any], out: PathLike) -> str:
