@@ -74,6 +74,8 @@ MAX_LIDAR_FILL_PX = 1000.0
 MAX_POSE = 1e6
 #: the road fit's inlier threshold at most, pixels (a residual of 1000 px makes every pixel an inlier)
 MAX_INLIER_THRESHOLD_PX = 1000.0
+#: the share of a frame's height that ``--crop-top`` may leave out, exclusive (some road must stay in view)
+MAX_CROP_TOP = 0.7
 
 
 def usable_cores() -> int:

@@ -57,7 +57,7 @@ def test_predict_records_crop_top_and_refuses_to_mix(ckpt: Path, tmp_path: Path,
     refused(capsys, ["predict", "--checkpoint", str(ckpt), "--input", str(frames), "--out", str(out),
                      "--no-overlays", "--shard", "2/2"], match="crop_top 0.3 → 0.0")
     refused(capsys, ["predict", "--checkpoint", str(ckpt), "--input", str(frames), "--out", str(tmp_path / "bad"),
-                     "--crop-top", "0.8"], match="crop-top is a fraction")
+                     "--crop-top", "0.8"], match="--crop-top must be in [0, 0.7)")
     assert not (tmp_path / "bad").exists()
     ev, labels = tmp_path / "eval", tmp_path / "labels"
     labels.mkdir()

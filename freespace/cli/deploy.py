@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from freespace.cli.shared import SEED, WORKERS
+from freespace.cli.shared import CROP_TOP, SEED, WORKERS
 from freespace.engine.model_folder import KERNELS
 from freespace.errors import InvalidOptionError
 from freespace.limits import MAX_BATCH_SIZE, MAX_EPOCHS, bounded_int
@@ -31,7 +31,7 @@ def predict_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tta", action="store_true", help="test-time augmentation: each frame seen with its light "
                                                       "normalised, averaged with its mirror image (two network passes "
                                                       "a frame; finds more road in dark or bright frames)")
-    p.add_argument("--crop-top", type=float, default=0.0, metavar="F",
+    p.add_argument("--crop-top", type=CROP_TOP, default=0.0, metavar="F",
                    help="leave the top F of every frame (a fraction of its height in [0, 0.7), above a fixed "
                         "camera's horizon) out of the network's input, scored not road: the road fills more of "
                         "the input (default 0)")

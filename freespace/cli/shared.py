@@ -10,11 +10,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from freespace.errors import MAX_SEED, InvalidOptionError, param
-from freespace.limits import WORKERS_PER_CORE, bounded_int, max_workers
+from freespace.limits import MAX_CROP_TOP, WORKERS_PER_CORE, bounded_float, bounded_int, max_workers
 
 #: worker processes (generate, autolabel, synth): at most a few per CPU core of this machine
 WORKERS = bounded_int(1, max_workers, why=f"{WORKERS_PER_CORE} per CPU core")
 SEED = bounded_int(0, MAX_SEED)
+#: ``--crop-top``: a share of the frame's height in [0, MAX_CROP_TOP)
+CROP_TOP = bounded_float(0, MAX_CROP_TOP, high_open=True)
 
 
 def number_pair(form: str, what: str) -> Callable[[str], tuple[float, float]]:

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from freespace.cli.config_options import FromFile, add_config_options, config_values
-from freespace.cli.shared import SEED, WORKERS, add_dataset_root, number_pair
+from freespace.cli.shared import CROP_TOP, SEED, WORKERS, add_dataset_root, number_pair
 from freespace.limits import bounded_int
 
 # --- train, evaluate, evaluate-kitti -------------------------------------------------------------------
@@ -75,7 +75,7 @@ def evaluate_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=WORKERS, help="ONNX Runtime threads (default: the cores this process may use)")
     p.add_argument("--tta", action="store_true", help="score the model as predict --tta runs it (light normalised, "
                                                       "mirror averaged)")
-    p.add_argument("--crop-top", type=float, default=0.0, metavar="F",
+    p.add_argument("--crop-top", type=CROP_TOP, default=0.0, metavar="F",
                    help="score the model as predict --crop-top F runs it (the top F of each frame left out of the "
                         "network's input, scored not road; default 0)")
     p.add_argument("--no-overlays", action="store_true", help="labelled folder: skip the TP/FN/FP overlays")

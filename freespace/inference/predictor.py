@@ -20,7 +20,7 @@ from freespace.errors import CorruptFileError, FreespaceError, InvalidOptionErro
 from freespace.io.codecs import MAX_IMAGE_SIDE
 from freespace.io.files import PathLike, missing_input, unicode_name
 from freespace.io.frame_fit import RESIZE_MODES, fit, unfit
-from freespace.limits import MAX_BATCH_SIZE, check_threads, usable_cores
+from freespace.limits import MAX_BATCH_SIZE, MAX_CROP_TOP, check_threads, usable_cores
 
 if TYPE_CHECKING:
     import torch
@@ -236,9 +236,10 @@ class Predictor:
     averaged with that of its mirror image (mirrored back): two passes of the network a frame, and the road found
     in frames darker or lighter than the model's training frames.
 
-    ``crop_top`` (a fraction of the height in [0, 0.7); 0: off): the top ``round(crop_top × H)`` rows of each frame,
-    above the horizon of a fixed camera, are left out of the network's input and scored 0 (not road); the rest is
-    resized to ``resize_to`` as a whole frame would be, so the road fills more of the input (a region of interest).
+    ``crop_top`` (a fraction of the height in [0, :data:`~freespace.limits.MAX_CROP_TOP`); 0: off): the top
+    ``round(crop_top × H)`` rows of each frame, above the horizon of a fixed camera, are left out of the network's
+    input and scored 0 (not road); the rest is resized to ``resize_to`` as a whole frame would be, so the road fills
+    more of the input (a region of interest).
     """
 
     def __init__(self, checkpoint: PathLike | None = None, onnx: PathLike | None = None,
@@ -246,9 +247,9 @@ class Predictor:
         check_threads(threads)
         if not isinstance(tta, bool):
             raise InvalidOptionError(f"{param('tta')} is True or False, got {tta!r}")
-        if isinstance(crop_top, bool) or not isinstance(crop_top, (int, float)) or not 0 <= crop_top < 0.7:
-            raise InvalidOptionError(f"{param('crop_top')} is a fraction of the frame's height in [0, 0.7), got "
-                                     f"{crop_top!r}")
+        if isinstance(crop_top, bool) or not isinstance(crop_top, (int, float)) or not 0 <= crop_top < MAX_CROP_TOP:
+            raise InvalidOptionError(f"{param('crop_top')} is a fraction of the frame's height in "
+                                     f"[0, {MAX_CROP_TOP}), got {crop_top!r}")
         self.tta, self.crop_top = tta, float(crop_top)
         if (checkpoint is None) == (onnx is None):
             raise InvalidOptionError(f"give exactly one of {param('checkpoint')} and {param('onnx')}")
