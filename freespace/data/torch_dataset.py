@@ -46,6 +46,7 @@ from freespace.errors import DatasetError
 from freespace.io.codecs import read_image
 from freespace.io.frame_fit import check_resize, fit
 from freespace.labels import IGNORE_INDEX
+from freespace.limits import MAX_CROP_TOP
 
 __all__ = ["RoadSegmentationDataset", "Item", "VirtualAugment", "IGNORE_INDEX", "label_to_index", "resized_intrinsics",
            "PHOTOMETRIC", "photometric_strength"]
@@ -174,7 +175,7 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
             augmentation when both are on.
         zoom: with ``affine``, also scale by a factor in 1 ± ``zoom`` (0: off; at most 0.5).
         crop_top: cut the top ``t`` (a fraction of the height, drawn in [0, ``crop_top``]) and stretch the rest
-            back (0: off; below 0.7).
+            back (0: off; below :data:`~freespace.limits.MAX_CROP_TOP`).
         resize: how a frame is fitted to ``size``: ``stretch`` or ``letterbox`` (aspect kept, the border don't
             care; :mod:`freespace.io.frame_fit`).
 
@@ -202,8 +203,8 @@ class RoadSegmentationDataset(torch.utils.data.Dataset):
         self._cache: dict[tuple[int, str | None], tuple[np.ndarray, np.ndarray]] = {}
         if not 0 <= zoom <= 0.5:
             raise ValueError(f"zoom must be in [0, 0.5], got {zoom}")
-        if not 0 <= crop_top < 0.7:
-            raise ValueError(f"crop_top must be in [0, 0.7), got {crop_top}")
+        if not 0 <= crop_top < MAX_CROP_TOP:
+            raise ValueError(f"crop_top must be in [0, {MAX_CROP_TOP}), got {crop_top}")
         self._aug = _augmenter(affine, flip, photometric, zoom)
         self.crop_top = crop_top
         self._strong = photometric_strength(photometric) == "strong"

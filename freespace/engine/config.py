@@ -51,6 +51,7 @@ from freespace.io.files import PathLike, atomic_write_text, check_outputs, check
 from freespace.io.frame_fit import RESIZE_MODES
 from freespace.limits import (
     MAX_BATCH_SIZE,
+    MAX_CROP_TOP,
     MAX_DEVICES,
     MAX_EPOCHS,
     MAX_FRAME_COUNT,
@@ -125,8 +126,7 @@ class TrainConfig:
     flip: bool = option("also mirror each training sample left-right (image and label) with probability ½, drawn "
                          "like the conventional augmentation", False)
     photometric: bool = option("also jitter each training sample's brightness, contrast and saturation (×0.75–1.25) "
-                                "and hue (±0.04 turn) with probability 0.8, drawn like the conventional augmentation",
-                                False)
+                                "and hue (±0.04 turn) with probability 0.8, drawn like the conventional one", False)
     photometric_strength: str = option(f"how {param('photometric')} recolours: mild (as it says) or strong "
                                        f"(brightness ×0.5–1.3, contrast ×0.6–1.4, saturation ×0.4–1.4, a gamma "
                                        f"0.7–2 that darkens like dusk, blur and noise: for cameras and light the "
@@ -135,7 +135,7 @@ class TrainConfig:
     zoom: Annotated[float, Field(ge=0, le=0.5)] = option("also scale each training sample (image and label) by a "
                                                           "factor drawn in 1 ± this, with the conventional "
                                                           "augmentation (new borders don't care); 0: off", 0.0)
-    crop_top: Annotated[float, Field(ge=0, lt=0.7)] = option(
+    crop_top: Annotated[float, Field(ge=0, lt=MAX_CROP_TOP)] = option(
         "also cut the top t × the height off each training sample (image and label) and stretch the rest back, t "
         "drawn in [0, this]: the road ends at other rows than the frames show; 0: off", 0.0, metavar="MAX")
     epochs: Annotated[int, Field(ge=1, le=MAX_EPOCHS)] = option("most epochs", 50)
