@@ -1,11 +1,13 @@
 """A copy of a generic training dataset whose frames of one camera are padded, left and right, to another aspect:
 the CamVid frames (480×360, 4:3) of the real-roads mix at KITTI's aspect (1242/375), so that resizing every frame
-to the training size keeps their proportions instead of squeezing them vertically (session 35's ``mixpad``).
+to the training size keeps their proportions instead of squeezing them vertically (session 35's ``mixpad``); with
+``--cut-top F``, every frame (image and label) also loses its top ``round(F × H)`` rows first — the region of
+interest that ``predict --crop-top F`` feeds a network.
 
-The padding is black in the image and don't care (black) in the label; frames without the prefix, the subset lists
+The padding is black in the image and don't care (black) in the label; frames left as they are, the subset lists
 and ``freespace.yaml`` are linked, not copied. Refuses an ``--out`` that exists or lies inside ``--root``.
 
-    python studies/real-roads/padded.py --root MIX --out MIXPAD [--prefix camvid-] [--aspect 3.312]
+    python studies/real-roads/padded.py --root MIX --out MIXPAD [--prefix camvid-] [--aspect 3.312] [--cut-top F]
 """
 
 from __future__ import annotations
@@ -35,21 +37,24 @@ def pad_to_aspect(image: np.ndarray, aspect: float) -> np.ndarray:
     return np.pad(image, widths)
 
 
-def build(root: Path, out: Path, prefix: str, aspect: float) -> dict[str, int]:
+def build(root: Path, out: Path, prefix: str, aspect: float, cut_top: float = 0.0) -> dict[str, int]:
     """Lay out ``out`` from the generic dataset ``root`` (``left/``, ``label/``, ``splits/``, ``freespace.yaml``):
-    frames whose name starts with ``prefix`` padded to ``aspect``, the others linked → counts of both."""
+    every frame without its top ``round(cut_top × H)`` rows, and those whose name starts with ``prefix`` padded to
+    ``aspect`` (0: none); frames left as they are linked → counts of written and linked frames."""
     counts = {"padded": 0, "linked": 0}
     for sub in ("left", "label"):
         (out / sub).mkdir(parents=True)
         for path in sorted((root / sub).iterdir()):
-            if not path.name.startswith(prefix):
+            pad = aspect > 0 and path.name.startswith(prefix)
+            if not pad and cut_top == 0:
                 os.symlink(path.resolve(), out / sub / path.name)
                 counts["linked"] += sub == "left"
                 continue
             image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
             if image is None:
                 raise ValueError(f"{path} is not an image: rebuild {root}")
-            cv2.imwrite(str(out / sub / path.name), pad_to_aspect(image, aspect))
+            image = image[int(round(cut_top * image.shape[0])):]
+            cv2.imwrite(str(out / sub / path.name), pad_to_aspect(image, aspect) if pad else image)
             counts["padded"] += sub == "left"
     for name in ("splits", "freespace.yaml"):
         if (root / name).exists():
@@ -62,7 +67,9 @@ def main() -> None:
     ap.add_argument("--root", type=Path, required=True, help="a generic dataset (left/, label/, splits/)")
     ap.add_argument("--out", type=Path, required=True, help="the padded copy (a new folder)")
     ap.add_argument("--prefix", default="camvid-", help="pad the frames whose name starts with this")
-    ap.add_argument("--aspect", type=float, default=KITTI_ASPECT, help="width over height after padding")
+    ap.add_argument("--aspect", type=float, default=KITTI_ASPECT, help="width over height after padding (0: none)")
+    ap.add_argument("--cut-top", type=float, default=0.0, metavar="F",
+                    help="also cut the top F of every frame's height (image and label) first; in [0, 0.7)")
     args = ap.parse_args()
     if not (args.root / "left").is_dir() or not (args.root / "label").is_dir():
         ap.error(f"{args.root} has no left/ and label/: give a generic dataset's root")
@@ -70,19 +77,21 @@ def main() -> None:
         ap.error(f"{args.out} exists: give a new folder")
     if args.out.resolve().is_relative_to(args.root.resolve()):
         ap.error(f"{args.out} lies inside {args.root}: give a folder outside it")
-    if args.aspect <= 0:
-        ap.error(f"--aspect {args.aspect} must be positive")
+    if args.aspect < 0:
+        ap.error(f"--aspect {args.aspect} must be positive (0: no padding)")
+    if not 0 <= args.cut_top < 0.7:
+        ap.error(f"--cut-top {args.cut_top} must be in [0, 0.7)")
     tmp = args.out.with_name(args.out.name + ".partial")
     if tmp.exists():
         ap.error(f"{tmp} exists (an interrupted run?): remove it")
     try:
-        counts = build(args.root, tmp, args.prefix, args.aspect)
+        counts = build(args.root, tmp, args.prefix, args.aspect, args.cut_top)
     except ValueError as err:
         shutil.rmtree(tmp)
         ap.exit(1, f"padded.py: {err}\n")
     tmp.rename(args.out)
-    print(f"padded.py: {counts['padded']} frames padded to aspect {args.aspect:.3f}, {counts['linked']} linked "
-          f"→ {args.out}")
+    print(f"padded.py: {counts['padded']} frames written (aspect {args.aspect:.3f}, top {args.cut_top} cut), "
+          f"{counts['linked']} linked → {args.out}")
 
 
 if __name__ == "__main__":

@@ -725,10 +725,18 @@ def test_padded_pads_one_camera_s_frames_to_the_aspect_and_links_the_rest(tmp_pa
     for args, said in ((["--root", str(root), "--out", str(out)], "exists"),
                        (["--root", str(root), "--out", str(root / "x")], "lies inside"),
                        (["--root", str(tmp_path / "none"), "--out", str(tmp_path / "y")], "no left/"),
-                       (["--root", str(root), "--out", str(tmp_path / "z"), "--aspect", "0"], "must be positive")):
+                       (["--root", str(root), "--out", str(tmp_path / "z"), "--aspect", "-1"], "must be positive"),
+                       (["--root", str(root), "--out", str(tmp_path / "z"), "--cut-top", "0.7"], "must be in")):
         res = subprocess.run([sys.executable, str(STUDY / "padded.py"), *args], capture_output=True, text=True)
         assert res.returncode == 2 and said in res.stderr and "Traceback" not in res.stderr
     assert not (root / "x").exists() and not (tmp_path / "y").exists() and not (tmp_path / "z").exists()
+    cut = tmp_path / "cut"
+    res = subprocess.run([sys.executable, str(STUDY / "padded.py"), "--root", str(root), "--out", str(cut),
+                          "--aspect", "0", "--cut-top", "0.5"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    for sub in ("left", "label"):
+        for name in ("camvid-a.png", "drive-b.png"):  # every frame: its top 2 of 4 rows cut, no padding
+            assert cv2.imread(str(cut / sub / name)).tolist() == image[2:].tolist()
     (root / "left" / "camvid-c.png").write_bytes(b"not a png")
     res = subprocess.run([sys.executable, str(STUDY / "padded.py"), "--root", str(root), "--out", str(tmp_path / "w")],
                          capture_output=True, text=True)
