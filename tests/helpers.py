@@ -141,3 +141,18 @@ def tiny_model_folder(parent: Path, size: tuple[int, int] = (32, 96)) -> Path:
     tiny_road_checkpoint(folder / "model.ckpt", size, width=0.25)
     (folder / "README.md").write_text("# tiny-road — a test model\n")
     return folder
+
+
+def road_folders(parent: Path, size: tuple[int, int], count: int = 3) -> tuple[Path, Path]:
+    """``parent/frames`` and ``parent/labels``: ``count`` rendered road frames ``f<i>.png`` of ``size`` (H, W)
+    and their road masks as binary PNGs (255 = road), for ``predict`` and ``evaluate --label-format binary``."""
+    from freespace.io.codecs import write_image
+
+    frames, labels = parent / "frames", parent / "labels"
+    frames.mkdir()
+    labels.mkdir()
+    for i in range(count):
+        image, road = road_frame(size, i)
+        write_image(frames / f"f{i}.png", image)
+        write_image(labels / f"f{i}.png", (road * 255).astype(np.uint8))
+    return frames, labels

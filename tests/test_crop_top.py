@@ -13,9 +13,8 @@ import pytest
 from freespace.cli import main
 from freespace.errors import InvalidOptionError
 from freespace.inference.predictor import Predictor
-from freespace.io.codecs import write_image
 
-from helpers import refused, road_frame, tiny_road_checkpoint
+from helpers import refused, road_folders, road_frame, tiny_road_checkpoint
 
 SIZE = (32, 96)
 
@@ -45,10 +44,7 @@ def test_crop_top_feeds_the_rest_of_the_frame_and_scores_the_top_not_road(ckpt: 
 
 def test_predict_records_crop_top_and_refuses_to_mix(ckpt: Path, tmp_path: Path,
                                                      capsys: pytest.CaptureFixture) -> None:
-    frames = tmp_path / "frames"
-    frames.mkdir()
-    for i in range(3):
-        write_image(frames / f"f{i}.png", road_frame(SIZE, i)[0])
+    frames, labels = road_folders(tmp_path, SIZE)
     out = tmp_path / "out"
     assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames), "--out", str(out), "--crop-top",
                  "0.3", "--no-overlays", "--shard", "1/2"]) == 0
@@ -59,10 +55,7 @@ def test_predict_records_crop_top_and_refuses_to_mix(ckpt: Path, tmp_path: Path,
     refused(capsys, ["predict", "--checkpoint", str(ckpt), "--input", str(frames), "--out", str(tmp_path / "bad"),
                      "--crop-top", "0.8"], match="--crop-top must be in [0, 0.7)")
     assert not (tmp_path / "bad").exists()
-    ev, labels = tmp_path / "eval", tmp_path / "labels"
-    labels.mkdir()
-    for i in range(3):
-        write_image(labels / f"f{i}.png", (road_frame(SIZE, i)[1] * 255).astype(np.uint8))
+    ev = tmp_path / "eval"
     assert main(["evaluate", "--checkpoint", str(ckpt), "--images", str(frames), "--labels", str(labels),
                  "--label-format", "binary", "--out", str(ev), "--crop-top", "0.3", "--no-overlays"]) == 0
     assert json.loads((ev / "metrics.json").read_text())["crop_top"] == 0.3

@@ -14,9 +14,8 @@ from freespace.cli import main
 from freespace.data.photometry import normalise_light
 from freespace.errors import InvalidOptionError
 from freespace.inference.predictor import Predictor
-from freespace.io.codecs import write_image
 
-from helpers import refused, road_frame, tiny_road_checkpoint
+from helpers import refused, road_folders, road_frame, tiny_road_checkpoint
 
 SIZE = (32, 96)
 
@@ -44,10 +43,7 @@ def test_tta_is_the_mean_of_the_normalised_frame_and_its_mirror(ckpt: Path) -> N
 
 
 def test_predict_records_tta_and_refuses_to_mix(ckpt: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    frames = tmp_path / "frames"
-    frames.mkdir()
-    for i in range(3):
-        write_image(frames / f"f{i}.png", road_frame(SIZE, i)[0])
+    frames, labels = road_folders(tmp_path, SIZE)
     out = tmp_path / "out"
     assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames), "--out", str(out), "--tta",
                  "--no-overlays", "--shard", "1/2"]) == 0
@@ -56,10 +52,6 @@ def test_predict_records_tta_and_refuses_to_mix(ckpt: Path, tmp_path: Path, caps
     refused(capsys, ["predict", "--checkpoint", str(ckpt), "--input", str(frames), "--out", str(out),
                      "--no-overlays", "--shard", "2/2"], match="tta True → False")
     ev = tmp_path / "eval"
-    labels = tmp_path / "labels"
-    labels.mkdir()
-    for i in range(3):
-        write_image(labels / f"f{i}.png", (road_frame(SIZE, i)[1] * 255).astype(np.uint8))
     assert main(["evaluate", "--checkpoint", str(ckpt), "--images", str(frames), "--labels", str(labels),
                  "--label-format", "binary", "--out", str(ev), "--tta", "--no-overlays"]) == 0
     assert json.loads((ev / "metrics.json").read_text())["tta"] is True
