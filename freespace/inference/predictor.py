@@ -349,9 +349,9 @@ class Predictor:
 
     def _prepare(self, image: np.ndarray) -> np.ndarray:
         """:meth:`prepare` of an image already checked (:func:`_rgb_image`)."""
+        image = image[self._cut(image.shape[0]):]  # the rows crop_top leaves out, before any conversion
         if image.dtype != np.uint8:  # uint16 and float: to [0, 1] first (cv2 resizes float32, not float16)
             image = image.astype(np.float32) * np.float32(1 / 65535 if image.dtype == np.uint16 else 1)
-        image = image[self._cut(image.shape[0]):]
         if self.resize_to is not None and image.shape[:2] != self.resize_to:
             image = fit(image, self.resize_to, self.resize)
         if self.tta:  # the light normalised at the network's size (as adapt's teacher sees frames)

@@ -26,6 +26,7 @@ import numpy as np
 
 from freespace.evaluation.labelled import pair_labelled_frames, parse_label_format, read_label_image
 from freespace.evaluation.metrics import Counts
+from freespace.limits import MAX_CROP_TOP
 
 #: the labelled development sets as ``bench/real_bench.py`` reads them: name, images, labels (under real_dev/make.sh's
 #: DEST), the label format
@@ -211,8 +212,8 @@ def main() -> None:
             ap.error(f"--model {name}={path}: no such file")
     if (a.tta or a.crop_top) and not a.sweep:
         ap.error("--tta and --crop-top go with --sweep")
-    if not 0 <= a.crop_top < 0.7:
-        ap.error(f"--crop-top {a.crop_top} is not a fraction of the height in [0, 0.7)")
+    if not 0 <= a.crop_top < MAX_CROP_TOP:
+        ap.error(f"--crop-top {a.crop_top} is not a fraction of the height in [0, {MAX_CROP_TOP})")
     if a.sweep:
         res = {"models": {k: str(v) for k, v in models.items()}, "tta": a.tta, "crop_top": a.crop_top,
                "sets": sweep(models, a.real_dev, a.threads, a.tta, a.crop_top)}

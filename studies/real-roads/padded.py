@@ -20,6 +20,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from freespace.limits import MAX_CROP_TOP
+
 #: KITTI's frame aspect (1242×375)
 KITTI_ASPECT = 1242 / 375
 
@@ -41,7 +43,7 @@ def build(root: Path, out: Path, prefix: str, aspect: float, cut_top: float = 0.
     """Lay out ``out`` from the generic dataset ``root`` (``left/``, ``label/``, ``splits/``, ``freespace.yaml``):
     every frame without its top ``round(cut_top × H)`` rows, and those whose name starts with ``prefix`` padded to
     ``aspect`` (0: none); frames left as they are linked → counts of written and linked frames."""
-    counts = {"padded": 0, "linked": 0}
+    counts = {"written": 0, "linked": 0}
     for sub in ("left", "label"):
         (out / sub).mkdir(parents=True)
         for path in sorted((root / sub).iterdir()):
@@ -55,7 +57,7 @@ def build(root: Path, out: Path, prefix: str, aspect: float, cut_top: float = 0.
                 raise ValueError(f"{path} is not an image: rebuild {root}")
             image = image[int(round(cut_top * image.shape[0])):]
             cv2.imwrite(str(out / sub / path.name), pad_to_aspect(image, aspect) if pad else image)
-            counts["padded"] += sub == "left"
+            counts["written"] += sub == "left"
     for name in ("splits", "freespace.yaml"):
         if (root / name).exists():
             os.symlink((root / name).resolve(), out / name)
@@ -69,7 +71,7 @@ def main() -> None:
     ap.add_argument("--prefix", default="camvid-", help="pad the frames whose name starts with this")
     ap.add_argument("--aspect", type=float, default=KITTI_ASPECT, help="width over height after padding (0: none)")
     ap.add_argument("--cut-top", type=float, default=0.0, metavar="F",
-                    help="also cut the top F of every frame's height (image and label) first; in [0, 0.7)")
+                    help=f"also cut the top F of every frame's height (image and label) first; in [0, {MAX_CROP_TOP})")
     args = ap.parse_args()
     if not (args.root / "left").is_dir() or not (args.root / "label").is_dir():
         ap.error(f"{args.root} has no left/ and label/: give a generic dataset's root")
@@ -79,8 +81,8 @@ def main() -> None:
         ap.error(f"{args.out} lies inside {args.root}: give a folder outside it")
     if args.aspect < 0:
         ap.error(f"--aspect {args.aspect} must be positive (0: no padding)")
-    if not 0 <= args.cut_top < 0.7:
-        ap.error(f"--cut-top {args.cut_top} must be in [0, 0.7)")
+    if not 0 <= args.cut_top < MAX_CROP_TOP:
+        ap.error(f"--cut-top {args.cut_top} must be in [0, {MAX_CROP_TOP})")
     tmp = args.out.with_name(args.out.name + ".partial")
     if tmp.exists():
         ap.error(f"{tmp} exists (an interrupted run?): remove it")
@@ -90,7 +92,7 @@ def main() -> None:
         shutil.rmtree(tmp)
         ap.exit(1, f"padded.py: {err}\n")
     tmp.rename(args.out)
-    print(f"padded.py: {counts['padded']} frames written (aspect {args.aspect:.3f}, top {args.cut_top} cut), "
+    print(f"padded.py: {counts['written']} frames written (aspect {args.aspect:.3f}, top {args.cut_top} cut), "
           f"{counts['linked']} linked → {args.out}")
 
 
